@@ -1,0 +1,1 @@
+//! The dataset directory: table names, atomic writes, content-hash registry.

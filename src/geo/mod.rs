@@ -1,0 +1,1 @@
+//! Projections (pure Rust) and vertical-datum handling.

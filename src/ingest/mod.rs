@@ -1,0 +1,3 @@
+//! Edges that read foreign formats (LAS/LAZ, GEDI HDF5) into the dataset's Parquet tables.
+
+pub mod als;

@@ -1,0 +1,14 @@
+//! gedisim: simulate NASA GEDI waveforms from airborne lidar (ALS), process real and simulated
+//! waveforms the way GEDI L2A does, and measure the sim-to-real gap.
+//!
+//! Layout (see `docs/ARCHITECTURE.md`): pure kernels (`sim`, `process`, `collocate`) know nothing
+//! of files or Arrow; adapters (`ingest`, `dataset`, `sql`) convert between files, Arrow and kernels.
+
+pub mod dataset;
+pub mod error;
+pub mod geo;
+pub mod ingest;
+pub mod process;
+pub mod sim;
+
+pub use error::{Error, Result};

@@ -1,0 +1,1 @@
+//! Pure kernels on waveforms: relative heights, L2A algorithms, noise twin, denoising.

@@ -1,0 +1,64 @@
+//! ALS point columns as the kernels consume them (structure of arrays).
+
+/// A set of ALS returns, one entry per point in every column (structure of arrays).
+///
+/// Coordinates are in the tile's projected CRS (metres) with heights as stored in the file.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct AlsPoints {
+    pub x: Vec<f64>,
+    pub y: Vec<f64>,
+    pub z: Vec<f64>,
+    /// Raw LAS intensity.
+    pub intensity: Vec<u16>,
+    pub return_number: Vec<u8>,
+    pub number_of_returns: Vec<u8>,
+    /// ASPRS class (2 = ground).
+    pub classification: Vec<u8>,
+    /// Scan angle in degrees (formats 6–10 converted from 0.006° units).
+    pub scan_angle_deg: Vec<f32>,
+    /// GPS time as stored (NaN when the point format has none).
+    pub gps_time: Vec<f64>,
+    pub point_source_id: Vec<u16>,
+}
+
+impl AlsPoints {
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    /// True when there is no point.
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+
+    /// Empty set with room for `n` points in every column.
+    pub fn with_capacity(n: usize) -> Self {
+        AlsPoints {
+            x: Vec::with_capacity(n),
+            y: Vec::with_capacity(n),
+            z: Vec::with_capacity(n),
+            intensity: Vec::with_capacity(n),
+            return_number: Vec::with_capacity(n),
+            number_of_returns: Vec::with_capacity(n),
+            classification: Vec::with_capacity(n),
+            scan_angle_deg: Vec::with_capacity(n),
+            gps_time: Vec::with_capacity(n),
+            point_source_id: Vec::with_capacity(n),
+        }
+    }
+
+    /// Append every point of `other`.
+    pub fn extend_from(&mut self, other: &AlsPoints) {
+        self.x.extend_from_slice(&other.x);
+        self.y.extend_from_slice(&other.y);
+        self.z.extend_from_slice(&other.z);
+        self.intensity.extend_from_slice(&other.intensity);
+        self.return_number.extend_from_slice(&other.return_number);
+        self.number_of_returns.extend_from_slice(&other.number_of_returns);
+        self.classification.extend_from_slice(&other.classification);
+        self.scan_angle_deg.extend_from_slice(&other.scan_angle_deg);
+        self.gps_time.extend_from_slice(&other.gps_time);
+        self.point_source_id.extend_from_slice(&other.point_source_id);
+    }
+}
