@@ -1,1 +1,207 @@
-//! The dataset directory: table names, atomic writes, content-hash registry.
+//! The dataset directory: table names, atomic Parquet writes, and the content-hash registry.
+//!
+//! A dataset is a directory; each table is a folder of Parquet files (zstd). Every file is
+//! written under a temporary name (`*.parquet.tmp`, which readers ignore) and renamed when
+//! complete, so a crash never leaves a half-written table.
+
+use std::collections::HashMap;
+use std::fs::File;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use arrow::datatypes::SchemaRef;
+use arrow::record_batch::RecordBatch;
+use parquet::arrow::ArrowWriter;
+use parquet::basic::{Compression, ZstdLevel};
+use parquet::file::metadata::KeyValue;
+use parquet::file::properties::{EnabledStatistics, WriterProperties};
+use sha2::{Digest, Sha256};
+
+use crate::error::{Error, Result};
+
+/// Tables of a dataset, one folder each.
+pub mod tables {
+    /// ALS points, clustered by spatial cell.
+    pub const ALS: &str = "als";
+    /// One row per ingested ALS file.
+    pub const TILES: &str = "tiles";
+    /// One row per GEDI shot.
+    pub const SHOTS: &str = "shots";
+    /// One row per ingested GEDI granule file.
+    pub const GRANULES: &str = "granules";
+    /// Simulated waveforms and RH.
+    pub const SIM: &str = "sim";
+}
+
+/// A dataset directory.
+#[derive(Debug, Clone)]
+pub struct Dataset {
+    root: PathBuf,
+}
+
+impl Dataset {
+    /// Open (and create if needed) the dataset at `root`.
+    pub fn create(root: &Path) -> Result<Self> {
+        std::fs::create_dir_all(root).map_err(|e| Error::file(root, format!("cannot create dataset directory: {e}")))?;
+        Ok(Dataset { root: root.to_path_buf() })
+    }
+
+    /// Open an existing dataset.
+    pub fn open(root: &Path) -> Result<Self> {
+        if !root.is_dir() {
+            return Err(Error::file(root, "not a dataset directory (run `gedisim ingest` first)"));
+        }
+        Ok(Dataset { root: root.to_path_buf() })
+    }
+
+    /// The dataset's directory.
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    /// Folder of table `name` (created if needed).
+    pub fn table_dir(&self, name: &str) -> Result<PathBuf> {
+        let dir = self.root.join(name);
+        std::fs::create_dir_all(&dir).map_err(|e| Error::file(&dir, format!("cannot create table directory: {e}")))?;
+        Ok(dir)
+    }
+
+    /// Whether table `name` has at least one complete Parquet file.
+    pub fn has_table(&self, name: &str) -> bool {
+        table_files(&self.root.join(name)).map(|f| !f.is_empty()).unwrap_or(false)
+    }
+
+    /// Path of the Parquet file `stem` of table `name`.
+    pub fn table_file(&self, name: &str, stem: &str) -> Result<PathBuf> {
+        Ok(self.table_dir(name)?.join(format!("{stem}.parquet")))
+    }
+}
+
+/// The complete Parquet files of a table folder, sorted by name.
+pub fn table_files(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    for entry in std::fs::read_dir(dir)? {
+        let path = entry?.path();
+        if path.extension().and_then(|e| e.to_str()) == Some("parquet") {
+            files.push(path);
+        }
+    }
+    files.sort();
+    Ok(files)
+}
+
+/// Writer properties shared by every table: zstd, page-level statistics, the given
+/// key-value metadata and row-group size.
+pub fn writer_properties(metadata: &HashMap<String, String>, max_row_group_rows: usize) -> WriterProperties {
+    let mut kv: Vec<KeyValue> = metadata.iter().map(|(k, v)| KeyValue::new(k.clone(), v.clone())).collect();
+    kv.sort_by(|a, b| a.key.cmp(&b.key));
+    WriterProperties::builder()
+        .set_compression(Compression::ZSTD(ZstdLevel::try_new(3).expect("valid zstd level")))
+        .set_statistics_enabled(EnabledStatistics::Page)
+        .set_max_row_group_row_count(Some(max_row_group_rows))
+        .set_key_value_metadata(Some(kv))
+        .build()
+}
+
+/// A Parquet file being written under a temporary name; [`AtomicParquet::finish`] renames it
+/// into place. Dropping it unfinished removes the temporary file.
+pub struct AtomicParquet {
+    writer: Option<ArrowWriter<File>>,
+    tmp: PathBuf,
+    dest: PathBuf,
+}
+
+impl AtomicParquet {
+    /// Start writing `dest` with `schema` and `props`.
+    pub fn create(dest: &Path, schema: SchemaRef, props: WriterProperties) -> Result<Self> {
+        let tmp = tmp_path(dest);
+        let file = File::create(&tmp).map_err(|e| Error::file(&tmp, format!("cannot create: {e}")))?;
+        let writer = ArrowWriter::try_new(file, schema, Some(props)).map_err(|e| Error::table(dest, e))?;
+        Ok(AtomicParquet { writer: Some(writer), tmp, dest: dest.to_path_buf() })
+    }
+
+    /// Append a batch.
+    pub fn write(&mut self, batch: &RecordBatch) -> Result<()> {
+        let w = self.writer.as_mut().expect("writer is present until finish");
+        w.write(batch).map_err(|e| Error::table(&self.dest, e))
+    }
+
+    /// Close the current row group (the next batch starts a new one).
+    pub fn flush_row_group(&mut self) -> Result<()> {
+        let w = self.writer.as_mut().expect("writer is present until finish");
+        w.flush().map_err(|e| Error::table(&self.dest, e))
+    }
+
+    /// Write the footer, sync, and rename into place.
+    pub fn finish(mut self) -> Result<PathBuf> {
+        let w = self.writer.take().expect("writer is present until finish");
+        let file = w.into_inner().map_err(|e| Error::table(&self.dest, e))?;
+        file.sync_all().map_err(|e| Error::file(&self.tmp, e))?;
+        std::fs::rename(&self.tmp, &self.dest).map_err(|e| Error::file(&self.dest, format!("cannot rename into place: {e}")))?;
+        Ok(self.dest.clone())
+    }
+}
+
+impl Drop for AtomicParquet {
+    fn drop(&mut self) {
+        if self.writer.is_some() {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+}
+
+/// Write `batches` to `dest` atomically.
+pub fn write_parquet(dest: &Path, schema: SchemaRef, batches: &[RecordBatch], metadata: &HashMap<String, String>) -> Result<PathBuf> {
+    let mut w = AtomicParquet::create(dest, schema, writer_properties(metadata, 1 << 17))?;
+    for b in batches {
+        w.write(b)?;
+    }
+    w.finish()
+}
+
+fn tmp_path(dest: &Path) -> PathBuf {
+    let mut name = dest.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+    name.push(format!(".{}.tmp", std::process::id()));
+    dest.with_file_name(name)
+}
+
+/// SHA-256 of a file's content, lowercase hex: the key that makes ingest idempotent.
+pub fn content_hash(path: &Path) -> Result<String> {
+    let mut file = File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
+    let mut hasher = Sha256::new();
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        let n = file.read(&mut buf).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
+        if n == 0 {
+            break;
+        }
+        hasher.update(&buf[..n]);
+    }
+    Ok(hex::encode(hasher.finalize()))
+}
+
+/// Shorthand for an Arc'd schema.
+pub fn schema_ref(s: arrow::datatypes::Schema) -> SchemaRef {
+    Arc::new(s)
+}
+
+/// Write query results to `out`: Parquet when it ends in `.parquet`, CSV otherwise (atomically).
+pub fn write_result(out: &Path, batches: &[RecordBatch]) -> Result<()> {
+    let schema = match batches.first() {
+        Some(b) => b.schema(),
+        None => Arc::new(arrow::datatypes::Schema::empty()),
+    };
+    if out.extension().and_then(|e| e.to_str()) == Some("parquet") {
+        write_parquet(out, schema, batches, &HashMap::new())?;
+        return Ok(());
+    }
+    let tmp = tmp_path(out);
+    let file = File::create(&tmp).map_err(|e| Error::file(&tmp, format!("cannot create: {e}")))?;
+    let mut w = arrow::csv::Writer::new(file);
+    for b in batches {
+        w.write(b).map_err(|e| Error::table(out, e))?;
+    }
+    drop(w);
+    std::fs::rename(&tmp, out).map_err(|e| Error::file(out, format!("cannot rename into place: {e}")))
+}

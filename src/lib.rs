@@ -10,5 +10,6 @@ pub mod geo;
 pub mod ingest;
 pub mod process;
 pub mod sim;
+pub mod sql;
 
 pub use error::{Error, Result};
