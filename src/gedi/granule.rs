@@ -9,7 +9,7 @@
 use std::path::Path;
 use std::str::FromStr;
 
-use hdf5::types::{VarLenUnicode, H5Type};
+use hdf5::types::{H5Type, VarLenUnicode};
 use hdf5::{File, Group, Location};
 
 use super::{beam_number, BeamType, N_ALGORITHMS, RH_LEN};
@@ -276,7 +276,10 @@ fn time_datasets(prefix: &str, name: &str, delta_time: &[f64]) -> Vec<ExtraDatas
             format!("{prefix}master_int"),
             Values::U32(delta_time.iter().map(|t| t.floor().max(0.0) as u32).collect()),
         ),
-        ExtraDataset::new(format!("{prefix}master_frac"), Values::F64(delta_time.iter().map(|t| t - t.floor()).collect())),
+        ExtraDataset::new(
+            format!("{prefix}master_frac"),
+            Values::F64(delta_time.iter().map(|t| t - t.floor()).collect()),
+        ),
     ]
 }
 
@@ -284,8 +287,9 @@ fn time_datasets(prefix: &str, name: &str, delta_time: &[f64]) -> Vec<ExtraDatas
 fn pack_waveforms(path: &Path, field: &str, waves: impl Iterator<Item = (u64, Vec<f32>)>) -> Result<[Values; 3]> {
     let (mut flat, mut count, mut start) = (Vec::new(), Vec::new(), Vec::new());
     for (shot, w) in waves {
-        let n = u16::try_from(w.len())
-            .map_err(|_| Error::field(path, field, format!("shot {shot}: {} samples exceed the uint16 count", w.len())))?;
+        let n = u16::try_from(w.len()).map_err(|_| {
+            Error::field(path, field, format!("shot {shot}: {} samples exceed the uint16 count", w.len()))
+        })?;
         // GEDI's start index is 1-based (gedi-products.md §1).
         start.push(flat.len() as u64 + 1);
         count.push(n);
@@ -303,9 +307,11 @@ fn l1b_datasets(path: &Path, beam: &Beam<L1bShot>) -> Result<Vec<ExtraDataset>> 
     let mut out = vec![ExtraDataset::new("shot_number", Values::U64(shot_number.clone()))];
     out.extend(time_datasets("", &beam.name, &delta_time));
     let field = format!("{}/rxwaveform", beam.name);
-    let [rx, rx_count, rx_start] = pack_waveforms(path, &field, s.iter().map(|x| (x.shot_number, x.rx_waveform.clone())))?;
+    let [rx, rx_count, rx_start] =
+        pack_waveforms(path, &field, s.iter().map(|x| (x.shot_number, x.rx_waveform.clone())))?;
     let field = format!("{}/txwaveform", beam.name);
-    let [tx, tx_count, tx_start] = pack_waveforms(path, &field, s.iter().map(|x| (x.shot_number, x.tx_waveform.clone())))?;
+    let [tx, tx_count, tx_start] =
+        pack_waveforms(path, &field, s.iter().map(|x| (x.shot_number, x.tx_waveform.clone())))?;
     out.extend([
         ExtraDataset::new("rxwaveform", rx),
         ExtraDataset::new("rx_sample_count", rx_count),
@@ -337,7 +343,12 @@ fn l1b_datasets(path: &Path, beam: &Beam<L1bShot>) -> Result<Vec<ExtraDataset>> 
 }
 
 /// Check that every shot has `len` values in a list field, and flatten them.
-fn flatten_rows<T: Copy>(path: &Path, field: &str, rows: impl Iterator<Item = (u64, Vec<T>)>, len: usize) -> Result<Vec<T>> {
+fn flatten_rows<T: Copy>(
+    path: &Path,
+    field: &str,
+    rows: impl Iterator<Item = (u64, Vec<T>)>,
+    len: usize,
+) -> Result<Vec<T>> {
     let mut flat = Vec::new();
     for (shot, row) in rows {
         if row.len() != len {
@@ -410,7 +421,7 @@ fn l2a_datasets(path: &Path, beam: &Beam<L2aShot>) -> Result<Vec<ExtraDataset>> 
     Ok(out)
 }
 
-fn h5err(path: &Path, what: &str) -> impl Fn(hdf5::Error) -> Error + '_ {
+fn h5err<'a>(path: &'a Path, what: &str) -> impl Fn(hdf5::Error) -> Error + 'a {
     let what = what.to_string();
     move |e| Error::file(path, format!("{what}: {e}"))
 }
@@ -461,7 +472,11 @@ pub fn write_values(root: &Group, rel: &str, values: &Values, row_len: usize) ->
     fn typed<T: H5Type>(parent: &Group, name: &str, data: &[T], row_len: usize) -> hdf5::Result<()> {
         let rows = data.len() / row_len.max(1);
         let builder = parent.new_dataset::<T>();
-        let ds = if row_len == 1 { builder.shape(rows).create(name)? } else { builder.shape((rows, row_len)).create(name)? };
+        let ds = if row_len == 1 {
+            builder.shape(rows).create(name)?
+        } else {
+            builder.shape((rows, row_len)).create(name)?
+        };
         if !data.is_empty() {
             ds.write_raw(data)?;
         }

@@ -33,8 +33,10 @@ pub fn proj_string(epsg: u32) -> Option<String> {
             )
         }
         3035 => format!("+proj=laea +lat_0=52 +lon_0=10 +x_0=4321000 +y_0=3210000 {GRS80}"),
-        3857 => "+proj=merc +a=6378137 +b=6378137 +lat_ts=0 +lon_0=0 +x_0=0 +y_0=0 +k=1 +units=m +nadgrids=@null +no_defs"
-            .to_string(),
+        3857 => {
+            "+proj=merc +a=6378137 +b=6378137 +lat_ts=0 +lon_0=0 +x_0=0 +y_0=0 +k=1 +units=m +nadgrids=@null +no_defs"
+                .to_string()
+        }
         25828..=25838 => format!("+proj=utm +zone={} {GRS80}", epsg - 25800),
         32601..=32660 => format!("+proj=utm +zone={} +datum=WGS84 +units=m +no_defs", epsg - 32600),
         32701..=32760 => format!("+proj=utm +zone={} +south +datum=WGS84 +units=m +no_defs", epsg - 32700),

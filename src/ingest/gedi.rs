@@ -14,12 +14,10 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use arrow::array::{
-    ArrayRef, BooleanArray, Float32Builder, ListBuilder, PrimitiveArray, RecordBatch, StringArray,
-};
+use arrow::array::{ArrayRef, BooleanArray, Float32Builder, ListBuilder, PrimitiveArray, RecordBatch, StringArray};
 use arrow::datatypes::{
-    ArrowPrimitiveType, DataType, Field, Float64Type, Int16Type, Int8Type, Schema, SchemaRef, UInt32Type,
-    UInt64Type, UInt8Type,
+    ArrowPrimitiveType, DataType, Field, Float64Type, Int16Type, Int8Type, Schema, SchemaRef, UInt32Type, UInt64Type,
+    UInt8Type,
 };
 use hdf5::types::{FixedAscii, FixedUnicode, H5Type, TypeDescriptor, VarLenAscii, VarLenUnicode};
 use hdf5::{Dataset, File, Group, Location};
@@ -285,7 +283,8 @@ pub fn granule_key(path: &Path) -> String {
     let tokens: Vec<&str> = stem.split('_').collect();
     let is_product = tokens.len() > 2 && tokens[0].starts_with("GEDI0") && tokens[1].len() == 1;
     if is_product {
-        let track = tokens.iter().position(|t| t.len() > 1 && t.starts_with('T') && t[1..].bytes().all(|b| b.is_ascii_digit()));
+        let track =
+            tokens.iter().position(|t| t.len() > 1 && t.starts_with('T') && t[1..].bytes().all(|b| b.is_ascii_digit()));
         if let Some(t) = track.filter(|&t| t > 2 && t + 1 < tokens.len()) {
             return tokens[2..=t + 1].join("_");
         }
@@ -315,7 +314,10 @@ pub fn pair_granules(l1b: &[PathBuf], l2a: &[PathBuf]) -> Result<(Vec<GranulePai
         }
         let partner = l2a_by_key.remove(&key).cloned();
         if partner.is_none() && !l2a.is_empty() {
-            notes.push(format!("{}: no L2A file of granule {key} was given; its shots have null L2A columns", p.display()));
+            notes.push(format!(
+                "{}: no L2A file of granule {key} was given; its shots have null L2A columns",
+                p.display()
+            ));
         }
         pairs.push(GranulePair { granule: stem(p), l1b: Some(p.clone()), l2a: partner });
     }
@@ -583,7 +585,10 @@ impl BeamGroup<'_> {
                     .map(|s| u64::try_from(s).map_err(|_| self.err(rel, format!("negative shot number {s}"))))
                     .collect()
             }
-            _ => Err(self.err(rel, format!("expected an integer dtype (a float cannot hold shot numbers), found {desc}"))),
+            _ => {
+                Err(self
+                    .err(rel, format!("expected an integer dtype (a float cannot hold shot numbers), found {desc}")))
+            }
         }
     }
 }
@@ -625,10 +630,7 @@ fn read_waveforms(g: &BeamGroup, shots: &[u64], wave: &str, prefix: &str) -> Res
         }
         // 1-based: the shot's samples are [s-1, s-1+c).
         let end = (s - 1).checked_add(c).filter(|&e| e <= len).ok_or_else(|| {
-            g.err(
-                &start_rel,
-                format!("shot {shot}: start {s} + {count_rel} {c} - 1 exceeds the {wave} length {len}"),
-            )
+            g.err(&start_rel, format!("shot {shot}: start {s} + {count_rel} {c} - 1 exceeds the {wave} length {len}"))
         })?;
         spans.push(((s - 1) as usize, (end - (s - 1)) as usize));
     }
@@ -812,7 +814,11 @@ fn duplicate_check(path: Option<&Path>, beam: &str, shots: &[u64]) -> Result<()>
     let mut sorted = shots.to_vec();
     sorted.sort_unstable();
     if let Some(w) = sorted.windows(2).find(|w| w[0] == w[1]) {
-        return Err(Error::field(path.unwrap_or(Path::new("")), format!("{beam}/shot_number"), format!("duplicate shot {}", w[0])));
+        return Err(Error::field(
+            path.unwrap_or(Path::new("")),
+            format!("{beam}/shot_number"),
+            format!("duplicate shot {}", w[0]),
+        ));
     }
     Ok(())
 }
@@ -888,7 +894,10 @@ fn join(
             return Err(Error::field(
                 path,
                 format!("{beam}/shot_number"),
-                format!("{} shot(s) have no L2A partner (first {first}) and --strict-join is set", report.l1b_only.len()),
+                format!(
+                    "{} shot(s) have no L2A partner (first {first}) and --strict-join is set",
+                    report.l1b_only.len()
+                ),
             ));
         }
         if let Some(&first) = report.l2a_only.first() {
@@ -896,7 +905,10 @@ fn join(
             return Err(Error::field(
                 path,
                 format!("{beam}/shot_number"),
-                format!("{} shot(s) have no L1B partner (first {first}) and --strict-join is set", report.l2a_only.len()),
+                format!(
+                    "{} shot(s) have no L1B partner (first {first}) and --strict-join is set",
+                    report.l2a_only.len()
+                ),
             ));
         }
     }
@@ -917,6 +929,11 @@ struct BatchContext<'a> {
 /// `v[i]` when both the optional column and the row index are present.
 fn at<T: Copy>(v: &Option<Vec<T>>, i: Option<usize>) -> Option<T> {
     Some(v.as_ref()?[i?])
+}
+
+/// Row `i` of a row-major N×101 RH array.
+fn rh_row(v: &[f32], i: usize) -> &[f32] {
+    &v[i * RH_LEN..(i + 1) * RH_LEN]
 }
 
 fn prim<T: ArrowPrimitiveType>(rows: &[Row], f: impl Fn(&Row) -> Option<T::Native>) -> ArrayRef {
@@ -951,7 +968,6 @@ impl BatchContext<'_> {
         // Accessors returning None when the row lacks that side.
         let a1 = |r: &Row| l1.zip(r.l1b);
         let a2 = |r: &Row| l2.zip(r.l2a);
-        let rh_row = |b: &L2aBeam, i: usize| &b.rh[i * RH_LEN..(i + 1) * RH_LEN];
 
         let mut cols: Vec<(String, ArrayRef)> = vec![
             ("granule".into(), strings(rows, |_| Some(self.granule))),
@@ -963,7 +979,9 @@ impl BatchContext<'_> {
             (
                 "delta_time".into(),
                 f64s(rows, |r| {
-                    a1(r).and_then(|(b, i)| at(&b.delta_time, Some(i))).or_else(|| a2(r).and_then(|(b, i)| at(&b.delta_time, Some(i))))
+                    a1(r)
+                        .and_then(|(b, i)| at(&b.delta_time, Some(i)))
+                        .or_else(|| a2(r).and_then(|(b, i)| at(&b.delta_time, Some(i))))
                 }),
             ),
             ("lat_bin0".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.lat_bin0[i]))),
@@ -978,10 +996,7 @@ impl BatchContext<'_> {
             ("elevation_bin0".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.elevation_bin0[i]))),
             ("elevation_lastbin".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.elevation_lastbin[i]))),
             ("rx_waveform".into(), lists(rows, |r| a1(r).map(|(b, i)| b.rx.get(i)))),
-            (
-                "rx_sample_count".into(),
-                prim::<UInt32Type>(rows, |r| a1(r).map(|(b, i)| b.rx.spans[i].1 as u32)),
-            ),
+            ("rx_sample_count".into(), prim::<UInt32Type>(rows, |r| a1(r).map(|(b, i)| b.rx.spans[i].1 as u32))),
             ("tx_waveform".into(), lists(rows, |r| a1(r).and_then(|(b, i)| Some(b.tx.as_ref()?.get(i))))),
             ("noise_mean_corrected".into(), f64s(rows, |r| a1(r).and_then(|(b, i)| at(&b.noise_mean, Some(i))))),
             ("noise_stddev_corrected".into(), f64s(rows, |r| a1(r).and_then(|(b, i)| at(&b.noise_stddev, Some(i))))),
@@ -1001,18 +1016,18 @@ impl BatchContext<'_> {
             ("sensitivity".into(), f64s(rows, |r| a2(r).map(|(b, i)| b.sensitivity[i]))),
             ("selected_algorithm".into(), prim::<UInt8Type>(rows, |r| a2(r).map(|(b, i)| b.selected_algorithm[i]))),
             ("elev_lowestmode".into(), f64s(rows, |r| a2(r).map(|(b, i)| b.elev_lowestmode[i]))),
-            ("rh".into(), lists(rows, |r| a2(r).map(|(b, i)| rh_row(b, i)))),
+            ("rh".into(), lists(rows, |r| a2(r).map(|(b, i)| rh_row(&b.rh, i)))),
             ("energy_total".into(), f64s(rows, |r| a2(r).and_then(|(b, i)| at(&b.energy_total, Some(i))))),
         ];
         for a in 0..N_ALGORITHMS {
             let n = a + 1;
             let alg = |r: &Row| a2(r).map(|(b, i)| (&b.algorithms[a], i));
             cols.extend([
-                (format!("elev_lowestmode_a{n}"), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.elev_lowestmode, Some(i))))),
                 (
-                    format!("rh_a{n}"),
-                    lists(rows, |r| alg(r).and_then(|(g, i)| Some(&g.rh.as_ref()?[i * RH_LEN..(i + 1) * RH_LEN]))),
+                    format!("elev_lowestmode_a{n}"),
+                    f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.elev_lowestmode, Some(i)))),
                 ),
+                (format!("rh_a{n}"), lists(rows, |r| alg(r).and_then(|(g, i)| Some(rh_row(g.rh.as_ref()?, i))))),
                 (format!("sensitivity_a{n}"), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.sensitivity, Some(i))))),
                 (
                     format!("quality_flag_a{n}"),
@@ -1023,8 +1038,12 @@ impl BatchContext<'_> {
                 (format!("zcross_a{n}"), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.zcross, Some(i))))),
             ]);
         }
-        let u8_lc = |f: fn(&L2aBeam) -> &Option<Vec<u8>>| prim::<UInt8Type>(rows, move |r| a2(r).and_then(|(b, i)| at(f(b), Some(i))));
-        let i16_lc = |f: fn(&L2aBeam) -> &Option<Vec<i16>>| prim::<Int16Type>(rows, move |r| a2(r).and_then(|(b, i)| at(f(b), Some(i))));
+        let u8_lc = |f: fn(&L2aBeam) -> &Option<Vec<u8>>| {
+            prim::<UInt8Type>(rows, move |r| a2(r).and_then(|(b, i)| at(f(b), Some(i))))
+        };
+        let i16_lc = |f: fn(&L2aBeam) -> &Option<Vec<i16>>| {
+            prim::<Int16Type>(rows, move |r| a2(r).and_then(|(b, i)| at(f(b), Some(i))))
+        };
         cols.extend([
             ("leaf_off_flag".into(), u8_lc(|b| &b.leaf_off_flag)),
             ("leaf_off_doy".into(), i16_lc(|b| &b.leaf_off_doy)),
