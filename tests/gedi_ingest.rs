@@ -11,7 +11,7 @@ use gedisim::gedi::granule::{
     v2_file_name, write_l1b_v2, write_l2a_v2, write_values, Beam, GranuleMeta, L1bShot, L2aShot, Values,
 };
 use gedisim::geo::projection::Projector;
-use gedisim::ingest::gedi::{ingest_gedi, read_gedi, shots_schema, GediOptions, IngestReport};
+use gedisim::ingest::gedi::{granule_key, ingest_gedi, read_gedi, shots_schema, GediOptions, IngestReport};
 use hdf5::types::{IntSize, TypeDescriptor};
 
 // ---------------------------------------------------------------------------------------------
@@ -762,4 +762,31 @@ fn bad_float_shot_numbers_and_swapped_products() {
     std::fs::write(&junk, b"not hdf5").unwrap();
     let e = err_text(from_ref(&junk), &[], &GediOptions::default());
     assert!(e.starts_with(&format!("{}: cannot open as HDF5", junk.display())), "{e}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Pairing of L1B and L2A files
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn granule_keys_pair_v1_and_v2_names() {
+    assert_eq!(granule_key(&v1_l1b()), "2019108080338_O01964_T05337_02");
+    assert_eq!(granule_key(&v1_l1b()), granule_key(&v1_l2a()));
+    let v2 = Path::new("GEDI01_B_2019170155833_O02932_02_T02267_02_005_01_V002.h5");
+    let v2a = Path::new("GEDI02_A_2019170155833_O02932_02_T02267_02_003_01_V002.h5");
+    assert_eq!(granule_key(v2), "2019170155833_O02932_02_T02267_02");
+    assert_eq!(granule_key(v2), granule_key(v2a));
+    assert_eq!(granule_key(Path::new("/x/my_file.h5")), "my_file");
+}
+
+#[test]
+fn files_without_a_partner_file_are_noted_once() {
+    let fx = fixture(&[]);
+    // A V2 L1B and the V1 L2A: different granules, so nothing joins.
+    let (t, report) = read(from_ref(&fx.l1b), &[v1_l2a()], &GediOptions::default());
+    assert_eq!(t.num_rows(), 6 + 301);
+    let warnings = report.warnings();
+    assert_eq!(warnings.len(), 2, "{warnings:?}");
+    assert!(warnings[0].starts_with(&format!("{}: no L2A file of granule", fx.l1b.display())), "{}", warnings[0]);
+    assert!(warnings[1].starts_with(&format!("{}: no L1B file of granule", v1_l2a().display())), "{}", warnings[1]);
 }
