@@ -6,6 +6,7 @@
 
 pub mod dataset;
 pub mod error;
+pub mod gedi;
 pub mod geo;
 pub mod ingest;
 pub mod process;

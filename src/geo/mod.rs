@@ -1,1 +1,3 @@
 //! Projections (pure Rust) and vertical-datum handling.
+
+pub mod projection;

@@ -2,4 +2,5 @@
 
 pub mod als;
 pub mod footprints;
+pub mod gedi;
 pub mod las;
