@@ -34,6 +34,30 @@ enum Command {
 enum IngestCommand {
     /// LAS/LAZ files or folders → <dataset>/als/ and <dataset>/tiles/.
     Als(IngestAlsArgs),
+    /// GEDI L1B and/or L2A granules (V1 or V2) → <dataset>/shots/ and <dataset>/granules/.
+    Gedi(IngestGediArgs),
+}
+
+#[derive(Args)]
+struct IngestGediArgs {
+    /// L1B files or folders holding them.
+    #[arg(long, num_args = 1..)]
+    l1b: Vec<PathBuf>,
+    /// L2A files or folders holding them.
+    #[arg(long, num_args = 1..)]
+    l2a: Vec<PathBuf>,
+    /// Dataset directory (created if needed).
+    #[arg(long)]
+    out: PathBuf,
+    /// Projected CRS of the shots' x, y (default: the dataset's ALS CRS, else 2154).
+    #[arg(long)]
+    epsg: Option<u32>,
+    /// Geoid offset N (m, ellipsoid − orthometric) for every shot, instead of each shot's L1B geoid.
+    #[arg(long, allow_hyphen_values = true)]
+    geoid_offset: Option<f64>,
+    /// Fail when a shot of a paired granule is in only one of L1B and L2A (default: keep it, warn).
+    #[arg(long)]
+    strict_join: bool,
 }
 
 #[derive(Args)]
@@ -92,6 +116,7 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Ingest(IngestCommand::Als(a)) => ingest_als(a),
+        Command::Ingest(IngestCommand::Gedi(a)) => ingest_gedi(a),
         Command::Sql(a) => sql(a),
         Command::Bench(BenchCommand::Decode { file }) => bench_decode(file),
     }
@@ -133,6 +158,57 @@ fn ingest_als(a: IngestAlsArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
+    use gedisim::ingest::gedi::{self, GediOptions, GranuleOutcome};
+    if a.l1b.is_empty() && a.l2a.is_empty() {
+        return Err(Error::Usage("give --l1b and/or --l2a files".into()));
+    }
+    let l1b = expand_h5(&a.l1b)?;
+    let l2a = expand_h5(&a.l2a)?;
+    let ds = Dataset::create(&a.out)?;
+    let epsg = match a.epsg {
+        Some(e) => e,
+        None => als::dataset_epsg(&ds)?.unwrap_or(2154),
+    };
+    let opts = GediOptions { epsg, geoid_offset: a.geoid_offset, strict_join: a.strict_join };
+    let n = gedi::pair_granules(&l1b, &l2a)?.0.len() as u64;
+    let bar = progress(n, "granules");
+    let result = gedi::ingest_into_dataset(&ds, &l1b, &l2a, &opts, &|| bar.inc(1));
+    bar.finish_and_clear();
+    let (outcomes, report) = result?;
+    for w in report.warnings() {
+        eprintln!("warning: {w}");
+    }
+    for o in outcomes {
+        match o {
+            GranuleOutcome::Ingested { granule, shots } => eprintln!("{granule}: {shots} shots"),
+            GranuleOutcome::AlreadyIngested { granule } => eprintln!("{granule}: already ingested (same content), skipped"),
+        }
+    }
+    Ok(())
+}
+
+/// Files as given, folders expanded to the `.h5` files they hold.
+fn expand_h5(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for p in inputs {
+        if p.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
+                .map_err(|e| Error::file(p, format!("cannot list folder: {e}")))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|f| f.extension().and_then(|e| e.to_str()).map(|e| e.eq_ignore_ascii_case("h5")).unwrap_or(false))
+                .collect();
+            found.sort();
+            out.extend(found);
+        } else if p.is_file() {
+            out.push(p.clone());
+        } else {
+            return Err(Error::file(p, "no such file or folder"));
+        }
+    }
+    Ok(out)
 }
 
 fn sql(a: SqlArgs) -> Result<()> {

@@ -159,7 +159,7 @@ pub fn ingest_tiles(
     let als_dir = dataset.table_dir(tables::ALS)?;
     let tiles_dir = dataset.table_dir(tables::TILES)?;
     // One CRS per dataset: the tiles already there fix it.
-    let existing_epsg = dataset_epsg(&tiles_dir)?;
+    let existing_epsg = dataset_epsg(dataset)?;
     // A single file gets both cores for LAZ decoding; several files run one per core.
     let parallel_decode = files.len() == 1;
     files
@@ -169,8 +169,12 @@ pub fn ingest_tiles(
 }
 
 /// The EPSG recorded by previously ingested tiles, if any.
-fn dataset_epsg(tiles_dir: &Path) -> Result<Option<u32>> {
-    let files = dataset::table_files(tiles_dir).map_err(|e| Error::file(tiles_dir, e))?;
+pub fn dataset_epsg(dataset: &Dataset) -> Result<Option<u32>> {
+    let tiles_dir = dataset.root().join(tables::TILES);
+    if !tiles_dir.is_dir() {
+        return Ok(None);
+    }
+    let files = dataset::table_files(&tiles_dir).map_err(|e| Error::file(&tiles_dir, e))?;
     let Some(first) = files.first() else { return Ok(None) };
     let file = File::open(first).map_err(|e| Error::file(first, e))?;
     let reader = parquet::file::serialized_reader::SerializedFileReader::new(file).map_err(|e| Error::table(first, e))?;

@@ -1065,3 +1065,115 @@ impl BatchContext<'_> {
         RecordBatch::try_new(self.schema.clone(), arrays).map_err(|e| Error::table(self.granule, e))
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Into a dataset
+// ---------------------------------------------------------------------------------------------
+
+/// What happened to one granule in [`ingest_into_dataset`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum GranuleOutcome {
+    /// Shots written (replacing an earlier version of the granule, if any).
+    Ingested { granule: String, shots: usize },
+    /// The same files (by content hash) were ingested before.
+    AlreadyIngested { granule: String },
+}
+
+/// Schema of the `granules/` table: one row per ingested granule and the content hashes that key it.
+pub fn granules_schema() -> SchemaRef {
+    Arc::new(arrow::datatypes::Schema::new(vec![
+        Field::new("granule", DataType::Utf8, false),
+        Field::new("granule_key", DataType::Utf8, false),
+        Field::new("l1b_path", DataType::Utf8, true),
+        Field::new("l1b_hash", DataType::Utf8, true),
+        Field::new("l2a_path", DataType::Utf8, true),
+        Field::new("l2a_hash", DataType::Utf8, true),
+        Field::new("n_shots", DataType::UInt64, false),
+    ]))
+}
+
+/// Ingest L1B/L2A files into `<dataset>/shots/` (one file per granule, `<granule_key>.parquet`)
+/// and `<dataset>/granules/`. A granule whose files have the same content hashes as at its last
+/// ingest is skipped; one whose files changed (e.g. its L2A arrived later) is rewritten.
+/// Granules are processed in parallel; `on_granule` is called after each.
+pub fn ingest_into_dataset(
+    dataset: &crate::dataset::Dataset,
+    l1b: &[PathBuf],
+    l2a: &[PathBuf],
+    opts: &GediOptions,
+    on_granule: &(dyn Fn() + Sync),
+) -> Result<(Vec<GranuleOutcome>, IngestReport)> {
+    use crate::dataset::{self, tables, AtomicParquet};
+    use arrow::array::{StringArray, UInt64Array};
+
+    let (pairs, notes) = pair_granules(l1b, l2a)?;
+    let shots_dir = dataset.table_dir(tables::SHOTS)?;
+    let granules_dir = dataset.table_dir(tables::GRANULES)?;
+    let results = pairs
+        .par_iter()
+        .map(|pair| -> Result<(GranuleOutcome, Vec<BeamReport>)> {
+            let key = granule_key(pair.l1b.as_deref().or(pair.l2a.as_deref()).expect("a pair has a file"));
+            let hash = |p: &Option<PathBuf>| p.as_deref().map(dataset::content_hash).transpose();
+            let (h1, h2) = (hash(&pair.l1b)?, hash(&pair.l2a)?);
+            let record = granules_dir.join(format!("{key}.parquet"));
+            if previous_hashes(&record)? == Some((h1.clone(), h2.clone())) {
+                on_granule();
+                return Ok((GranuleOutcome::AlreadyIngested { granule: pair.granule.clone() }, Vec::new()));
+            }
+            let schema = shots_schema(opts.epsg);
+            let mut metadata = std::collections::HashMap::new();
+            metadata.insert("gedisim:crs_epsg".to_string(), opts.epsg.to_string());
+            metadata.insert("gedisim:vertical_reference".to_string(), VERTICAL_DATUM.to_string());
+            let props = dataset::writer_properties(&metadata, 1 << 16);
+            let mut writer = AtomicParquet::create(&shots_dir.join(format!("{key}.parquet")), schema, props)?;
+            let beams = read_granule(pair, opts, &mut |b| writer.write(&b))?;
+            writer.finish()?;
+            let shots: usize = beams.iter().map(BeamReport::rows).sum();
+            let path = |p: &Option<PathBuf>| p.as_ref().map(|p| p.display().to_string());
+            let cols: Vec<arrow::array::ArrayRef> = vec![
+                Arc::new(StringArray::from(vec![pair.granule.clone()])),
+                Arc::new(StringArray::from(vec![key.clone()])),
+                Arc::new(StringArray::from(vec![path(&pair.l1b)])),
+                Arc::new(StringArray::from(vec![h1])),
+                Arc::new(StringArray::from(vec![path(&pair.l2a)])),
+                Arc::new(StringArray::from(vec![h2])),
+                Arc::new(UInt64Array::from(vec![shots as u64])),
+            ];
+            let batch = RecordBatch::try_new(granules_schema(), cols).map_err(|e| Error::table(&record, e))?;
+            dataset::write_parquet(&record, granules_schema(), &[batch], &metadata)?;
+            on_granule();
+            Ok((GranuleOutcome::Ingested { granule: pair.granule.clone(), shots }, beams))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let mut report = IngestReport { beams: Vec::new(), notes };
+    let mut outcomes = Vec::new();
+    for (o, beams) in results {
+        outcomes.push(o);
+        report.beams.extend(beams);
+    }
+    Ok((outcomes, report))
+}
+
+/// The (L1B, L2A) content hashes recorded by an earlier ingest of a granule, if any.
+fn previous_hashes(record: &Path) -> Result<Option<(Option<String>, Option<String>)>> {
+    use arrow::array::{Array, AsArray};
+    if !record.exists() {
+        return Ok(None);
+    }
+    let file = std::fs::File::open(record).map_err(|e| Error::file(record, e))?;
+    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+        .and_then(|b| b.build())
+        .map_err(|e| Error::table(record, e))?;
+    for batch in reader {
+        let batch = batch.map_err(|e| Error::table(record, e))?;
+        if batch.num_rows() == 0 {
+            continue;
+        }
+        let get = |c: &str| {
+            let a = batch.column_by_name(c)?.as_string_opt::<i32>()?;
+            (!a.is_null(0)).then(|| a.value(0).to_string())
+        };
+        return Ok(Some((get("l1b_hash"), get("l2a_hash"))));
+    }
+    Ok(None)
+}
