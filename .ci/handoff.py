@@ -11,6 +11,6 @@ assert tables, f"no table in {root}"
 for table in tables:
     first = sorted(table.glob("*.parquet"))[0]
     t = pq.read_table(first)
-    n = duckdb.sql(f"select count(*) from read_parquet('{first}')").fetchone()[0]
+    n = duckdb.sql(f"select count(*) from read_parquet('{first}')").fetchall()[0][0]
     assert n == t.num_rows, (table.name, n, t.num_rows)
     print(f"{table.name}: {first.name}: {t.num_rows} rows, {len(t.schema)} columns: pyarrow and duckdb agree")
