@@ -1,1 +1,4 @@
 //! Pure kernels on waveforms: relative heights, L2A algorithms, noise twin, denoising.
+
+pub mod l2a;
+pub mod noise_twin;

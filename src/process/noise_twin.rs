@@ -1,0 +1,1 @@
+//! Noise twin: turns a noise-free simulated waveform into a GEDI-like one.
