@@ -1,1 +1,5 @@
 //! Pure kernels on waveforms: relative heights, L2A algorithms, noise twin, denoising.
+
+pub mod denoise;
+pub mod l2a;
+pub mod noise_twin;
