@@ -60,7 +60,7 @@ pub struct TwinWaveform {
 /// Linearly resample a waveform with bins of `input_bin_m` onto GEDI's [`GEDI_BIN_M`] grid, sample
 /// 0 on sample 0; the output covers the same vertical extent.
 pub fn resample_to_gedi(wave: &[f64], input_bin_m: f64) -> Vec<f64> {
-    if wave.is_empty() || !(input_bin_m > 0.0) {
+    if wave.is_empty() || !input_bin_m.is_finite() || input_bin_m <= 0.0 {
         return Vec::new();
     }
     let extent = (wave.len() - 1) as f64 * input_bin_m;
@@ -118,7 +118,7 @@ impl ShotTwin {
             signal = convolve_with_pulse(&signal, &normalised_pulse(pulse)?);
         }
         let energy: f64 = signal.iter().sum();
-        if !(energy > 0.0) {
+        if energy.is_nan() || energy <= 0.0 {
             return Err(TwinError::NoEnergy);
         }
         let gain = self.energy_total / energy;
@@ -254,7 +254,7 @@ impl LinkMarginTwin {
         }
         let signal = resample_to_gedi(sim, input_bin_m);
         let total: f64 = signal.iter().map(|&w| w - w.min(0.0)).sum::<f64>() * GEDI_BIN_M;
-        if !(total > 0.0) {
+        if total.is_nan() || total <= 0.0 {
             return Err(TwinError::NoEnergy);
         }
         let c = self.true_cover.unwrap_or(0.0);
@@ -325,7 +325,7 @@ fn normalised_pulse(pulse: &[f32]) -> Result<Vec<f64>, TwinError> {
         .map(|&v| (f64::from(v) - baseline).max(0.0))
         .collect();
     let sum: f64 = p.iter().sum();
-    if !(sum > 0.0) {
+    if sum.is_nan() || sum <= 0.0 {
         return Err(TwinError::Invalid("tx_pulse"));
     }
     Ok(p.into_iter().map(|v| v / sum).collect())
