@@ -35,7 +35,9 @@ pub enum TwinError {
     #[error("simulated waveform has no positive energy")]
     NoEnergy,
     /// The waveform placed at `start` does not fit in the record length.
-    #[error("signal of {signal} samples at sample {start} does not fit a record of {record} samples")]
+    #[error(
+        "signal of {signal} samples at sample {start} does not fit a record of {record} samples"
+    )]
     DoesNotFit {
         /// First sample of the signal in the record.
         start: usize,
@@ -58,7 +60,7 @@ pub struct TwinWaveform {
 /// Linearly resample a waveform with bins of `input_bin_m` onto GEDI's [`GEDI_BIN_M`] grid, sample
 /// 0 on sample 0; the output covers the same vertical extent.
 pub fn resample_to_gedi(wave: &[f64], input_bin_m: f64) -> Vec<f64> {
-    if wave.is_empty() || !(input_bin_m > 0.0) {
+    if wave.is_empty() || !input_bin_m.is_finite() || input_bin_m <= 0.0 {
         return Vec::new();
     }
     let extent = (wave.len() - 1) as f64 * input_bin_m;
@@ -93,12 +95,19 @@ pub struct ShotTwin {
 impl ShotTwin {
     /// Make the twin waveform: `sim` (bins of `input_bin_m`, top to bottom) placed with its first
     /// bin at record sample `start`, noise drawn from `seed`.
-    pub fn apply(&self, sim: &[f64], input_bin_m: f64, start: usize, seed: u64) -> Result<TwinWaveform, TwinError> {
+    pub fn apply(
+        &self,
+        sim: &[f64],
+        input_bin_m: f64,
+        start: usize,
+        seed: u64,
+    ) -> Result<TwinWaveform, TwinError> {
         check_signal(sim, input_bin_m)?;
         if !self.energy_total.is_finite() || self.energy_total <= 0.0 {
             return Err(TwinError::Invalid("energy_total"));
         }
-        if !self.noise.mean.is_finite() || !self.noise.stddev.is_finite() || self.noise.stddev < 0.0 {
+        if !self.noise.mean.is_finite() || !self.noise.stddev.is_finite() || self.noise.stddev < 0.0
+        {
             return Err(TwinError::Invalid("noise"));
         }
         if !self.quantum.is_finite() || self.quantum < 0.0 {
@@ -109,7 +118,7 @@ impl ShotTwin {
             signal = convolve_with_pulse(&signal, &normalised_pulse(pulse)?);
         }
         let energy: f64 = signal.iter().sum();
-        if !(energy > 0.0) {
+        if energy.is_nan() || energy <= 0.0 {
             return Err(TwinError::NoEnergy);
         }
         let gain = self.energy_total / energy;
@@ -120,12 +129,22 @@ impl ShotTwin {
             .iter()
             .map(|&s| {
                 let x = s + self.noise.mean + self.noise.stddev * normal.sample();
-                (if self.quantum > 0.0 { (x / self.quantum).round() * self.quantum } else { x }) as f32
+                (if self.quantum > 0.0 {
+                    (x / self.quantum).round() * self.quantum
+                } else {
+                    x
+                }) as f32
             })
             .collect();
         // Rounding adds a uniform error of variance q²/12 and no bias.
         let stddev = (self.noise.stddev.powi(2) + self.quantum.powi(2) / 12.0).sqrt();
-        Ok(TwinWaveform { wave, noise: Noise { mean: self.noise.mean, stddev } })
+        Ok(TwinWaveform {
+            wave,
+            noise: Noise {
+                mean: self.noise.mean,
+                stddev,
+            },
+        })
     }
 }
 
@@ -198,7 +217,8 @@ impl LinkMarginTwin {
             + (self.footprint_sigma_m * LINK_SLOPE_DEG.to_radians().tan()).powi(2))
         .sqrt();
         let g = (1.0 - self.cover) * self.rho_g;
-        let amplitude = (g / (g + self.rho_v * self.cover)) / (sigma_eff * (2.0 * std::f64::consts::PI).sqrt());
+        let amplitude =
+            (g / (g + self.rho_v * self.cover)) / (sigma_eff * (2.0 * std::f64::consts::PI).sqrt());
         let n_noise = gaussian_quantile(1.0 - FALSE_ALARM_PER_BIN);
         let n_signal = gaussian_quantile(1.0 - MISSED_DETECTION);
         let ratio = 10f64.powf(self.link_margin_db / 10.0);
@@ -206,10 +226,27 @@ impl LinkMarginTwin {
     }
 
     /// Make the twin of `sim` (bins of `input_bin_m`, top to bottom) with noise drawn from `seed`.
-    pub fn apply(&self, sim: &[f64], input_bin_m: f64, seed: u64) -> Result<TwinWaveform, TwinError> {
+    pub fn apply(
+        &self,
+        sim: &[f64],
+        input_bin_m: f64,
+        seed: u64,
+    ) -> Result<TwinWaveform, TwinError> {
         check_signal(sim, input_bin_m)?;
-        let params = [self.link_margin_db, self.cover, self.true_sig, self.offset, self.max_dn, self.rho_v, self.rho_g];
-        if params.iter().any(|p| !p.is_finite()) || self.true_sig <= 0.0 || self.max_dn <= 0.0 || self.bits == 0 {
+        let params = [
+            self.link_margin_db,
+            self.cover,
+            self.true_sig,
+            self.offset,
+            self.max_dn,
+            self.rho_v,
+            self.rho_g,
+        ];
+        if params.iter().any(|p| !p.is_finite())
+            || self.true_sig <= 0.0
+            || self.max_dn <= 0.0
+            || self.bits == 0
+        {
             return Err(TwinError::Invalid("link-margin parameters"));
         }
         if !(0.0..1.0).contains(&self.cover) {
@@ -217,7 +254,7 @@ impl LinkMarginTwin {
         }
         let signal = resample_to_gedi(sim, input_bin_m);
         let total: f64 = signal.iter().map(|&w| w - w.min(0.0)).sum::<f64>() * GEDI_BIN_M;
-        if !(total > 0.0) {
+        if total.is_nan() || total <= 0.0 {
             return Err(TwinError::NoEnergy);
         }
         let c = self.true_cover.unwrap_or(0.0);
@@ -263,7 +300,11 @@ fn check_signal(sim: &[f64], input_bin_m: f64) -> Result<(), TwinError> {
 fn place(signal: &[f64], start: usize, len: usize) -> Result<Vec<f64>, TwinError> {
     let end = start.checked_add(signal.len()).filter(|&e| e <= len);
     let Some(end) = end else {
-        return Err(TwinError::DoesNotFit { start, signal: signal.len(), record: len });
+        return Err(TwinError::DoesNotFit {
+            start,
+            signal: signal.len(),
+            record: len,
+        });
     };
     let mut record = vec![0.0; len];
     record[start..end].copy_from_slice(signal);
@@ -279,9 +320,12 @@ fn normalised_pulse(pulse: &[f32]) -> Result<Vec<f64>, TwinError> {
     sorted.sort_by(f64::total_cmp);
     // The pulse occupies a small part of the 128-sample record: the median is the baseline.
     let baseline = sorted[sorted.len() / 2];
-    let p: Vec<f64> = pulse.iter().map(|&v| (f64::from(v) - baseline).max(0.0)).collect();
+    let p: Vec<f64> = pulse
+        .iter()
+        .map(|&v| (f64::from(v) - baseline).max(0.0))
+        .collect();
     let sum: f64 = p.iter().sum();
-    if !(sum > 0.0) {
+    if sum.is_nan() || sum <= 0.0 {
         return Err(TwinError::Invalid("tx_pulse"));
     }
     Ok(p.into_iter().map(|v| v / sum).collect())
@@ -289,7 +333,11 @@ fn normalised_pulse(pulse: &[f32]) -> Result<Vec<f64>, TwinError> {
 
 /// Convolution of `signal` with `pulse`, centred on the pulse peak, same length as `signal`.
 fn convolve_with_pulse(signal: &[f64], pulse: &[f64]) -> Vec<f64> {
-    let peak = pulse.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map_or(0, |(i, _)| i);
+    let peak = pulse
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map_or(0, |(i, _)| i);
     let n = signal.len() as isize;
     (0..n)
         .map(|i| {
@@ -326,7 +374,10 @@ struct NormalSource {
 
 impl NormalSource {
     fn new(seed: u64) -> Self {
-        Self { rng: ChaCha8Rng::seed_from_u64(seed), spare: None }
+        Self {
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            spare: None,
+        }
     }
 
     /// Uniform in [−1, 1).
@@ -364,7 +415,10 @@ mod tests {
         let sigma_eff = (0.764_331f64.powi(2) + (5.5 * 2f64.to_radians().tan()).powi(2)).sqrt();
         let g = 0.1 * 0.4;
         let a = (g / (g + 0.57 * 0.9)) / (sigma_eff * (2.0 * std::f64::consts::PI).sqrt());
-        let db = 10.0 * ((a - gaussian_quantile(0.9) * s) / (gaussian_quantile(1.0 - FALSE_ALARM_PER_BIN) * s)).log10();
+        let db = 10.0
+            * ((a - gaussian_quantile(0.9) * s)
+                / (gaussian_quantile(1.0 - FALSE_ALARM_PER_BIN) * s))
+                .log10();
         assert!((db - 3.0).abs() < 1e-9);
     }
 
@@ -379,48 +433,81 @@ mod tests {
         assert_ne!(a, draw(8));
         let mean = a.iter().sum::<f64>() / a.len() as f64;
         let var = a.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / a.len() as f64;
-        assert!(mean.abs() < 0.03 && (var - 1.0).abs() < 0.03, "mean {mean} var {var}");
+        assert!(
+            mean.abs() < 0.03 && (var - 1.0).abs() < 0.03,
+            "mean {mean} var {var}"
+        );
     }
 
     #[test]
     fn resampling_keeps_the_extent_and_shape() {
-        let sim: Vec<f64> = (0..1001).map(|i| (-0.5 * ((i as f64 - 500.0) / 20.0).powi(2)).exp()).collect();
+        let sim: Vec<f64> = (0..1001)
+            .map(|i| (-0.5 * ((i as f64 - 500.0) / 20.0).powi(2)).exp())
+            .collect();
         let r = resample_to_gedi(&sim, SIM_BIN_M);
         assert_eq!(r.len(), (1000.0 * 0.15 / GEDI_BIN_M).floor() as usize + 1);
-        let peak = r.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map(|(i, _)| i).unwrap_or(0);
+        let peak = r
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(i, _)| i)
+            .unwrap_or(0);
         assert!((peak as f64 * GEDI_BIN_M - 75.0).abs() < GEDI_BIN_M);
         assert!(resample_to_gedi(&[], 0.15).is_empty());
     }
 
     #[test]
     fn shot_twin_matches_the_shot_energy_and_noise() {
-        let sim: Vec<f64> = (0..400).map(|i| (-0.5 * ((i as f64 - 200.0) / 6.0).powi(2)).exp()).collect();
+        let sim: Vec<f64> = (0..400)
+            .map(|i| (-0.5 * ((i as f64 - 200.0) / 6.0).powi(2)).exp())
+            .collect();
         let twin = ShotTwin {
             energy_total: 10_000.0,
-            noise: Noise { mean: 220.0, stddev: 3.0 },
+            noise: Noise {
+                mean: 220.0,
+                stddev: 3.0,
+            },
             sample_count: 1000,
             tx_pulse: None,
             quantum: 1.0,
         };
         let t = twin.apply(&sim, GEDI_BIN_M, 300, 42).expect("twin");
         assert_eq!(t.wave.len(), 1000);
-        assert_eq!(t.wave, twin.apply(&sim, GEDI_BIN_M, 300, 42).expect("twin").wave);
+        assert_eq!(
+            t.wave,
+            twin.apply(&sim, GEDI_BIN_M, 300, 42).expect("twin").wave
+        );
         let energy: f64 = t.wave.iter().map(|&w| f64::from(w) - 220.0).sum();
         assert!((energy - 10_000.0).abs() < 400.0, "energy {energy}");
         let pre = &t.wave[..250];
         let m = pre.iter().map(|&v| f64::from(v)).sum::<f64>() / 250.0;
         assert!((m - 220.0).abs() < 0.6);
         assert!(t.wave.iter().all(|v| v.fract() == 0.0));
-        assert_eq!(twin.apply(&sim, GEDI_BIN_M, 700, 1), Err(TwinError::DoesNotFit { start: 700, signal: 400, record: 1000 }));
+        assert_eq!(
+            twin.apply(&sim, GEDI_BIN_M, 700, 1),
+            Err(TwinError::DoesNotFit {
+                start: 700,
+                signal: 400,
+                record: 1000
+            })
+        );
         assert_eq!(twin.apply(&[], GEDI_BIN_M, 0, 1), Err(TwinError::Empty));
-        assert_eq!(twin.apply(&[0.0; 10], GEDI_BIN_M, 0, 1), Err(TwinError::NoEnergy));
-        let with_pulse = ShotTwin { tx_pulse: Some(vec![10.0, 10.0, 30.0, 90.0, 30.0, 10.0, 10.0]), ..twin.clone() };
+        assert_eq!(
+            twin.apply(&[0.0; 10], GEDI_BIN_M, 0, 1),
+            Err(TwinError::NoEnergy)
+        );
+        let with_pulse = ShotTwin {
+            tx_pulse: Some(vec![10.0, 10.0, 30.0, 90.0, 30.0, 10.0, 10.0]),
+            ..twin.clone()
+        };
         assert!(with_pulse.apply(&sim, GEDI_BIN_M, 300, 42).is_ok());
     }
 
     #[test]
     fn link_margin_twin_has_the_reference_noise_level() {
-        let sim: Vec<f64> = (0..600).map(|i| (-0.5 * ((i as f64 - 300.0) / 6.0).powi(2)).exp()).collect();
+        let sim: Vec<f64> = (0..600)
+            .map(|i| (-0.5 * ((i as f64 - 300.0) / 6.0).powi(2)).exp())
+            .collect();
         let twin = LinkMarginTwin::new(5.0, 0.95);
         let t = twin.apply(&sim, SIM_BIN_M, 3).expect("twin");
         let pre: Vec<f64> = t.wave[..200].iter().map(|&v| f64::from(v)).collect();
@@ -428,7 +515,13 @@ mod tests {
         let sd = (pre.iter().map(|v| (v - m).powi(2)).sum::<f64>() / 199.0).sqrt();
         assert!((m - 93.5).abs() < 1.0, "mean {m}");
         assert!((sd - 5.0).abs() < 0.8, "sd {sd}");
-        assert!(t.wave.iter().all(|&v| (0.0..4096.0).contains(&v) && v.fract() == 0.0));
-        assert_eq!(LinkMarginTwin::new(5.0, 1.0).apply(&sim, SIM_BIN_M, 3), Err(TwinError::Invalid("cover")));
+        assert!(t
+            .wave
+            .iter()
+            .all(|&v| (0.0..4096.0).contains(&v) && v.fract() == 0.0));
+        assert_eq!(
+            LinkMarginTwin::new(5.0, 1.0).apply(&sim, SIM_BIN_M, 3),
+            Err(TwinError::Invalid("cover"))
+        );
     }
 }

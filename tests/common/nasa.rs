@@ -1,7 +1,6 @@
 //! NASA's stored L2A results for the shared real V1 L1B/L2A pair (tests/data/gedi, PROVENANCE.md):
 //! each joined shot's waveform, noise, geolocation and the stored values for a1..a6.
 
-
 use std::path::PathBuf;
 
 use gedisim::process::l2a::{Noise, WaveformGeolocation};
@@ -50,7 +49,9 @@ impl RealShot {
 }
 
 fn data_path(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/gedi").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/gedi")
+        .join(name)
 }
 
 fn read<T: hdf5::H5Type>(group: &hdf5::Group, name: &str) -> Vec<T> {
@@ -86,7 +87,9 @@ pub fn load_real_shots() -> Vec<RealShot> {
         let energy: Vec<f64> = read(&b2, "energy_total");
         let algs: Vec<AlgArrays> = (1..=6).map(|a| AlgArrays::read(&b2, a)).collect();
         for (i, &sn) in sn1.iter().enumerate() {
-            let Some(j) = sn2.iter().position(|&s| s == sn) else { continue };
+            let Some(j) = sn2.iter().position(|&s| s == sn) else {
+                continue;
+            };
             let s0 = start[i] as usize - 1; // 1-based in the file
             let n = usize::from(count[i]);
             let t0 = tx_start[i] as usize - 1;
@@ -95,7 +98,10 @@ pub fn load_real_shots() -> Vec<RealShot> {
                 shot_number: sn,
                 wave: wave[s0..s0 + n].to_vec(),
                 tx: tx[t0..t0 + usize::from(tx_count[i])].to_vec(),
-                noise: Noise { mean: mean[i], stddev: sd[i] },
+                noise: Noise {
+                    mean: mean[i],
+                    stddev: sd[i],
+                },
                 geo: WaveformGeolocation {
                     sample_count: n,
                     elevation_bin0: z0[i],
@@ -130,7 +136,9 @@ struct AlgArrays {
 
 impl AlgArrays {
     fn read(beam: &hdf5::Group, alg: usize) -> Self {
-        let g = beam.group(&format!("rx_processing_a{alg}")).expect("rx_processing group");
+        let g = beam
+            .group(&format!("rx_processing_a{alg}"))
+            .expect("rx_processing group");
         let geo = beam.group("geolocation").expect("geolocation group");
         let modelocs: Vec<f64> = read(&g, "rx_modelocs");
         let n = read::<f64>(&g, "toploc").len();

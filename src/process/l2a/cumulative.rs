@@ -17,9 +17,22 @@ pub(super) struct EnergyProfile<'a> {
 
 impl<'a> EnergyProfile<'a> {
     /// The profile between `toploc` and `botloc`, or `None` when it holds no positive energy.
-    pub(super) fn new(smoothed: &'a [f64], mean: f64, toploc: f64, botloc: f64, grid: f64) -> Option<Self> {
+    pub(super) fn new(
+        smoothed: &'a [f64],
+        mean: f64,
+        toploc: f64,
+        botloc: f64,
+        grid: f64,
+    ) -> Option<Self> {
         let steps = ((botloc - toploc) * grid).round().max(0.0) as usize;
-        let mut profile = Self { smoothed, mean, botloc, grid, steps, total: 0.0 };
+        let mut profile = Self {
+            smoothed,
+            mean,
+            botloc,
+            grid,
+            steps,
+            total: 0.0,
+        };
         profile.total = (0..=steps).map(|j| profile.value(j)).sum();
         (profile.total > 0.0).then_some(profile)
     }
@@ -59,7 +72,10 @@ impl<'a> EnergyProfile<'a> {
 
     /// Share (%) of the total energy at or below `position`.
     pub(super) fn percent_below(&self, position: f64) -> f64 {
-        let below: f64 = (0..=self.steps).take_while(|&j| self.position(j) >= position).map(|j| self.value(j)).sum();
+        let below: f64 = (0..=self.steps)
+            .take_while(|&j| self.position(j) >= position)
+            .map(|j| self.value(j))
+            .sum();
         100.0 * below / self.total
     }
 }
@@ -79,7 +95,11 @@ pub(super) fn select_ground(modes: &[Mode], profile: &EnergyProfile, thresh: f64
 }
 
 /// `trunc(100·(z(rx_cumulative[k]) − z(zcross)))` in cm, NASA's `rh_aN`.
-pub(super) fn relative_heights_cm(geo: &WaveformGeolocation, cumulative: &[f64; RH_COUNT], zcross: f64) -> [i32; RH_COUNT] {
+pub(super) fn relative_heights_cm(
+    geo: &WaveformGeolocation,
+    cumulative: &[f64; RH_COUNT],
+    zcross: f64,
+) -> [i32; RH_COUNT] {
     let ground = geo.elevation_at(zcross);
     cumulative.map(|p| (100.0 * (geo.elevation_at(p) - ground)).trunc() as i32)
 }

@@ -25,7 +25,10 @@ impl GaussianKernel {
     pub fn for_width(width: f64) -> Self {
         let sigma = width - SIGMA_OFFSET;
         if !sigma.is_finite() || sigma <= 0.0 {
-            return Self { width, taps: vec![1.0] };
+            return Self {
+                width,
+                taps: vec![1.0],
+            };
         }
         let reach = sigma * (2.0 * (1.0 / TRUNCATION_RATIO).ln()).sqrt();
         let half = reach.floor() as usize;
@@ -60,7 +63,11 @@ impl GaussianKernel {
         for (i, o) in out.iter_mut().enumerate() {
             *o = if i >= h && i + h < n {
                 // Interior: every tap falls inside the waveform.
-                wave[i - h..=i + h].iter().zip(&self.taps).map(|(&w, &t)| f64::from(w) * t).sum()
+                wave[i - h..=i + h]
+                    .iter()
+                    .zip(&self.taps)
+                    .map(|(&w, &t)| f64::from(w) * t)
+                    .sum()
             } else {
                 // Edge: indices clamped to the first/last sample (nearest-edge padding).
                 self.taps
