@@ -1,1 +1,3 @@
 //! Pure kernels on waveforms: relative heights, L2A algorithms, noise twin, denoising.
+
+pub mod rh;
