@@ -3,3 +3,4 @@
 pub mod denoise;
 pub mod l2a;
 pub mod noise_twin;
+pub mod rh;

@@ -62,3 +62,24 @@ impl AlsPoints {
         self.point_source_id.extend_from_slice(&other.point_source_id);
     }
 }
+
+impl AlsPoints {
+    /// The points in the order given by `order` (indices into `self`), every column permuted.
+    pub fn permuted(&self, order: &[u32]) -> AlsPoints {
+        fn pick<T: Copy>(v: &[T], order: &[u32]) -> Vec<T> {
+            order.iter().map(|&i| v[i as usize]).collect()
+        }
+        AlsPoints {
+            x: pick(&self.x, order),
+            y: pick(&self.y, order),
+            z: pick(&self.z, order),
+            intensity: pick(&self.intensity, order),
+            return_number: pick(&self.return_number, order),
+            number_of_returns: pick(&self.number_of_returns, order),
+            classification: pick(&self.classification, order),
+            scan_angle_deg: pick(&self.scan_angle_deg, order),
+            gps_time: pick(&self.gps_time, order),
+            point_source_id: pick(&self.point_source_id, order),
+        }
+    }
+}
