@@ -4,6 +4,7 @@
 //! Layout (see `docs/ARCHITECTURE.md`): pure kernels (`sim`, `process`, `collocate`) know nothing
 //! of files or Arrow; adapters (`ingest`, `dataset`, `sql`) convert between files, Arrow and kernels.
 
+pub mod als_table;
 pub mod dataset;
 pub mod error;
 pub mod gedi;
@@ -11,6 +12,8 @@ pub mod geo;
 pub mod ingest;
 pub mod process;
 pub mod sim;
+pub mod simulate;
 pub mod sql;
+pub mod tables;
 
 pub use error::{Error, Result};

@@ -23,6 +23,10 @@ enum Command {
     /// Ingest ALS tiles or GEDI granules into a dataset's Parquet tables.
     #[command(subcommand)]
     Ingest(IngestCommand),
+    /// Simulate GEDI waveforms from ALS: direct mode (--als, --footprints, --out) or dataset mode (--dataset).
+    Simulate(SimulateArgs),
+    /// GEDI L2A processing (algorithms a1–a6) of the waveforms of an L1B file.
+    L2a(L2aArgs),
     /// Run SQL over a dataset's tables (with gedisim's functions).
     Sql(SqlArgs),
     /// Measurements used by the benchmarks.
@@ -80,6 +84,63 @@ struct IngestAlsArgs {
 }
 
 #[derive(Args)]
+struct SimulateArgs {
+    /// LAS/LAZ file (direct mode).
+    #[arg(long, requires_all = ["footprints", "out"], conflicts_with = "dataset")]
+    als: Option<PathBuf>,
+    /// CSV with a header naming id, x, y (direct mode).
+    #[arg(long)]
+    footprints: Option<PathBuf>,
+    /// Output Parquet file (direct mode).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Dataset directory: simulate every ingested shot into <dataset>/sim/.
+    #[arg(long)]
+    dataset: Option<PathBuf>,
+    /// gedirat reproduces Hancock's gediRat exactly (batch-dependent bin grid, every point of
+    /// every class); default fixes its slips.
+    #[arg(long, value_enum, default_value = "default")]
+    profile: ProfileArg,
+    /// Pulse: `gaussian` (FWHM 15 ns unless --psigma) or a two-column pulse file (range m, amplitude).
+    #[arg(long, default_value = "gaussian")]
+    pulse: String,
+    /// Turn off ALS density normalisation.
+    #[arg(long)]
+    no_norm: bool,
+    /// Footprint Gaussian σ (m).
+    #[arg(long, default_value_t = 5.5)]
+    fsigma: f32,
+    /// Gaussian pulse σ (m) instead of the 15 ns FWHM.
+    #[arg(long)]
+    psigma: Option<f32>,
+    /// Convolve each return with the pulse while binning instead of after.
+    #[arg(long)]
+    pulse_before: bool,
+    /// Direct mode with the default profile: keep the classes that ingest drops (7, 18, 64–67).
+    #[arg(long)]
+    keep_all_classes: bool,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum ProfileArg {
+    Gedirat,
+    Default,
+}
+
+#[derive(Args)]
+struct L2aArgs {
+    /// GEDI L1B file (V1 or V2).
+    #[arg(long)]
+    l1b: PathBuf,
+    /// Output Parquet file: one row per shot × algorithm.
+    #[arg(long)]
+    out: PathBuf,
+    /// Algorithms to run, e.g. 1,3.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,3,4,5,6")]
+    algorithms: Vec<u8>,
+}
+
+#[derive(Args)]
 struct SqlArgs {
     /// Dataset directory.
     #[arg(long)]
@@ -117,6 +178,8 @@ fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Ingest(IngestCommand::Als(a)) => ingest_als(a),
         Command::Ingest(IngestCommand::Gedi(a)) => ingest_gedi(a),
+        Command::Simulate(a) => simulate(a),
+        Command::L2a(a) => l2a(a),
         Command::Sql(a) => sql(a),
         Command::Bench(BenchCommand::Decode { file }) => bench_decode(file),
     }
@@ -165,8 +228,8 @@ fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
     if a.l1b.is_empty() && a.l2a.is_empty() {
         return Err(Error::Usage("give --l1b and/or --l2a files".into()));
     }
-    let l1b = expand_h5(&a.l1b)?;
-    let l2a = expand_h5(&a.l2a)?;
+    let l1b = expand_h5(&a.l1b, "GEDI01_B")?;
+    let l2a = expand_h5(&a.l2a, "GEDI02_A")?;
     let ds = Dataset::create(&a.out)?;
     let epsg = match a.epsg {
         Some(e) => e,
@@ -190,8 +253,9 @@ fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
     Ok(())
 }
 
-/// Files as given, folders expanded to the `.h5` files they hold.
-fn expand_h5(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+/// Files as given; folders expanded to the `.h5` files they hold whose name starts with
+/// `product` (GEDI's naming: `GEDI01_B…` for L1B, `GEDI02_A…` for L2A).
+fn expand_h5(inputs: &[PathBuf], product: &str) -> Result<Vec<PathBuf>> {
     let mut out = Vec::new();
     for p in inputs {
         if p.is_dir() {
@@ -199,6 +263,7 @@ fn expand_h5(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
                 .map_err(|e| Error::file(p, format!("cannot list folder: {e}")))?
                 .filter_map(|e| e.ok().map(|e| e.path()))
                 .filter(|f| f.extension().and_then(|e| e.to_str()).map(|e| e.eq_ignore_ascii_case("h5")).unwrap_or(false))
+                .filter(|f| f.file_name().and_then(|n| n.to_str()).map(|n| n.starts_with(product)).unwrap_or(false))
                 .collect();
             found.sort();
             out.extend(found);
@@ -209,6 +274,73 @@ fn expand_h5(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
         }
     }
     Ok(out)
+}
+
+fn simulate(a: SimulateArgs) -> Result<()> {
+    use gedisim::sim::{self, Profile, PulseTiming, SimConfig};
+    let profile = match a.profile {
+        ProfileArg::Gedirat => Profile::Gedirat,
+        ProfileArg::Default => Profile::Default,
+    };
+    let mut cfg = SimConfig::new(profile);
+    cfg.fsigma = a.fsigma;
+    cfg.normalise_density = !a.no_norm;
+    if a.pulse_before {
+        cfg.pulse_timing = PulseTiming::BeforeBinning;
+    }
+    cfg.pulse = match (a.pulse.as_str(), a.psigma) {
+        ("gaussian", Some(s)) => sim::Pulse::gaussian(s, cfg.res as f32)?,
+        ("gaussian", None) => cfg.pulse,
+        (file, _) => {
+            let path = PathBuf::from(file);
+            let text = std::fs::read_to_string(&path).map_err(|e| Error::file(&path, format!("cannot read pulse file: {e}")))?;
+            let pairs = sim::pulse::parse_pulse_text(&text).map_err(|e| Error::field(&path, "pulse", e))?;
+            sim::Pulse::tabulated(&pairs).map_err(|e| Error::field(&path, "pulse", e))?
+        }
+    };
+    if let Some(dir) = a.dataset {
+        let ds = Dataset::open(&dir)?;
+        let n = gedisim::simulate::shot_footprints(&ds)?.len() as u64;
+        let bar = progress(n, "shots");
+        let r = gedisim::simulate::simulate_dataset(&ds, &cfg, profile, &|k| bar.inc(k as u64));
+        bar.finish_and_clear();
+        let (ok, skipped) = r?;
+        eprintln!("{ok} shots simulated, {skipped} skipped (see the status column) → {}", dir.join("sim").display());
+        return Ok(());
+    }
+    let (Some(als_path), Some(fp_path), Some(out)) = (a.als, a.footprints, a.out) else {
+        return Err(Error::Usage("give --als, --footprints and --out (direct mode) or --dataset".into()));
+    };
+    let footprints = gedisim::ingest::footprints::read_footprints_csv(&fp_path)?;
+    let mut points = gedisim::ingest::las::read_points(&als_path)?;
+    if profile == Profile::Default && !a.keep_all_classes {
+        points = gedisim::simulate::drop_ingest_classes(&points);
+    }
+    let (ok, skipped) = gedisim::simulate::simulate_direct(&points, &footprints, &cfg, profile, &out)?;
+    eprintln!("{ok} footprints simulated, {skipped} skipped (see the status column) → {}", out.display());
+    Ok(())
+}
+
+fn l2a(a: L2aArgs) -> Result<()> {
+    use gedisim::process::l2a::AlgorithmSettings;
+    let settings = a
+        .algorithms
+        .iter()
+        .map(|&n| AlgorithmSettings::gedi(n).ok_or_else(|| Error::Usage(format!("--algorithms: {n} is not a GEDI algorithm (1..6)"))))
+        .collect::<Result<Vec<_>>>()?;
+    let opts = gedisim::ingest::gedi::GediOptions::default();
+    let schema = gedisim::tables::l2a::l2a_schema();
+    let props = gedisim::dataset::writer_properties(&Default::default(), 1 << 16);
+    let mut writer = gedisim::dataset::AtomicParquet::create(&a.out, schema, props)?;
+    let mut rows = 0;
+    let report = gedisim::ingest::gedi::ingest_gedi(std::slice::from_ref(&a.l1b), &[], &opts, |shots| {
+        let batch = gedisim::tables::l2a::l2a_batch(&shots, &settings, &a.l1b)?;
+        rows += batch.num_rows();
+        writer.write(&batch)
+    })?;
+    writer.finish()?;
+    eprintln!("{} shots × {} algorithms → {rows} rows in {}", report.rows(), settings.len(), a.out.display());
+    Ok(())
 }
 
 fn sql(a: SqlArgs) -> Result<()> {

@@ -9,7 +9,7 @@ use std::collections::HashMap;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
-use gedisim::ingest::als::read_points;
+use gedisim::ingest::las::read_points;
 use gedisim::sim::pulse::parse_pulse_text;
 use gedisim::sim::{
     simulate, AlsPoints, Footprint, Profile, Pulse, Quirks, SimConfig, SimulatedFootprint, Weighting,

@@ -3,17 +3,10 @@
 use std::path::Path;
 
 use crate::error::{Error, Result};
-
-/// One footprint centre to simulate.
-#[derive(Debug, Clone, PartialEq)]
-pub struct FootprintCentre {
-    pub id: String,
-    pub x: f64,
-    pub y: f64,
-}
+use crate::sim::Footprint;
 
 /// Read a footprint CSV (`id,x,y` header, any column order, extra columns ignored).
-pub fn read_footprints_csv(path: &Path) -> Result<Vec<FootprintCentre>> {
+pub fn read_footprints_csv(path: &Path) -> Result<Vec<Footprint>> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
     let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty() && !l.starts_with('#'));
     let (_, header) = lines.next().ok_or_else(|| Error::field(path, "header", "empty file: expected a header `id,x,y`"))?;
@@ -41,7 +34,7 @@ pub fn read_footprints_csv(path: &Path) -> Result<Vec<FootprintCentre>> {
         if !seen.insert(id.clone()) {
             return Err(Error::field(path, "id", format!("line {}: duplicate id `{id}`", lineno + 1)));
         }
-        out.push(FootprintCentre { id, x: num(cx, "x")?, y: num(cy, "y")? });
+        out.push(Footprint { id, x: num(cx, "x")?, y: num(cy, "y")? });
     }
     Ok(out)
 }
@@ -56,7 +49,7 @@ mod tests {
         let f = dir.path().join("fp.csv");
         std::fs::write(&f, "x,id,y,extra\n1.5,a,2.5,z\n3,b,4,z\n").unwrap();
         let fps = read_footprints_csv(&f).unwrap();
-        assert_eq!(fps[1], FootprintCentre { id: "b".into(), x: 3.0, y: 4.0 });
+        assert_eq!(fps[1], Footprint { id: "b".into(), x: 3.0, y: 4.0 });
         std::fs::write(&f, "id,x,y\na,1,nan\n").unwrap();
         let e = read_footprints_csv(&f).unwrap_err().to_string();
         assert!(e.contains("fp.csv") && e.contains("y"), "{e}");

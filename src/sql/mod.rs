@@ -1,6 +1,9 @@
 //! The DataFusion session: the dataset's tables registered by name, and gedisim's SQL functions
 //! (thin wrappers over the kernels).
 
+pub mod rh;
+pub mod simulate;
+
 use std::path::Path;
 
 use datafusion::datasource::file_format::parquet::ParquetFormat;
@@ -15,6 +18,7 @@ use crate::error::{Error, Result};
 pub async fn session(ds: &Dataset) -> Result<SessionContext> {
     let config = SessionConfig::new().with_information_schema(true);
     let ctx = SessionContext::new_with_config(config);
+    register_functions(&ctx, ds);
     for entry in std::fs::read_dir(ds.root()).map_err(|e| Error::file(ds.root(), e))? {
         let dir = entry.map_err(|e| Error::file(ds.root(), e))?.path();
         let Some(name) = dir.file_name().and_then(|n| n.to_str()).map(str::to_string) else { continue };
@@ -24,6 +28,13 @@ pub async fn session(ds: &Dataset) -> Result<SessionContext> {
         register_table(&ctx, &name, &dir).await?;
     }
     Ok(ctx)
+}
+
+/// Register gedisim's SQL functions: `gedi_rh(wave, z0, dz, ground)` and the table function
+/// `gedi_simulate([profile])`.
+pub fn register_functions(ctx: &SessionContext, ds: &Dataset) {
+    ctx.register_udf(datafusion::logical_expr::ScalarUDF::new_from_impl(rh::GediRh::new()));
+    ctx.register_udtf("gedi_simulate", Arc::new(simulate::GediSimulate::new(ds.clone())));
 }
 
 /// Register the Parquet folder `dir` as table `name`.

@@ -1,0 +1,73 @@
+//! `gedi_rh(wave, z0, dz, ground)`: RH0…RH100 (m above `ground`) of a waveform list column whose
+//! sample k is labelled `z0 − k·dz` (the `sim` table's convention). Wraps `process::rh`.
+
+use std::sync::Arc;
+
+use arrow::array::{Array, AsArray};
+use arrow::datatypes::{DataType, Float32Type, Float64Type};
+use datafusion::common::{exec_err, Result as DfResult};
+use datafusion::logical_expr::{ColumnarValue, ScalarFunctionArgs, ScalarUDFImpl, Signature, Volatility};
+
+use crate::process::rh::rh_profile;
+use crate::tables::{list_f32, list_f32_builder};
+
+/// The `gedi_rh` scalar function.
+#[derive(Debug, PartialEq, Eq, Hash)]
+pub struct GediRh {
+    signature: Signature,
+}
+
+impl GediRh {
+    /// Takes (list<float32>, float64, float64, float64).
+    pub fn new() -> Self {
+        GediRh {
+            signature: Signature::exact(
+                vec![list_f32(), DataType::Float64, DataType::Float64, DataType::Float64],
+                Volatility::Immutable,
+            ),
+        }
+    }
+}
+
+impl Default for GediRh {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl ScalarUDFImpl for GediRh {
+    fn name(&self) -> &str {
+        "gedi_rh"
+    }
+    fn signature(&self) -> &Signature {
+        &self.signature
+    }
+    fn return_type(&self, _: &[DataType]) -> DfResult<DataType> {
+        Ok(list_f32())
+    }
+    fn invoke_with_args(&self, args: ScalarFunctionArgs) -> DfResult<ColumnarValue> {
+        let n = args.number_rows;
+        let arrays = ColumnarValue::values_to_arrays(&args.args)?;
+        let (waves, z0, dz, ground) = (
+            arrays[0].as_list::<i32>(),
+            arrays[1].as_primitive::<Float64Type>(),
+            arrays[2].as_primitive::<Float64Type>(),
+            arrays[3].as_primitive::<Float64Type>(),
+        );
+        let mut out = list_f32_builder(n);
+        for i in 0..n {
+            if waves.is_null(i) || z0.is_null(i) || dz.is_null(i) || ground.is_null(i) {
+                out.append_null();
+                continue;
+            }
+            if !(dz.value(i) > 0.0) {
+                return exec_err!("gedi_rh: dz must be > 0, got {}", dz.value(i));
+            }
+            let w = waves.value(i);
+            let w = w.as_primitive::<Float32Type>();
+            let rh = rh_profile(w.values(), z0.value(i), dz.value(i), ground.value(i));
+            out.append_value(rh.iter().map(|&v| Some(v)));
+        }
+        Ok(ColumnarValue::Array(Arc::new(out.finish())))
+    }
+}

@@ -1,0 +1,72 @@
+//! `gedisim l2a` (the CLI contract) on the real V1 L1B file, checked against NASA's L2A values
+//! as ingested in the `shots` table.
+
+mod common;
+
+use std::collections::HashMap;
+use std::fs::File;
+
+use arrow::array::{Array, AsArray};
+use arrow::datatypes::{Float32Type, Float64Type, UInt64Type, UInt8Type};
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+
+use common::{data, gedisim};
+
+fn read(path: &std::path::Path) -> Vec<arrow::record_batch::RecordBatch> {
+    ParquetRecordBatchReaderBuilder::try_new(File::open(path).unwrap()).unwrap().build().unwrap().map(|b| b.unwrap()).collect()
+}
+
+#[test]
+fn l2a_cli_rows_agree_with_nasa() {
+    let tmp = tempfile::tempdir().unwrap();
+    let l1b = data("gedi/GEDI01_B_2019108080338_O01964_T05337_02_003_01_sub.h5");
+    let l2a = data("gedi/GEDI02_A_2019108080338_O01964_T05337_02_001_01_sub.h5");
+    let out = tmp.path().join("l2a.parquet");
+    let (ok, _, err) = gedisim(&["l2a", "--l1b", l1b.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    let (ok, _, err) = gedisim(&["l2a", "--l1b", l1b.to_str().unwrap(), "--out", out.to_str().unwrap(), "--algorithms", "7"]);
+    assert!(!ok && err.contains("--algorithms"), "{err}");
+
+    // NASA's values per (shot, algorithm), through our own ingest.
+    let (batches, _) = gedisim::ingest::gedi::read_gedi(&[l1b], &[l2a], &Default::default()).unwrap();
+    let mut nasa: HashMap<(u64, u8), (f64, Vec<f32>)> = HashMap::new();
+    for b in &batches {
+        let sn = b.column_by_name("shot_number").unwrap().as_primitive::<UInt64Type>();
+        for a in 1..=6u8 {
+            let elev = b.column_by_name(&format!("elev_lowestmode_a{a}")).unwrap().as_primitive::<Float64Type>();
+            let rh = b.column_by_name(&format!("rh_a{a}")).unwrap().as_list::<i32>();
+            for i in 0..b.num_rows() {
+                if !rh.is_null(i) && !elev.is_null(i) {
+                    let r = rh.value(i);
+                    nasa.insert((sn.value(i), a), (elev.value(i), r.as_primitive::<Float32Type>().values().to_vec()));
+                }
+            }
+        }
+    }
+
+    let rows = read(&out);
+    let n: usize = rows.iter().map(|b| b.num_rows()).sum();
+    assert_eq!(n, 300 * 6, "one row per L1B shot × algorithm");
+    let (mut rh_ok, mut rh_all, mut elev_ok, mut compared) = (0usize, 0usize, 0usize, 0usize);
+    for b in &rows {
+        let sn = b.column_by_name("shot_number").unwrap().as_primitive::<UInt64Type>();
+        let alg = b.column_by_name("algorithm").unwrap().as_primitive::<UInt8Type>();
+        let elev = b.column_by_name("elev_lowestmode").unwrap().as_primitive::<Float64Type>();
+        let rh = b.column_by_name("rh").unwrap().as_list::<i32>();
+        for i in 0..b.num_rows() {
+            let Some((nasa_elev, nasa_rh)) = nasa.get(&(sn.value(i), alg.value(i))) else { continue };
+            assert!(!rh.is_null(i), "every real shot has an L2A result");
+            compared += 1;
+            let ours = rh.value(i);
+            for (a, b) in ours.as_primitive::<Float32Type>().values().iter().zip(nasa_rh) {
+                rh_all += 1;
+                rh_ok += ((a - b).abs() <= 0.15) as usize;
+            }
+            elev_ok += ((elev.value(i) - nasa_elev).abs() <= 0.5 * 0.1499) as usize;
+        }
+    }
+    let (rh_rate, elev_rate) = (rh_ok as f64 / rh_all as f64, elev_ok as f64 / compared as f64);
+    println!("gedisim l2a vs NASA: {compared} shot-algorithms, RH within 0.15 m {:.1} %, ground within ½ sample {:.1} %", 100.0 * rh_rate, 100.0 * elev_rate);
+    assert_eq!(compared, 1800);
+    assert!(rh_rate >= 0.99 && elev_rate >= 0.99, "{rh_rate} {elev_rate}");
+}
