@@ -49,7 +49,7 @@ fn scene_25m(root: &Path) -> PathBuf {
     let start = Instant::now();
     let src = root.join("tests/data/als/lidarforfuel_2_bas_lig.laz");
     let mut reader = las::Reader::from_path(&src).unwrap();
-    let points: Vec<las::Point> = reader.points().map(|p| p.unwrap()).collect();
+    let points: Vec<las::Point> = reader.read_all().unwrap().points().map(|p| p.unwrap()).collect();
     let mut builder = las::Builder::from(reader.header().clone());
     builder.point_format.is_compressed = true;
     builder.evlrs.clear();
