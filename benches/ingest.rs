@@ -17,7 +17,7 @@ fn main() {
         let decode = run(&["bench", "decode", file.to_str().unwrap()]);
         let out = tempfile::tempdir().unwrap();
         let ingest = run(&["ingest", "als", file.to_str().unwrap(), "--out", out.path().to_str().unwrap(), "--stats"]);
-        let (td, ti) = (field(&decode, "s,"), field(&ingest, "s,"));
+        let (td, ti) = (field(&decode, " s,"), field(&ingest, " s,"));
         println!("{}", file.file_name().unwrap().to_string_lossy());
         println!("  las decode alone : {}", decode.trim());
         println!("  gedisim ingest   : {}", ingest.trim());
@@ -32,7 +32,7 @@ fn run(args: &[&str]) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
-/// The number printed just before `suffix` (e.g. "12.3 s,").
+/// The number printed just before `suffix` (e.g. "12.3" before " s,").
 fn field(line: &str, suffix: &str) -> f64 {
     let end = line.find(suffix).expect("figure in output");
     line[..end].trim_end().rsplit(' ').next().unwrap().parse().expect("number")
@@ -54,7 +54,8 @@ fn scene_25m(root: &Path) -> PathBuf {
     builder.point_format.is_compressed = true;
     builder.evlrs.clear();
     let header = builder.into_header().unwrap();
-    let tmp = dir.join("scene25M.laz.tmp");
+    // The extension decides compression in `las::Writer::from_path`: keep `.laz` last.
+    let tmp = dir.join("scene25M.tmp.laz");
     let mut writer = las::Writer::from_path(&tmp, header).unwrap();
     for i in 0..10 {
         for j in 0..10 {
