@@ -256,24 +256,10 @@ fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
 /// Files as given; folders expanded to the `.h5` files they hold whose name starts with
 /// `product` (GEDI's naming: `GEDI01_B…` for L1B, `GEDI02_A…` for L2A).
 fn expand_h5(inputs: &[PathBuf], product: &str) -> Result<Vec<PathBuf>> {
-    let mut out = Vec::new();
-    for p in inputs {
-        if p.is_dir() {
-            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
-                .map_err(|e| Error::file(p, format!("cannot list folder: {e}")))?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|f| f.extension().and_then(|e| e.to_str()).map(|e| e.eq_ignore_ascii_case("h5")).unwrap_or(false))
-                .filter(|f| f.file_name().and_then(|n| n.to_str()).map(|n| n.starts_with(product)).unwrap_or(false))
-                .collect();
-            found.sort();
-            out.extend(found);
-        } else if p.is_file() {
-            out.push(p.clone());
-        } else {
-            return Err(Error::file(p, "no such file or folder"));
-        }
-    }
-    Ok(out)
+    gedisim::ingest::expand_inputs(inputs, |f| {
+        gedisim::ingest::has_extension(f, "h5")
+            && f.file_name().and_then(|n| n.to_str()).map(|n| n.starts_with(product)).unwrap_or(false)
+    })
 }
 
 fn simulate(a: SimulateArgs) -> Result<()> {

@@ -71,28 +71,7 @@ pub fn cell_key(x: f64, y: f64) -> u64 {
 
 /// Expand folders into the LAS/LAZ files they contain (sorted); files are kept as given.
 pub fn expand_inputs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
-    let mut out = Vec::new();
-    for p in inputs {
-        if p.is_dir() {
-            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
-                .map_err(|e| Error::file(p, format!("cannot list folder: {e}")))?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|f| {
-                    f.extension()
-                        .and_then(|e| e.to_str())
-                        .map(|e| e.eq_ignore_ascii_case("las") || e.eq_ignore_ascii_case("laz"))
-                        .unwrap_or(false)
-                })
-                .collect();
-            found.sort();
-            out.extend(found);
-        } else if p.is_file() {
-            out.push(p.clone());
-        } else {
-            return Err(Error::file(p, "no such file or folder"));
-        }
-    }
-    Ok(out)
+    super::expand_inputs(inputs, |f| super::has_extension(f, "las") || super::has_extension(f, "laz"))
 }
 
 /// Schema of the `als/` table.
