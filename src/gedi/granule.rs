@@ -245,20 +245,25 @@ pub fn v2_file_name(level: &str, start: &str, orbit: u32, sub_orbit: u8, track: 
 
 /// Write a V2-layout L1B granule with the given beams.
 pub fn write_l1b_v2(path: &Path, beams: &[Beam<L1bShot>], meta: &GranuleMeta) -> Result<()> {
-    let file = create_granule(path, "GEDI_L1B", meta)?;
-    for beam in beams {
-        let mut sets = l1b_datasets(path, beam)?;
-        sets.extend(beam.extra.iter().cloned());
-        write_beam(path, &file, &beam.name, &sets)?;
-    }
-    Ok(())
+    write_granule(path, "GEDI_L1B", beams, meta, l1b_datasets)
 }
 
 /// Write a V2-layout L2A granule with the given beams.
 pub fn write_l2a_v2(path: &Path, beams: &[Beam<L2aShot>], meta: &GranuleMeta) -> Result<()> {
-    let file = create_granule(path, "GEDI_L2A", meta)?;
+    write_granule(path, "GEDI_L2A", beams, meta, l2a_datasets)
+}
+
+/// Write a granule of product `short_name`: per beam, the product's datasets plus the beam's extras.
+fn write_granule<S>(
+    path: &Path,
+    short_name: &str,
+    beams: &[Beam<S>],
+    meta: &GranuleMeta,
+    datasets: fn(&Path, &Beam<S>) -> Result<Vec<ExtraDataset>>,
+) -> Result<()> {
+    let file = create_granule(path, short_name, meta)?;
     for beam in beams {
-        let mut sets = l2a_datasets(path, beam)?;
+        let mut sets = datasets(path, beam)?;
         sets.extend(beam.extra.iter().cloned());
         write_beam(path, &file, &beam.name, &sets)?;
     }
