@@ -60,6 +60,15 @@ impl AlsTable {
     /// Every point of the row groups that intersect any of `boxes` (a superset of the points
     /// inside the boxes, in table order).
     pub fn points_near(&self, boxes: &[BBox]) -> Result<(AlsPoints, ReadStats)> {
+        self.read(boxes, None)
+    }
+
+    /// The points inside `bbox` (edges included), reading only the row groups that intersect it.
+    pub fn points_in(&self, bbox: BBox) -> Result<(AlsPoints, ReadStats)> {
+        self.read(&[bbox], Some(bbox))
+    }
+
+    fn read(&self, boxes: &[BBox], keep: Option<BBox>) -> Result<(AlsPoints, ReadStats)> {
         let mut out = AlsPoints::default();
         let mut stats = ReadStats { row_groups_read: 0, row_groups_total: self.row_groups() };
         for f in &self.files {
@@ -76,16 +85,35 @@ impl AlsTable {
             stats.row_groups_read += wanted.len();
             let file = File::open(&f.path).map_err(|e| Error::file(&f.path, e))?;
             let reader = ParquetRecordBatchReaderBuilder::try_new(file)
-                .and_then(|b| b.with_row_groups(wanted).with_batch_size(1 << 16).build())
+                .and_then(|b| {
+                    // The point attributes only: `tile` and `cell` are constant per row group.
+                    let columns = POINT_COLUMNS.iter().copied();
+                    let mask = parquet::arrow::ProjectionMask::columns(b.parquet_schema(), columns);
+                    b.with_row_groups(wanted).with_projection(mask).with_batch_size(1 << 16).build()
+                })
                 .map_err(|e| Error::table(&f.path, e))?;
             for batch in reader {
                 let batch = batch.map_err(|e| Error::table(&f.path, e))?;
-                append(&mut out, &batch, &f.path)?;
+                append(&mut out, &batch, keep, &f.path)?;
             }
         }
         Ok((out, stats))
     }
 }
+
+/// The columns of `als/` that make an [`AlsPoints`].
+const POINT_COLUMNS: [&str; 10] = [
+    "x",
+    "y",
+    "z",
+    "intensity",
+    "return_number",
+    "number_of_returns",
+    "classification",
+    "scan_angle_deg",
+    "gps_time",
+    "point_source_id",
+];
 
 fn row_group_boxes(meta: &ParquetMetaData, path: &Path) -> Result<Vec<BBox>> {
     let schema = meta.file_metadata().schema_descr();
@@ -111,18 +139,31 @@ fn row_group_boxes(meta: &ParquetMetaData, path: &Path) -> Result<Vec<BBox>> {
         .collect()
 }
 
-fn append(out: &mut AlsPoints, b: &arrow::record_batch::RecordBatch, path: &Path) -> Result<()> {
+/// Append the rows of `b` (those inside `keep`, when given) to `out`.
+fn append(out: &mut AlsPoints, b: &arrow::record_batch::RecordBatch, keep: Option<BBox>, path: &Path) -> Result<()> {
     let col = |name: &str| b.column_by_name(name).ok_or_else(|| Error::field(path, name, "column missing from the ALS table"));
-    out.x.extend_from_slice(col("x")?.as_primitive::<Float64Type>().values());
-    out.y.extend_from_slice(col("y")?.as_primitive::<Float64Type>().values());
-    out.z.extend_from_slice(col("z")?.as_primitive::<Float64Type>().values());
-    out.intensity.extend_from_slice(col("intensity")?.as_primitive::<UInt16Type>().values());
-    out.return_number.extend_from_slice(col("return_number")?.as_primitive::<UInt8Type>().values());
-    out.number_of_returns.extend_from_slice(col("number_of_returns")?.as_primitive::<UInt8Type>().values());
-    out.classification.extend_from_slice(col("classification")?.as_primitive::<UInt8Type>().values());
-    out.scan_angle_deg.extend_from_slice(col("scan_angle_deg")?.as_primitive::<Float32Type>().values());
+    let (x, y) = (col("x")?.as_primitive::<Float64Type>().values(), col("y")?.as_primitive::<Float64Type>().values());
+    let rows: Vec<usize> = match keep {
+        Some(k) => (0..b.num_rows()).filter(|&i| x[i] >= k[0] && x[i] <= k[2] && y[i] >= k[1] && y[i] <= k[3]).collect(),
+        None => (0..b.num_rows()).collect(),
+    };
+    fn put<T: Copy>(dst: &mut Vec<T>, src: &[T], rows: &[usize]) {
+        if rows.len() == src.len() {
+            dst.extend_from_slice(src);
+        } else {
+            dst.extend(rows.iter().map(|&i| src[i]));
+        }
+    }
+    put(&mut out.x, x, &rows);
+    put(&mut out.y, y, &rows);
+    put(&mut out.z, col("z")?.as_primitive::<Float64Type>().values(), &rows);
+    put(&mut out.intensity, col("intensity")?.as_primitive::<UInt16Type>().values(), &rows);
+    put(&mut out.return_number, col("return_number")?.as_primitive::<UInt8Type>().values(), &rows);
+    put(&mut out.number_of_returns, col("number_of_returns")?.as_primitive::<UInt8Type>().values(), &rows);
+    put(&mut out.classification, col("classification")?.as_primitive::<UInt8Type>().values(), &rows);
+    put(&mut out.scan_angle_deg, col("scan_angle_deg")?.as_primitive::<Float32Type>().values(), &rows);
     let gps = col("gps_time")?.as_primitive::<Float64Type>();
-    out.gps_time.extend((0..gps.len()).map(|i| if gps.is_null(i) { f64::NAN } else { gps.value(i) }));
-    out.point_source_id.extend_from_slice(col("point_source_id")?.as_primitive::<UInt16Type>().values());
+    out.gps_time.extend(rows.iter().map(|&i| if gps.is_null(i) { f64::NAN } else { gps.value(i) }));
+    put(&mut out.point_source_id, col("point_source_id")?.as_primitive::<UInt16Type>().values(), &rows);
     Ok(())
 }

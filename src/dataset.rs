@@ -12,7 +12,10 @@ use std::sync::Arc;
 
 use arrow::datatypes::SchemaRef;
 use arrow::record_batch::RecordBatch;
+use parquet::arrow::arrow_writer::{compute_leaves, ArrowColumnChunk, ArrowRowGroupWriterFactory};
 use parquet::arrow::ArrowWriter;
+use parquet::file::writer::SerializedFileWriter;
+use rayon::prelude::*;
 use parquet::basic::{Compression, ZstdLevel};
 use parquet::file::metadata::KeyValue;
 use parquet::file::properties::{EnabledStatistics, WriterProperties};
@@ -106,10 +109,19 @@ pub fn writer_properties(metadata: &HashMap<String, String>, max_row_group_rows:
 
 /// A Parquet file being written under a temporary name; [`AtomicParquet::finish`] renames it
 /// into place. Dropping it unfinished removes the temporary file.
+///
+/// Batches go through [`write`](Self::write) (buffered into row groups by the writer) or
+/// [`write_row_group`](Self::write_row_group) (one row group per call, columns encoded in
+/// parallel); a file uses one or the other.
 pub struct AtomicParquet {
-    writer: Option<ArrowWriter<File>>,
+    writer: Option<Writer>,
     tmp: PathBuf,
     dest: PathBuf,
+}
+
+enum Writer {
+    Buffered(ArrowWriter<File>),
+    RowGroups(SerializedFileWriter<File>, ArrowRowGroupWriterFactory),
 }
 
 impl AtomicParquet {
@@ -118,25 +130,63 @@ impl AtomicParquet {
         let tmp = tmp_path(dest);
         let file = File::create(&tmp).map_err(|e| Error::file(&tmp, format!("cannot create: {e}")))?;
         let writer = ArrowWriter::try_new(file, schema, Some(props)).map_err(|e| Error::table(dest, e))?;
-        Ok(AtomicParquet { writer: Some(writer), tmp, dest: dest.to_path_buf() })
+        Ok(AtomicParquet { writer: Some(Writer::Buffered(writer)), tmp, dest: dest.to_path_buf() })
     }
 
     /// Append a batch.
     pub fn write(&mut self, batch: &RecordBatch) -> Result<()> {
-        let w = self.writer.as_mut().expect("writer is present until finish");
-        w.write(batch).map_err(|e| Error::table(&self.dest, e))
+        match self.writer.as_mut().expect("writer is present until finish") {
+            Writer::Buffered(w) => w.write(batch).map_err(|e| Error::table(&self.dest, e)),
+            Writer::RowGroups(..) => Err(Error::table(&self.dest, "write after write_row_group")),
+        }
     }
 
     /// Close the current row group (the next batch starts a new one).
     pub fn flush_row_group(&mut self) -> Result<()> {
-        let w = self.writer.as_mut().expect("writer is present until finish");
-        w.flush().map_err(|e| Error::table(&self.dest, e))
+        match self.writer.as_mut().expect("writer is present until finish") {
+            Writer::Buffered(w) => w.flush().map_err(|e| Error::table(&self.dest, e)),
+            Writer::RowGroups(..) => Ok(()),
+        }
+    }
+
+    /// Write `batch` as one row group, encoding and compressing its columns in parallel.
+    pub fn write_row_group(&mut self, batch: &RecordBatch) -> Result<()> {
+        let table_err = |e: parquet::errors::ParquetError| Error::table(&self.dest, e);
+        if let Some(Writer::Buffered(_)) = self.writer {
+            let Some(Writer::Buffered(w)) = self.writer.take() else { unreachable!() };
+            let (file, factory) = w.into_serialized_writer().map_err(table_err)?;
+            self.writer = Some(Writer::RowGroups(file, factory));
+        }
+        let Some(Writer::RowGroups(file, factory)) = self.writer.as_mut() else { unreachable!() };
+        let writers = factory.create_column_writers(file.flushed_row_groups().len()).map_err(table_err)?;
+        let schema = batch.schema();
+        // One leaf per column: the tables written this way have no nested columns.
+        let chunks: Vec<ArrowColumnChunk> = writers
+            .into_par_iter()
+            .zip(schema.fields().par_iter().zip(batch.columns().par_iter()))
+            .map(|(mut writer, (field, column))| {
+                for leaf in compute_leaves(field, column)? {
+                    writer.write(&leaf)?;
+                }
+                writer.close()
+            })
+            .collect::<std::result::Result<_, _>>()
+            .map_err(table_err)?;
+        let mut row_group = file.next_row_group().map_err(table_err)?;
+        for chunk in chunks {
+            chunk.append_to_row_group(&mut row_group).map_err(table_err)?;
+        }
+        row_group.close().map_err(table_err)?;
+        Ok(())
     }
 
     /// Write the footer, sync, and rename into place.
     pub fn finish(mut self) -> Result<PathBuf> {
-        let w = self.writer.take().expect("writer is present until finish");
-        let file = w.into_inner().map_err(|e| Error::table(&self.dest, e))?;
+        let file = match self.writer.take().expect("writer is present until finish") {
+            Writer::Buffered(w) => w.into_inner(),
+            Writer::RowGroups(w, _) => w.into_inner(),
+        }
+        .map_err(|e| Error::table(&self.dest, e))?;
         file.sync_all().map_err(|e| Error::file(&self.tmp, e))?;
         std::fs::rename(&self.tmp, &self.dest).map_err(|e| Error::file(&self.dest, format!("cannot rename into place: {e}")))?;
         Ok(self.dest.clone())

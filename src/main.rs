@@ -88,13 +88,16 @@ struct SimulateArgs {
     /// LAS/LAZ file (direct mode).
     #[arg(long, requires_all = ["footprints", "out"], conflicts_with = "dataset")]
     als: Option<PathBuf>,
-    /// CSV with a header naming id, x, y (direct mode).
+    /// CSV with a header naming id, x, y (direct mode; in dataset mode, footprints to simulate
+    /// instead of the ingested shots, e.g. inventory plots).
     #[arg(long)]
     footprints: Option<PathBuf>,
-    /// Output Parquet file (direct mode).
+    /// Output Parquet file (direct mode; dataset mode with --footprints, default
+    /// <dataset>/sim/<CSV name>.parquet).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Dataset directory: simulate every ingested shot into <dataset>/sim/.
+    /// Dataset directory: simulate every ingested shot into <dataset>/sim/shots.parquet (or the
+    /// --footprints) from the ingested ALS points.
     #[arg(long)]
     dataset: Option<PathBuf>,
     /// gedirat reproduces Hancock's gediRat exactly (batch-dependent bin grid, every point of
@@ -119,6 +122,9 @@ struct SimulateArgs {
     /// Direct mode with the default profile: keep the classes that ingest drops (7, 18, 64–67).
     #[arg(long)]
     keep_all_classes: bool,
+    /// Print wall time, waveforms/s and peak memory at the end.
+    #[arg(long)]
+    stats: bool,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -284,26 +290,49 @@ fn simulate(a: SimulateArgs) -> Result<()> {
             sim::Pulse::tabulated(&pairs).map_err(|e| Error::field(&path, "pulse", e))?
         }
     };
-    if let Some(dir) = a.dataset {
+    let start = Instant::now();
+    let (ok, skipped, out) = if let Some(dir) = a.dataset {
         let ds = Dataset::open(&dir)?;
-        let n = gedisim::simulate::shot_footprints(&ds)?.len() as u64;
-        let bar = progress(n, "shots");
-        let r = gedisim::simulate::simulate_dataset(&ds, &cfg, profile, &|k| bar.inc(k as u64));
+        let (footprints, dest) = match &a.footprints {
+            Some(csv) => {
+                let stem = csv.file_stem().and_then(|s| s.to_str()).unwrap_or("footprints");
+                let dest = match &a.out {
+                    Some(out) => out.clone(),
+                    None => ds.table_file(gedisim::dataset::tables::SIM, stem)?,
+                };
+                (gedisim::ingest::footprints::read_footprints_csv(csv)?, dest)
+            }
+            None if a.out.is_some() => return Err(Error::Usage("--out in dataset mode needs --footprints".into())),
+            None => (gedisim::simulate::shot_footprints(&ds)?, ds.table_file(gedisim::dataset::tables::SIM, "shots")?),
+        };
+        let bar = progress(footprints.len() as u64, "footprints");
+        let r = gedisim::simulate::simulate_on_dataset(&ds, footprints, &cfg, profile, &dest, &|k| bar.inc(k as u64));
         bar.finish_and_clear();
         let (ok, skipped) = r?;
-        eprintln!("{ok} shots simulated, {skipped} skipped (see the status column) → {}", dir.join("sim").display());
-        return Ok(());
-    }
-    let (Some(als_path), Some(fp_path), Some(out)) = (a.als, a.footprints, a.out) else {
-        return Err(Error::Usage("give --als, --footprints and --out (direct mode) or --dataset".into()));
+        (ok, skipped, dest)
+    } else {
+        let (Some(als_path), Some(fp_path), Some(out)) = (a.als, a.footprints, a.out) else {
+            return Err(Error::Usage("give --als, --footprints and --out (direct mode) or --dataset".into()));
+        };
+        let footprints = gedisim::ingest::footprints::read_footprints_csv(&fp_path)?;
+        let mut points = gedisim::ingest::las::read_points(&als_path)?;
+        if profile == Profile::Default && !a.keep_all_classes {
+            points = gedisim::simulate::drop_ingest_classes(&points);
+        }
+        let (ok, skipped) = gedisim::simulate::simulate_direct(&points, &footprints, &cfg, profile, &out)?;
+        (ok, skipped, out)
     };
-    let footprints = gedisim::ingest::footprints::read_footprints_csv(&fp_path)?;
-    let mut points = gedisim::ingest::las::read_points(&als_path)?;
-    if profile == Profile::Default && !a.keep_all_classes {
-        points = gedisim::simulate::drop_ingest_classes(&points);
-    }
-    let (ok, skipped) = gedisim::simulate::simulate_direct(&points, &footprints, &cfg, profile, &out)?;
     eprintln!("{ok} footprints simulated, {skipped} skipped (see the status column) → {}", out.display());
+    if a.stats {
+        let s = start.elapsed().as_secs_f64();
+        println!(
+            "simulate: {} footprints × {} weightings, {s:.3} s, {:.1} footprints/s, peak RSS {:.1} MB",
+            ok + skipped,
+            gedisim::sim::N_WEIGHTINGS,
+            (ok + skipped) as f64 / s,
+            peak_rss_mb()
+        );
+    }
     Ok(())
 }
 

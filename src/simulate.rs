@@ -13,8 +13,10 @@ use crate::ingest::als::{cell_key, DROPPED_CLASSES};
 use crate::sim::{self, AlsPoints, Footprint, Profile, SimConfig, Weighting};
 use crate::tables::sim::{sim_batch, sim_metadata, sim_schema};
 
-/// Footprints simulated together in dataset mode (bounds memory: their points are read at once).
-pub const DATASET_BATCH: usize = 256;
+/// Side of the square blocks of footprints simulated together in dataset mode (m): a block's
+/// points (plus the footprint radius around it) are read at once, so memory is bounded by the
+/// block, and the next block is read while one is simulated.
+pub const BLOCK_M: f64 = 200.0;
 
 /// Keep only the points whose class the ingest keeps (so that direct mode with the `default`
 /// profile sees the same points as the dataset path).
@@ -60,26 +62,119 @@ pub fn shot_footprints(ds: &Dataset) -> Result<Vec<Footprint>> {
 }
 
 /// Dataset mode: simulate every shot of `<dataset>/shots/` on the `als/` table into
-/// `<dataset>/sim/shots.parquet`, batch by batch (shots sorted by spatial cell, each batch
-/// reading only the row groups its footprints touch). `on_batch(n)` reports progress.
+/// `<dataset>/sim/shots.parquet`. `on_batch(n)` reports progress.
 pub fn simulate_dataset(ds: &Dataset, cfg: &SimConfig, profile: Profile, on_batch: &dyn Fn(usize)) -> Result<(usize, usize)> {
-    let mut shots = shot_footprints(ds)?;
-    shots.sort_by_key(|f| cell_key(f.x, f.y));
-    let als = AlsTable::open(ds)?;
-    let half = sim::footprint::gauss_sep(cfg.fsigma, sim::footprint::I_THRESH) as f64 + 1.0;
+    let shots = shot_footprints(ds)?;
     let dest = ds.table_file(tables::SIM, "shots")?;
-    let mut writer = AtomicParquet::create(&dest, sim_schema(), dataset::writer_properties(&sim_metadata(profile), 1 << 14))?;
+    simulate_on_dataset(ds, shots, cfg, profile, &dest, on_batch)
+}
+
+/// Simulate `footprints` on the dataset's `als/` table into `dest` (atomically), block by block
+/// (see [`BlockSimulation`]). `on_batch(n)` reports progress.
+pub fn simulate_on_dataset(
+    ds: &Dataset,
+    footprints: Vec<Footprint>,
+    cfg: &SimConfig,
+    profile: Profile,
+    dest: &Path,
+    on_batch: &dyn Fn(usize),
+) -> Result<(usize, usize)> {
+    let mut writer = AtomicParquet::create(dest, sim_schema(), dataset::writer_properties(&sim_metadata(profile), 1 << 14))?;
     let (mut ok, mut skipped) = (0, 0);
-    for batch in shots.chunks(DATASET_BATCH) {
-        let boxes: Vec<BBox> = batch.iter().map(|f| [f.x - half, f.y - half, f.x + half, f.y + half]).collect();
-        let (points, _) = als.points_near(&boxes)?;
-        let results = sim::simulate(&points, batch, cfg)?;
+    for block in BlockSimulation::new(ds, footprints, cfg.clone())? {
+        let (block, results) = block?;
         let n_ok = results.iter().filter(|r| r.is_ok()).count();
         ok += n_ok;
         skipped += results.len() - n_ok;
-        writer.write(&sim_batch(batch, &results, &Weighting::ALL)?)?;
-        on_batch(batch.len());
+        writer.write(&sim_batch(&block, &results, &Weighting::ALL)?)?;
+        on_batch(block.len());
     }
     writer.finish()?;
     Ok((ok, skipped))
+}
+
+/// The simulation of footprints against a dataset's `als/` table as a stream of blocks
+/// ([`BLOCK_M`] squares of footprints, row-major): each block reads only the points within the
+/// footprint radius of its footprints, so memory is bounded by the block, never by the table,
+/// and the next block is read while one is simulated.
+pub struct BlockSimulation {
+    als: AlsTable,
+    cfg: SimConfig,
+    half: f64,
+    blocks: std::vec::IntoIter<Vec<Footprint>>,
+    current: Option<(Vec<Footprint>, Result<AlsPoints>)>,
+}
+
+/// One simulated block: its footprints and their outcomes, in the same order.
+pub type SimulatedBlock = (Vec<Footprint>, Vec<std::result::Result<sim::SimulatedFootprint, sim::SkipReason>>);
+
+impl BlockSimulation {
+    /// Prepare the blocks of `footprints` (the first block is read now).
+    pub fn new(ds: &Dataset, footprints: Vec<Footprint>, cfg: SimConfig) -> Result<Self> {
+        let als = AlsTable::open(ds)?;
+        let half = sim::footprint::gauss_sep(cfg.fsigma, sim::footprint::I_THRESH) as f64 + 1.0;
+        let mut blocks = blocks(footprints).into_iter();
+        let mut this = BlockSimulation { als, cfg, half, blocks: std::vec::IntoIter::default(), current: None };
+        this.current = blocks.next().map(|b| {
+            let points = this.read(&b);
+            (b, points)
+        });
+        this.blocks = blocks;
+        Ok(this)
+    }
+
+    /// The points within the footprint radius of `block`'s footprints.
+    fn read(&self, block: &[Footprint]) -> Result<AlsPoints> {
+        let h = self.half;
+        let mut b: BBox = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        for f in block.iter().filter(|f| f.x.is_finite() && f.y.is_finite()) {
+            b = [b[0].min(f.x - h), b[1].min(f.y - h), b[2].max(f.x + h), b[3].max(f.y + h)];
+        }
+        if b[0] > b[2] {
+            return Ok(AlsPoints::default());
+        }
+        Ok(self.als.points_in(b)?.0)
+    }
+}
+
+impl Iterator for BlockSimulation {
+    type Item = Result<SimulatedBlock>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let (block, points) = self.current.take()?;
+        let next = self.blocks.next();
+        let points = match points {
+            Ok(p) => p,
+            Err(e) => return Some(Err(e)),
+        };
+        let this = &*self;
+        let (results, ahead) =
+            rayon::join(|| sim::simulate(&points, &block, &this.cfg), || next.as_ref().map(|b| this.read(b)));
+        self.current = next.zip(ahead);
+        Some(results.map(|r| (block, r)))
+    }
+}
+
+/// Footprints grouped by [`BLOCK_M`] square, blocks in row-major order (footprints without a
+/// finite position form a block of their own, simulated as skipped).
+pub fn blocks(mut footprints: Vec<Footprint>) -> Vec<Vec<Footprint>> {
+    let key = |f: &Footprint| {
+        if f.x.is_finite() && f.y.is_finite() {
+            Some(((f.y / BLOCK_M).floor() as i64, (f.x / BLOCK_M).floor() as i64))
+        } else {
+            None
+        }
+    };
+    footprints.sort_by_key(|f| (key(f), cell_key(f.x, f.y)));
+    let mut out: Vec<Vec<Footprint>> = Vec::new();
+    let mut last = None;
+    for f in footprints {
+        let k = key(&f);
+        if out.is_empty() || k != last {
+            out.push(Vec::new());
+            last = k;
+        }
+        out.last_mut().expect("a block").push(f);
+    }
+    out
 }

@@ -248,7 +248,7 @@ struct Run {
 }
 
 /// Bytes of one spilled point: x, y, z, gps (f64), scan angle (f32), intensity, psid (u16),
-/// return number, number of returns, class (u8).
+/// return number, number of returns, class (u8). A run stores each column contiguously.
 const SPILL_RECORD: usize = 8 * 4 + 4 + 2 * 2 + 3;
 
 #[allow(clippy::too_many_arguments)]
@@ -310,7 +310,7 @@ fn ingest_tile(
             metadata.insert(meta::CRS_WKT.to_string(), wkt.clone());
         }
         let props = dataset::writer_properties(&metadata, MAX_ROW_GROUP_ROWS);
-        let props = rebuild_with_sorting(props);
+        let props = als_writer_properties(props);
         let dest = als_dir.join(format!("{key}.parquet"));
         let mut writer = AtomicParquet::create(&dest, als_schema(), props)?;
         let mut spill_reader = SpillReader::open(&spill)?;
@@ -322,10 +322,9 @@ fn ingest_tile(
                 end += 1;
             }
             let points = spill_reader.read_runs(&runs[start..end])?;
-            for part in (0..points.len()).step_by(MAX_ROW_GROUP_ROWS) {
-                let hi = (part + MAX_ROW_GROUP_ROWS).min(points.len());
-                writer.write(&als_batch(&points, part..hi, &tile, cell)?)?;
-                writer.flush_row_group()?;
+            let batch = als_batch(points, &tile, cell)?;
+            for part in (0..batch.num_rows()).step_by(MAX_ROW_GROUP_ROWS) {
+                writer.write_row_group(&batch.slice(part, MAX_ROW_GROUP_ROWS.min(batch.num_rows() - part)))?;
             }
             start = end;
         }
@@ -343,32 +342,37 @@ fn ingest_tile(
     result
 }
 
-fn rebuild_with_sorting(props: parquet::file::properties::WriterProperties) -> parquet::file::properties::WriterProperties {
-    // Declare the clustering so that readers may rely on it.
+/// The `als/` table's writer properties: the clustering declared so that readers may rely on it,
+/// and no dictionary for the columns whose values are nearly all distinct.
+fn als_writer_properties(props: parquet::file::properties::WriterProperties) -> parquet::file::properties::WriterProperties {
+    use parquet::schema::types::ColumnPath;
     let cell_col = als_schema().index_of("cell").expect("cell column");
-    props
-        .into_builder()
-        .set_sorting_columns(Some(vec![parquet::file::metadata::SortingColumn {
-            column_idx: cell_col as i32,
-            descending: false,
-            nulls_first: false,
-        }]))
-        .build()
+    let mut builder = props.into_builder().set_sorting_columns(Some(vec![parquet::file::metadata::SortingColumn {
+        column_idx: cell_col as i32,
+        descending: false,
+        nulls_first: false,
+    }]));
+    for col in ["x", "y", "z", "gps_time"] {
+        builder = builder.set_column_dictionary_enabled(ColumnPath::from(col), false);
+    }
+    builder.build()
 }
 
-fn als_batch(p: &AlsPoints, r: std::ops::Range<usize>, tile: &str, cell: u64) -> Result<RecordBatch> {
-    let n = r.len();
+/// The points of one cell as an `als/` batch (the columns are moved, not copied).
+fn als_batch(p: AlsPoints, tile: &str, cell: u64) -> Result<RecordBatch> {
+    let n = p.len();
+    let gps_time = Float64Array::from_iter(p.gps_time.iter().map(|&t| t.is_finite().then_some(t)));
     let cols: Vec<ArrayRef> = vec![
-        Arc::new(Float64Array::from(p.x[r.clone()].to_vec())),
-        Arc::new(Float64Array::from(p.y[r.clone()].to_vec())),
-        Arc::new(Float64Array::from(p.z[r.clone()].to_vec())),
-        Arc::new(UInt16Array::from(p.intensity[r.clone()].to_vec())),
-        Arc::new(UInt8Array::from(p.return_number[r.clone()].to_vec())),
-        Arc::new(UInt8Array::from(p.number_of_returns[r.clone()].to_vec())),
-        Arc::new(UInt8Array::from(p.classification[r.clone()].to_vec())),
-        Arc::new(Float32Array::from(p.scan_angle_deg[r.clone()].to_vec())),
-        Arc::new(Float64Array::from_iter(p.gps_time[r.clone()].iter().map(|&t| t.is_finite().then_some(t)))),
-        Arc::new(UInt16Array::from(p.point_source_id[r].to_vec())),
+        Arc::new(Float64Array::from(p.x)),
+        Arc::new(Float64Array::from(p.y)),
+        Arc::new(Float64Array::from(p.z)),
+        Arc::new(UInt16Array::from(p.intensity)),
+        Arc::new(UInt8Array::from(p.return_number)),
+        Arc::new(UInt8Array::from(p.number_of_returns)),
+        Arc::new(UInt8Array::from(p.classification)),
+        Arc::new(Float32Array::from(p.scan_angle_deg)),
+        Arc::new(gps_time),
+        Arc::new(UInt16Array::from(p.point_source_id)),
         Arc::new(StringArray::from(vec![tile; n])),
         Arc::new(UInt64Array::from(vec![cell; n])),
     ];
@@ -439,30 +443,31 @@ impl SpillFile {
         Ok(SpillFile { path: path.to_path_buf(), out: BufWriter::with_capacity(1 << 20, f), offset: 0, buf: Vec::new() })
     }
 
-    /// Append the points `order` (sorted by cell) of `chunk`, one run per cell.
+    /// Append the points `order` (sorted by cell) of `chunk`, one run per cell, column by column.
     fn write_runs(&mut self, chunk: &AlsPoints, order: &[(u64, u32)], runs: &mut Vec<Run>) -> Result<()> {
+        fn put<T: Copy, const N: usize>(buf: &mut Vec<u8>, col: &[T], idx: &[(u64, u32)], bytes: impl Fn(T) -> [u8; N]) {
+            for &(_, i) in idx {
+                buf.extend_from_slice(&bytes(col[i as usize]));
+            }
+        }
         self.buf.clear();
         self.buf.reserve(order.len() * SPILL_RECORD);
         let mut start = 0;
         while start < order.len() {
             let cell = order[start].0;
-            let mut end = start;
-            while end < order.len() && order[end].0 == cell {
-                let i = order[end].1 as usize;
-                self.buf.extend_from_slice(&chunk.x[i].to_le_bytes());
-                self.buf.extend_from_slice(&chunk.y[i].to_le_bytes());
-                self.buf.extend_from_slice(&chunk.z[i].to_le_bytes());
-                self.buf.extend_from_slice(&chunk.gps_time[i].to_le_bytes());
-                self.buf.extend_from_slice(&chunk.scan_angle_deg[i].to_le_bytes());
-                self.buf.extend_from_slice(&chunk.intensity[i].to_le_bytes());
-                self.buf.extend_from_slice(&chunk.point_source_id[i].to_le_bytes());
-                self.buf.push(chunk.return_number[i]);
-                self.buf.push(chunk.number_of_returns[i]);
-                self.buf.push(chunk.classification[i]);
-                end += 1;
-            }
-            let len = (end - start) as u32;
-            runs.push(Run { cell, offset: self.offset + (start * SPILL_RECORD) as u64, len });
+            let end = start + order[start..].partition_point(|&(c, _)| c == cell);
+            let (idx, buf) = (&order[start..end], &mut self.buf);
+            runs.push(Run { cell, offset: self.offset + buf.len() as u64, len: idx.len() as u32 });
+            put(buf, &chunk.x, idx, f64::to_le_bytes);
+            put(buf, &chunk.y, idx, f64::to_le_bytes);
+            put(buf, &chunk.z, idx, f64::to_le_bytes);
+            put(buf, &chunk.gps_time, idx, f64::to_le_bytes);
+            put(buf, &chunk.scan_angle_deg, idx, f32::to_le_bytes);
+            put(buf, &chunk.intensity, idx, u16::to_le_bytes);
+            put(buf, &chunk.point_source_id, idx, u16::to_le_bytes);
+            put(buf, &chunk.return_number, idx, |v: u8| [v]);
+            put(buf, &chunk.number_of_returns, idx, |v: u8| [v]);
+            put(buf, &chunk.classification, idx, |v: u8| [v]);
             start = end;
         }
         self.out.write_all(&self.buf).map_err(|e| Error::file(&self.path, format!("cannot write spill file: {e}")))?;
@@ -490,28 +495,31 @@ impl SpillReader {
     }
 
     fn read_runs(&mut self, runs: &[Run]) -> Result<AlsPoints> {
-        let n: usize = runs.iter().map(|r| r.len as usize).sum();
-        let mut p = AlsPoints::with_capacity(n);
+        fn take<T, const N: usize>(col: &mut Vec<T>, bytes: &[u8], at: &mut usize, n: usize, from: impl Fn([u8; N]) -> T) {
+            let part = &bytes[*at..*at + n * N];
+            col.extend(part.chunks_exact(N).map(|c| from(c.try_into().expect("N bytes"))));
+            *at += n * N;
+        }
+        let total: usize = runs.iter().map(|r| r.len as usize).sum();
+        let mut p = AlsPoints::with_capacity(total);
         for r in runs {
-            self.buf.resize(r.len as usize * SPILL_RECORD, 0);
+            let n = r.len as usize;
+            self.buf.resize(n * SPILL_RECORD, 0);
             self.file
                 .seek(SeekFrom::Start(r.offset))
                 .and_then(|_| self.file.read_exact(&mut self.buf))
                 .map_err(|e| Error::file(&self.path, format!("cannot read spill file: {e}")))?;
-            for rec in self.buf.chunks_exact(SPILL_RECORD) {
-                let f64_at = |o: usize| f64::from_le_bytes(rec[o..o + 8].try_into().unwrap());
-                let u16_at = |o: usize| u16::from_le_bytes(rec[o..o + 2].try_into().unwrap());
-                p.x.push(f64_at(0));
-                p.y.push(f64_at(8));
-                p.z.push(f64_at(16));
-                p.gps_time.push(f64_at(24));
-                p.scan_angle_deg.push(f32::from_le_bytes(rec[32..36].try_into().unwrap()));
-                p.intensity.push(u16_at(36));
-                p.point_source_id.push(u16_at(38));
-                p.return_number.push(rec[40]);
-                p.number_of_returns.push(rec[41]);
-                p.classification.push(rec[42]);
-            }
+            let (b, at) = (&self.buf, &mut 0);
+            take(&mut p.x, b, at, n, f64::from_le_bytes);
+            take(&mut p.y, b, at, n, f64::from_le_bytes);
+            take(&mut p.z, b, at, n, f64::from_le_bytes);
+            take(&mut p.gps_time, b, at, n, f64::from_le_bytes);
+            take(&mut p.scan_angle_deg, b, at, n, f32::from_le_bytes);
+            take(&mut p.intensity, b, at, n, u16::from_le_bytes);
+            take(&mut p.point_source_id, b, at, n, u16::from_le_bytes);
+            take(&mut p.return_number, b, at, n, |[v]: [u8; 1]| v);
+            take(&mut p.number_of_returns, b, at, n, |[v]: [u8; 1]| v);
+            take(&mut p.classification, b, at, n, |[v]: [u8; 1]| v);
         }
         Ok(p)
     }

@@ -1,6 +1,6 @@
 //! `gedi_simulate([profile])`: the simulation as a SQL table function. It streams the `sim`
-//! rows of every ingested shot, batch by batch: shots sorted by spatial cell, each batch reading
-//! only the ALS row groups its footprints touch, then the simulation kernel.
+//! rows of every ingested shot, block by block ([`crate::simulate::BlockSimulation`]): each
+//! block reads only the ALS row groups its footprints touch, then the simulation kernel.
 
 use std::fmt;
 use std::sync::Arc;
@@ -16,11 +16,9 @@ use datafusion::physical_plan::stream::RecordBatchStreamAdapter;
 use datafusion::physical_plan::streaming::{PartitionStream, StreamingTableExec};
 use datafusion::physical_plan::{ExecutionPlan, SendableRecordBatchStream};
 
-use crate::als_table::{AlsTable, BBox};
 use crate::dataset::Dataset;
-use crate::ingest::als::cell_key;
-use crate::sim::{self, Profile, SimConfig, Weighting};
-use crate::simulate::{shot_footprints, DATASET_BATCH};
+use crate::sim::{Profile, SimConfig, Weighting};
+use crate::simulate::{shot_footprints, BlockSimulation};
 use crate::tables::sim::{sim_batch, sim_schema};
 
 /// The `gedi_simulate` table function of one dataset.
@@ -90,17 +88,11 @@ impl PartitionStream for SimulatedShots {
     fn execute(&self, _ctx: Arc<TaskContext>) -> SendableRecordBatchStream {
         let this = self.clone();
         let batches = move || -> crate::Result<Box<dyn Iterator<Item = DfResult<arrow::record_batch::RecordBatch>> + Send>> {
-            let mut shots = shot_footprints(&this.dataset)?;
-            shots.sort_by_key(|f| cell_key(f.x, f.y));
-            let als = AlsTable::open(&this.dataset)?;
-            let cfg = SimConfig::new(this.profile);
-            let half = sim::footprint::gauss_sep(cfg.fsigma, sim::footprint::I_THRESH) as f64 + 1.0;
-            let chunks: Vec<Vec<sim::Footprint>> = shots.chunks(DATASET_BATCH).map(|c| c.to_vec()).collect();
-            Ok(Box::new(chunks.into_iter().map(move |batch| {
-                let boxes: Vec<BBox> = batch.iter().map(|f| [f.x - half, f.y - half, f.x + half, f.y + half]).collect();
-                let (points, _) = als.points_near(&boxes).map_err(to_df)?;
-                let results = sim::simulate(&points, &batch, &cfg).map_err(to_df)?;
-                sim_batch(&batch, &results, &Weighting::ALL).map_err(to_df)
+            let shots = shot_footprints(&this.dataset)?;
+            let blocks = BlockSimulation::new(&this.dataset, shots, SimConfig::new(this.profile))?;
+            Ok(Box::new(blocks.map(|block| {
+                let (block, results) = block.map_err(to_df)?;
+                sim_batch(&block, &results, &Weighting::ALL).map_err(to_df)
             })))
         };
         let iter: Box<dyn Iterator<Item = DfResult<arrow::record_batch::RecordBatch>> + Send> = match batches() {
