@@ -176,7 +176,7 @@ fn shot_twin_bad_parameters_give_reasons() {
     let cases = [
         (
             "gedi_noise_twin(wave, z0, dz, 20000.0, 220.0, 3.0, 100, 150, seed)",
-            "does not fit",
+            "has energy outside a record of 100 samples",
         ),
         (
             "gedi_noise_twin(wave, z0, dz, 20000.0, 220.0, 3.0, -5, 0, seed)",
@@ -184,7 +184,7 @@ fn shot_twin_bad_parameters_give_reasons() {
         ),
         (
             "gedi_noise_twin(wave, z0, dz, 20000.0, 220.0, 3.0, 1000, -1, seed)",
-            "invalid value for start",
+            "has energy outside a record of 1000 samples",
         ),
         (
             "gedi_noise_twin(wave, z0, dz, -1.0, 220.0, 3.0, 1000, 0, seed)",
@@ -251,4 +251,147 @@ fn link_margin_twin_in_sql_is_the_kernel() {
         "tw",
     );
     assert_eq!(r[0].as_deref(), Some("invalid value for cover"));
+}
+
+mod common;
+
+/// `queries/simulated_l2a.sql`: simulations of 12 positions on a real tile, each given the noise
+/// twin of a real shot (its energy, noise and record length), processed by L2A a1–a6 in one query.
+#[test]
+fn simulated_l2a_query_processes_twins_of_simulations() {
+    use arrow::array::UInt32Array;
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = Dataset::create(tmp.path()).unwrap();
+    let tile = common::data("als/lidarforfuel_2_bas_lig.laz");
+    gedisim::ingest::als::ingest_tiles(&ds, &[tile], &Default::default(), &|_| {}).unwrap();
+    let real = common::nasa::load_real_shots();
+    let n = 12;
+    let pos = |k: usize| {
+        (
+            368500.0 + 18.0 * (k / 3) as f64,
+            6807430.0 + 22.0 * (k % 3) as f64,
+        )
+    };
+    let shots = |ground: &dyn Fn(usize) -> f64| {
+        let schema = Arc::new(Schema::new(vec![
+            Field::new("shot_number", DataType::UInt64, false),
+            Field::new("x", DataType::Float64, true),
+            Field::new("y", DataType::Float64, true),
+            Field::new("energy_total", DataType::Float64, true),
+            Field::new("noise_mean_corrected", DataType::Float64, true),
+            Field::new("noise_stddev_corrected", DataType::Float64, true),
+            Field::new("rx_sample_count", DataType::UInt32, true),
+            Field::new("elevation_bin0", DataType::Float64, true),
+            Field::new("geoid_offset_used", DataType::Float64, true),
+        ]));
+        let f64s = |f: &dyn Fn(usize) -> f64| {
+            Arc::new(Float64Array::from((0..n).map(f).collect::<Vec<_>>()))
+        };
+        let batch = RecordBatch::try_new(
+            schema.clone(),
+            vec![
+                Arc::new(UInt64Array::from(
+                    (0..n).map(|k| real[k].shot_number).collect::<Vec<_>>(),
+                )),
+                f64s(&|k| pos(k).0),
+                f64s(&|k| pos(k).1),
+                f64s(&|k| real[k].energy_total),
+                f64s(&|k| real[k].noise.mean),
+                f64s(&|k| real[k].noise.stddev),
+                Arc::new(UInt32Array::from(
+                    (0..n)
+                        .map(|k| real[k].wave.len() as u32)
+                        .collect::<Vec<_>>(),
+                )),
+                // The real shot's record top lies as far above its own ground as here (N = 20 m).
+                f64s(&|k| {
+                    ground(k)
+                        + 20.0
+                        + (real[k].geo.elevation_bin0
+                            - real[k].geo.elevation_at(real[k].nasa[0].zcross))
+                }),
+                f64s(&|_| 20.0),
+            ],
+        )
+        .unwrap();
+        dataset::write_parquet(
+            &ds.table_file("shots", "test").unwrap(),
+            schema,
+            &[batch],
+            &Default::default(),
+        )
+        .unwrap();
+    };
+    // First the positions alone, to know each footprint's ALS ground.
+    shots(&|_| 0.0);
+    let grounds = query(
+        &ds,
+        "select footprint_id, als_ground from gedi_simulate('default') where weighting = 'count'",
+    );
+    let mut ground = vec![f64::NAN; n];
+    for b in &grounds {
+        let id = b.column_by_name("footprint_id").unwrap().as_string::<i32>();
+        let g = b
+            .column_by_name("als_ground")
+            .unwrap()
+            .as_primitive::<Float64Type>();
+        for i in 0..b.num_rows() {
+            let k = (0..n)
+                .find(|&k| real[k].shot_number.to_string() == id.value(i))
+                .unwrap();
+            ground[k] = g.value(i);
+        }
+    }
+    shots(&|k| ground[k]);
+
+    let sql = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/queries/simulated_l2a.sql"
+    ))
+    .unwrap();
+    let first = query(&ds, &sql);
+    assert_eq!(
+        first,
+        query(&ds, &sql),
+        "seeded by shot number: the same rows again"
+    );
+    let (mut rows, mut processed, mut near) = (0, 0, 0);
+    for b in &first {
+        let twin_reason = b.column_by_name("twin_reason").unwrap().as_string::<i32>();
+        let reason = b
+            .column_by_name("no_result_reason")
+            .unwrap()
+            .as_string::<i32>();
+        let ground = b
+            .column_by_name("als_ground")
+            .unwrap()
+            .as_primitive::<Float64Type>();
+        let elev = b
+            .column_by_name("elev_lowestmode")
+            .unwrap()
+            .as_primitive::<Float64Type>();
+        for i in 0..b.num_rows() {
+            rows += 1;
+            assert!(
+                twin_reason.is_null(i),
+                "twin made: {}",
+                twin_reason.value(i)
+            );
+            if reason.is_null(i) {
+                processed += 1;
+                let d = elev.value(i) - ground.value(i);
+                near += usize::from(d.abs() <= 1.0);
+            }
+        }
+    }
+    println!("simulated_l2a.sql: {rows} rows, {processed} processed, {near} with the ground within 1 m of the ALS ground");
+    assert_eq!(rows, n * 6);
+    assert_eq!(
+        processed, rows,
+        "every twin is processed by every algorithm"
+    );
+    assert_eq!(
+        near, processed,
+        "the L2A ground of each twin is the simulation's ground"
+    );
 }

@@ -34,13 +34,13 @@ pub enum TwinError {
     /// The simulated waveform carries no positive energy, so it cannot be scaled to a gain.
     #[error("simulated waveform has no positive energy")]
     NoEnergy,
-    /// The waveform placed at `start` does not fit in the record length.
+    /// The waveform placed at `start` has non-zero samples outside the record.
     #[error(
-        "signal of {signal} samples at sample {start} does not fit a record of {record} samples"
+        "signal of {signal} samples placed at sample {start} has energy outside a record of {record} samples"
     )]
     DoesNotFit {
-        /// First sample of the signal in the record.
-        start: usize,
+        /// Record sample of the signal's first sample (negative: before the record).
+        start: isize,
         /// Signal length on the GEDI grid (samples).
         signal: usize,
         /// Record length (samples).
@@ -94,12 +94,14 @@ pub struct ShotTwin {
 
 impl ShotTwin {
     /// Make the twin waveform: `sim` (bins of `input_bin_m`, top to bottom) placed with its first
-    /// bin at record sample `start`, noise drawn from `seed`.
+    /// bin at record sample `start`, noise drawn from `seed`. `start` may be negative and the
+    /// signal may run past the record's end, as long as what falls outside is zero (a simulation's
+    /// empty buffer above the canopy and below the ground).
     pub fn apply(
         &self,
         sim: &[f64],
         input_bin_m: f64,
-        start: usize,
+        start: isize,
         seed: u64,
     ) -> Result<TwinWaveform, TwinError> {
         check_signal(sim, input_bin_m)?;
@@ -262,7 +264,7 @@ impl LinkMarginTwin {
             / (self.cover * self.rho_v + (1.0 - self.cover) * self.rho_g);
         let sigma = self.sigma_link() * refl_scale;
         let n = self.pre_samples + signal.len() + self.post_samples;
-        let record = place(&signal, self.pre_samples, n)?;
+        let record = place(&signal, self.pre_samples as isize, n)?;
         let step = self.max_dn / 2f64.powi(self.bits as i32);
         let top = self.max_dn - step;
         let mut normal = NormalSource::new(seed);
@@ -296,18 +298,24 @@ fn check_signal(sim: &[f64], input_bin_m: f64) -> Result<(), TwinError> {
     Ok(())
 }
 
-/// A record of `len` zeros with `signal` copied from sample `start` on.
-fn place(signal: &[f64], start: usize, len: usize) -> Result<Vec<f64>, TwinError> {
-    let end = start.checked_add(signal.len()).filter(|&e| e <= len);
-    let Some(end) = end else {
-        return Err(TwinError::DoesNotFit {
-            start,
-            signal: signal.len(),
-            record: len,
-        });
-    };
+/// A record of `len` zeros with `signal[k]` at record sample `start + k`; samples falling outside
+/// the record must be zero.
+fn place(signal: &[f64], start: isize, len: usize) -> Result<Vec<f64>, TwinError> {
     let mut record = vec![0.0; len];
-    record[start..end].copy_from_slice(signal);
+    for (k, &v) in signal.iter().enumerate() {
+        let r = start + k as isize;
+        match usize::try_from(r).ok().and_then(|r| record.get_mut(r)) {
+            Some(slot) => *slot = v,
+            None if v == 0.0 => {}
+            None => {
+                return Err(TwinError::DoesNotFit {
+                    start,
+                    signal: signal.len(),
+                    record: len,
+                })
+            }
+        }
+    }
     Ok(record)
 }
 
@@ -488,6 +496,36 @@ mod tests {
             Err(TwinError::DoesNotFit {
                 start: 700,
                 signal: 400,
+                record: 1000
+            })
+        );
+        // Zero samples may fall outside the record (a simulation's empty buffers), energy may not.
+        let mut padded = vec![0.0; 50];
+        padded.extend(&sim);
+        padded.extend([0.0; 50]);
+        let shifted = twin.apply(&padded, GEDI_BIN_M, 250, 42).expect("twin");
+        assert_eq!(
+            shifted.wave, t.wave,
+            "the same signal at the same record samples"
+        );
+        let inside = twin
+            .apply(&padded, GEDI_BIN_M, -50, 42)
+            .expect("zeros before the record");
+        let peak = inside
+            .wave
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(i, _)| i);
+        assert!(
+            peak.is_some_and(|p| p.abs_diff(200) <= 3),
+            "peak at {peak:?}"
+        );
+        assert_eq!(
+            twin.apply(&padded, GEDI_BIN_M, -51, 42),
+            Err(TwinError::DoesNotFit {
+                start: -51,
+                signal: 500,
                 record: 1000
             })
         );

@@ -6,7 +6,9 @@
 //! - `gedi_link_margin_twin(wave, z0, dz, link_margin_db, cover, seed [, true_cover])`: mode (b),
 //!   gediMetric's link-margin noise ([`LinkMarginTwin`], reference defaults otherwise).
 //!
-//! `wave` is a simulated waveform (sample k labelled `z0 − k·dz`, the `sim` table's convention).
+//! `wave` is a simulated waveform (sample k labelled `z0 − k·dz`, the `sim` table's convention);
+//! in mode (a) its sample 0 goes to record sample `start` (negative: above the record; simulated
+//! samples outside the record must be zero, as a simulation's empty buffers are).
 //! The struct: `rxwaveform` (list<float32>, DN, 1 ns samples), `elevation_bin0`,
 //! `elevation_lastbin` (m, in the datum of `z0`), `noise_mean`, `noise_stddev` (DN, what L2A
 //! should use) and `no_result_reason` (null when the twin was made). The same seed gives the same
@@ -231,8 +233,8 @@ impl ScalarUDFImpl for GediNoiseTwin {
 type Made = Result<(TwinWaveform, f64, f64), TwinError>;
 
 /// Elevations of the record's first and last samples when the simulated sample 0 (label `z0`)
-/// lies at record sample `start`, on the 1 ns grid.
-fn record_elevations(z0: f64, start: usize, len: usize) -> (f64, f64) {
+/// lies at record sample `start` (negative: above the record), on the 1 ns grid.
+fn record_elevations(z0: f64, start: isize, len: usize) -> (f64, f64) {
     let bin0 = z0 + start as f64 * GEDI_BIN_M;
     (bin0, bin0 - len.saturating_sub(1) as f64 * GEDI_BIN_M)
 }
@@ -241,7 +243,7 @@ fn record_elevations(z0: f64, start: usize, len: usize) -> (f64, f64) {
 fn shot_twin(sim: &[f64], z0: f64, dz: f64, c: &[Column], i: usize) -> Made {
     let (count, start) = (c[3].i64(i), c[4].i64(i));
     let count = usize::try_from(count).map_err(|_| TwinError::Invalid("sample_count"))?;
-    let start = usize::try_from(start).map_err(|_| TwinError::Invalid("start"))?;
+    let start = isize::try_from(start).map_err(|_| TwinError::Invalid("start"))?;
     if !z0.is_finite() {
         return Err(TwinError::Invalid("z0"));
     }
@@ -268,7 +270,7 @@ fn link_margin_twin(sim: &[f64], z0: f64, dz: f64, c: &[Column], i: usize) -> Ma
     let mut twin = LinkMarginTwin::new(c[0].f64(i), c[1].f64(i));
     twin.true_cover = c.get(3).map(|t| t.f64(i));
     let made = twin.apply(sim, dz, c[2].seed(i))?;
-    let (bin0, last) = record_elevations(z0, twin.pre_samples, made.wave.len());
+    let (bin0, last) = record_elevations(z0, twin.pre_samples as isize, made.wave.len());
     Ok((made, bin0, last))
 }
 
