@@ -11,7 +11,7 @@ use arrow::datatypes::{DataType, Field, Float32Type, Float64Type, Schema};
 
 use gedisim::dataset::{self, Dataset};
 use gedisim::process::l2a::{AlgorithmSettings, L2aProcessor, Noise, WaveformGeolocation};
-use gedisim::process::noise_twin::{LinkMarginTwin, ShotTwin, GEDI_BIN_M};
+use gedisim::process::noise_twin::{LinkMarginTwin, NoiseShape, ShotTwin, GEDI_BIN_M};
 
 const DZ: f64 = 0.15;
 const Z0: f64 = 350.0;
@@ -128,6 +128,7 @@ fn shot_twin_in_sql_is_the_kernel_seeded_and_processed_by_gedi_l2a() {
         sample_count: 1000,
         tx_pulse: None,
         quantum: 0.0,
+        noise_shape: NoiseShape::GEDI_V1,
     };
     let made = twin.apply(&sim, DZ, 150, 41).unwrap();
     assert_eq!(w[0].as_deref(), Some(made.wave.as_slice()));
@@ -197,6 +198,10 @@ fn shot_twin_bad_parameters_give_reasons() {
         (
             "gedi_noise_twin(wave, z0, dz, 20000.0, 220.0, 3.0, 1000, 0, seed, -1.0)",
             "invalid value for quantum",
+        ),
+        (
+            "gedi_noise_twin(wave, z0, dz, 20000.0, 220.0, 3.0, 1000, 0, seed, 0.0, -1.0, 0.5)",
+            "invalid value for noise_shape",
         ),
     ];
     for (call, reason) in cases {

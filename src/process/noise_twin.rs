@@ -4,7 +4,8 @@
 //! Both modes resample the simulated waveform (top to bottom, any normalisation) to GEDI's 1 ns
 //! grid, scale it to digitiser counts (DN), add Gaussian noise on a DC level and quantise:
 //! - [`ShotTwin`] (mode a) copies one real shot: its energy (gain), noise mean and σ, record length
-//!   and optionally its transmit pulse.
+//!   and optionally its transmit pulse; the noise has the correlation and per-sample level of real
+//!   GEDI records ([`NoiseShape::GEDI_V1`], measured) or is white.
 //! - [`LinkMarginTwin`] (mode b) is gediMetric's link-margin model (simulator-reference.md §2.3):
 //!   σ solved from a link margin in dB, signal rescaled so that the noise is `true_sig` DN on an
 //!   `offset` DN level, 12-bit floor digitisation.
@@ -76,6 +77,68 @@ pub fn resample_to_gedi(wave: &[f64], input_bin_m: f64) -> Vec<f64> {
         .collect()
 }
 
+/// The shape of a twin's noise: N(0,1) draws filtered by a discrete Gaussian of σ = `correlation`
+/// samples (0 = white), scaled so that one sample has the standard deviation `per_sample_ratio`·σ,
+/// where σ is the noise σ the shot reports (and L2A's thresholds use).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoiseShape {
+    /// σ (samples) of the Gaussian filter that correlates neighbouring samples; 0 = white noise.
+    pub correlation: f64,
+    /// Standard deviation of one sample of the record over the reported noise σ.
+    pub per_sample_ratio: f64,
+}
+
+impl NoiseShape {
+    /// Independent samples of standard deviation σ.
+    pub const WHITE: NoiseShape = NoiseShape {
+        correlation: 0.0,
+        per_sample_ratio: 1.0,
+    };
+
+    /// The noise of real GEDI L1B records, **measured** on the noise-only samples (before the
+    /// signal) of the shared V1 granule's calibration half (docs/l2a.md "Noise of the real
+    /// records"): one sample has 0.52× the reported `noise_stddev_corrected`, and neighbouring
+    /// samples are correlated as Gaussian-filtered white noise with σ 1.63 samples
+    /// (autocorrelation 0.91, 0.70, 0.44, 0.22 at lags 1–4). After L2A's smoothing this noise
+    /// has the level of the real records' noise; white noise of σ is 20–30 % weaker.
+    pub const GEDI_V1: NoiseShape = NoiseShape {
+        correlation: 1.63,
+        per_sample_ratio: 0.52,
+    };
+
+    fn is_valid(&self) -> bool {
+        self.correlation.is_finite()
+            && self.correlation >= 0.0
+            && self.per_sample_ratio.is_finite()
+            && self.per_sample_ratio >= 0.0
+    }
+
+    /// Filter taps, normalised to unit energy (Σ t² = 1) so that the filtered draws keep unit
+    /// variance; a single tap for white noise.
+    fn taps(&self) -> Vec<f64> {
+        if self.correlation <= 0.0 {
+            return vec![1.0];
+        }
+        let half = (4.0 * self.correlation).ceil() as i64;
+        let taps: Vec<f64> = (-half..=half)
+            .map(|j| (-0.5 * (j as f64 / self.correlation).powi(2)).exp())
+            .collect();
+        let norm = taps.iter().map(|t| t * t).sum::<f64>().sqrt();
+        taps.into_iter().map(|t| t / norm).collect()
+    }
+}
+
+/// `n` noise draws of unit per-sample variance with the correlation of `shape`, from `seed`.
+/// White noise is the plain N(0,1) stream of the seed.
+fn noise_draws(n: usize, shape: &NoiseShape, seed: u64) -> Vec<f64> {
+    let taps = shape.taps();
+    let mut normal = NormalSource::new(seed);
+    let white: Vec<f64> = (0..n + taps.len() - 1).map(|_| normal.sample()).collect();
+    (0..n)
+        .map(|i| taps.iter().zip(&white[i..]).map(|(t, w)| t * w).sum())
+        .collect()
+}
+
 /// Mode (a): a twin of one real shot.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ShotTwin {
@@ -90,6 +153,9 @@ pub struct ShotTwin {
     pub tx_pulse: Option<Vec<f32>>,
     /// Quantisation step (DN); values are rounded to the nearest multiple (0 = no quantisation).
     pub quantum: f64,
+    /// Correlation and per-sample level of the noise ([`NoiseShape::GEDI_V1`] for real GEDI
+    /// records, [`NoiseShape::WHITE`] for independent samples of σ).
+    pub noise_shape: NoiseShape,
 }
 
 impl ShotTwin {
@@ -115,6 +181,9 @@ impl ShotTwin {
         if !self.quantum.is_finite() || self.quantum < 0.0 {
             return Err(TwinError::Invalid("quantum"));
         }
+        if !self.noise_shape.is_valid() {
+            return Err(TwinError::Invalid("noise_shape"));
+        }
         let mut signal = resample_to_gedi(sim, input_bin_m);
         if let Some(pulse) = &self.tx_pulse {
             signal = convolve_with_pulse(&signal, &normalised_pulse(pulse)?);
@@ -126,11 +195,13 @@ impl ShotTwin {
         let gain = self.energy_total / energy;
         let mut record = place(&signal, start, self.sample_count)?;
         record.iter_mut().for_each(|v| *v *= gain);
-        let mut normal = NormalSource::new(seed);
+        let draws = noise_draws(record.len(), &self.noise_shape, seed);
+        let sample_sigma = self.noise.stddev * self.noise_shape.per_sample_ratio;
         let wave = record
             .iter()
-            .map(|&s| {
-                let x = s + self.noise.mean + self.noise.stddev * normal.sample();
+            .zip(&draws)
+            .map(|(&s, &d)| {
+                let x = s + self.noise.mean + sample_sigma * d;
                 (if self.quantum > 0.0 {
                     (x / self.quantum).round() * self.quantum
                 } else {
@@ -138,7 +209,8 @@ impl ShotTwin {
                 }) as f32
             })
             .collect();
-        // Rounding adds a uniform error of variance q²/12 and no bias.
+        // The reported σ is the shot's (what L2A's thresholds use). Rounding adds a uniform
+        // error of variance q²/12 and no bias.
         let stddev = (self.noise.stddev.powi(2) + self.quantum.powi(2) / 12.0).sqrt();
         Ok(TwinWaveform {
             wave,
@@ -478,6 +550,7 @@ mod tests {
             sample_count: 1000,
             tx_pulse: None,
             quantum: 1.0,
+            noise_shape: NoiseShape::WHITE,
         };
         let t = twin.apply(&sim, GEDI_BIN_M, 300, 42).expect("twin");
         assert_eq!(t.wave.len(), 1000);
@@ -539,6 +612,30 @@ mod tests {
             ..twin.clone()
         };
         assert!(with_pulse.apply(&sim, GEDI_BIN_M, 300, 42).is_ok());
+    }
+
+    #[test]
+    fn correlated_noise_has_the_requested_level_and_correlation() {
+        let shape = NoiseShape::GEDI_V1;
+        let d = noise_draws(200_000, &shape, 5);
+        assert_eq!(d, noise_draws(200_000, &shape, 5));
+        let n = d.len() as f64;
+        let var = d.iter().map(|x| x * x).sum::<f64>() / n;
+        let lag = |l: usize| d.iter().zip(&d[l..]).map(|(a, b)| a * b).sum::<f64>() / n / var;
+        assert!((var - 1.0).abs() < 0.02, "variance {var}");
+        for l in 1..=4 {
+            // Gaussian-filtered white noise: autocorrelation exp(−l²/(4σ²)).
+            let expected = (-((l * l) as f64) / (4.0 * shape.correlation.powi(2))).exp();
+            assert!(
+                (lag(l) - expected).abs() < 0.02,
+                "lag {l}: {} vs {expected}",
+                lag(l)
+            );
+        }
+        // White noise is the plain stream of the seed.
+        let mut normal = NormalSource::new(5);
+        let plain: Vec<f64> = (0..100).map(|_| normal.sample()).collect();
+        assert_eq!(noise_draws(100, &NoiseShape::WHITE, 5), plain);
     }
 
     #[test]

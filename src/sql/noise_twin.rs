@@ -2,7 +2,10 @@
 //! struct that `gedi_l2a` can process in the same query. Thin wrappers over
 //! [`crate::process::noise_twin`]:
 //! - `gedi_noise_twin(wave, z0, dz, energy_total, noise_mean, noise_stddev, sample_count, start,
-//!   seed [, quantum])`: mode (a), the twin of one real shot ([`ShotTwin`]);
+//!   seed [, quantum [, noise_correlation, noise_ratio]])`: mode (a), the twin of one real shot
+//!   ([`ShotTwin`]); the noise is correlated like real GEDI records ([`NoiseShape::GEDI_V1`])
+//!   unless `noise_correlation` (samples; 0 = white) and `noise_ratio` (per-sample σ over
+//!   `noise_stddev`) say otherwise;
 //! - `gedi_link_margin_twin(wave, z0, dz, link_margin_db, cover, seed [, true_cover])`: mode (b),
 //!   gediMetric's link-margin noise ([`LinkMarginTwin`], reference defaults otherwise).
 //!
@@ -27,7 +30,9 @@ use datafusion::logical_expr::{
 
 use super::l2a::{coerce_number, coerce_waveform};
 use crate::process::l2a::Noise;
-use crate::process::noise_twin::{LinkMarginTwin, ShotTwin, TwinError, TwinWaveform, GEDI_BIN_M};
+use crate::process::noise_twin::{
+    LinkMarginTwin, NoiseShape, ShotTwin, TwinError, TwinWaveform, GEDI_BIN_M,
+};
 use crate::tables::{list_f32, list_f32_builder};
 
 /// Fields of the struct both twin functions return.
@@ -57,8 +62,8 @@ impl Mode {
             Mode::LinkMargin => "gedi_link_margin_twin",
         }
     }
-    /// Argument names: the required ones, then the optional last one.
-    fn args(self) -> (&'static [&'static str], &'static str) {
+    /// Argument names: the required ones, then the optional ones (any leading part of them).
+    fn args(self) -> (&'static [&'static str], &'static [&'static str]) {
         match self {
             Mode::Shot => (
                 &[
@@ -72,11 +77,11 @@ impl Mode {
                     "start",
                     "seed",
                 ],
-                "quantum",
+                &["quantum", "noise_correlation", "noise_ratio"],
             ),
             Mode::LinkMargin => (
                 &["wave", "z0", "dz", "link_margin_db", "cover", "seed"],
-                "true_cover",
+                &["true_cover"],
             ),
         }
     }
@@ -166,12 +171,13 @@ impl ScalarUDFImpl for GediNoiseTwin {
     fn coerce_types(&self, arg_types: &[DataType]) -> DfResult<Vec<DataType>> {
         let name = self.mode.name();
         let (required, optional) = self.mode.args();
-        if arg_types.len() != required.len() && arg_types.len() != required.len() + 1 {
+        let most = required.len() + optional.len();
+        if !(required.len()..=most).contains(&arg_types.len()) {
             return plan_err!(
-                "{name}({}[, {optional}]): {} or {} arguments, got {}",
+                "{name}({}[, {}]): {} to {most} arguments, got {}",
                 required.join(", "),
+                optional.join(", "),
                 required.len(),
-                required.len() + 1,
                 arg_types.len()
             );
         }
@@ -179,7 +185,12 @@ impl ScalarUDFImpl for GediNoiseTwin {
             .iter()
             .enumerate()
             .map(|(i, t)| {
-                let arg = required.get(i).copied().unwrap_or(optional);
+                let arg = required
+                    .iter()
+                    .chain(optional)
+                    .nth(i)
+                    .copied()
+                    .unwrap_or_default();
                 if i == 0 {
                     coerce_waveform(name, t)
                 } else if self.mode.is_integer(arg) && *t == DataType::UInt64 {
@@ -239,7 +250,9 @@ fn record_elevations(z0: f64, start: isize, len: usize) -> (f64, f64) {
     (bin0, bin0 - len.saturating_sub(1) as f64 * GEDI_BIN_M)
 }
 
-/// Mode (a); `c` = energy_total, noise_mean, noise_stddev, sample_count, start, seed [, quantum].
+/// Mode (a); `c` = energy_total, noise_mean, noise_stddev, sample_count, start, seed
+/// [, quantum [, noise_correlation [, noise_ratio]]]. The noise shape defaults to the one measured
+/// on real GEDI records ([`NoiseShape::GEDI_V1`]).
 fn shot_twin(sim: &[f64], z0: f64, dz: f64, c: &[Column], i: usize) -> Made {
     let (count, start) = (c[3].i64(i), c[4].i64(i));
     let count = usize::try_from(count).map_err(|_| TwinError::Invalid("sample_count"))?;
@@ -256,6 +269,14 @@ fn shot_twin(sim: &[f64], z0: f64, dz: f64, c: &[Column], i: usize) -> Made {
         sample_count: count,
         tx_pulse: None,
         quantum: c.get(6).map_or(0.0, |q| q.f64(i)),
+        noise_shape: NoiseShape {
+            correlation: c
+                .get(7)
+                .map_or(NoiseShape::GEDI_V1.correlation, |v| v.f64(i)),
+            per_sample_ratio: c
+                .get(8)
+                .map_or(NoiseShape::GEDI_V1.per_sample_ratio, |v| v.f64(i)),
+        },
     };
     let made = twin.apply(sim, dz, start, c[5].seed(i))?;
     let (bin0, last) = record_elevations(z0, start, made.wave.len());
