@@ -307,6 +307,22 @@ fn bad_waveforms_give_a_reason_in_the_struct() {
     assert!(!r.is_null(1) && zcross.is_null(1) && rh.is_null(1));
     assert!(r.is_null(6));
 
+    // Elevations that are not finite: a reason, not an error.
+    let b = &query(
+        &ds,
+        "select gedi_l2a(wave, mean, sd, 1, 'NaN'::double, 40.0) as r from waves order by id",
+    )
+    .unwrap()[0];
+    let r = b.column_by_name("r").unwrap().as_struct();
+    let reason = r
+        .column_by_name("no_result_reason")
+        .unwrap()
+        .as_string::<i32>();
+    assert_eq!(
+        reason.value(0),
+        "elevation of the first or last sample is not finite"
+    );
+
     // An algorithm outside 1..6 is a one-line query error naming the function.
     let err = query(&ds, "select gedi_l2a(wave, mean, sd, 7) from waves").unwrap_err();
     assert!(

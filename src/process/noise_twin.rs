@@ -604,6 +604,21 @@ mod tests {
         );
         assert_eq!(twin.apply(&[], GEDI_BIN_M, 0, 1), Err(TwinError::Empty));
         assert_eq!(
+            twin.apply(&[0.0, f64::NAN, 1.0], GEDI_BIN_M, 0, 1),
+            Err(TwinError::Invalid("simulated waveform"))
+        );
+        let no_noise = ShotTwin {
+            noise: Noise {
+                mean: 220.0,
+                stddev: f64::NAN,
+            },
+            ..twin.clone()
+        };
+        assert_eq!(
+            no_noise.apply(&sim, GEDI_BIN_M, 0, 1),
+            Err(TwinError::Invalid("noise"))
+        );
+        assert_eq!(
             twin.apply(&[0.0; 10], GEDI_BIN_M, 0, 1),
             Err(TwinError::NoEnergy)
         );

@@ -67,6 +67,9 @@ pub enum NoResult {
         /// Samples in the waveform.
         waveform_len: usize,
     },
+    /// The elevation of the first or last sample is not finite (relative heights need both).
+    #[error("elevation of the first or last sample is not finite")]
+    InvalidElevation,
     /// The smoothed waveform never rises above the front or back threshold, or carries no energy
     /// between them.
     #[error("no signal above the thresholds")]
@@ -319,11 +322,14 @@ fn validate_input(wave: &[f32], noise: Noise, geo: &WaveformGeolocation) -> Resu
     if !noise.mean.is_finite() || !noise.stddev.is_finite() || noise.stddev <= 0.0 {
         return Err(NoResult::InvalidNoise);
     }
-    if geo.sample_count != wave.len() || !geo.is_valid() {
+    if geo.sample_count != wave.len() {
         return Err(NoResult::GeometryMismatch {
             sample_count: geo.sample_count,
             waveform_len: wave.len(),
         });
+    }
+    if !geo.is_valid() {
+        return Err(NoResult::InvalidElevation);
     }
     Ok(())
 }
@@ -440,6 +446,11 @@ mod tests {
                 sample_count: 10,
                 waveform_len: 800
             })
+        );
+        let nan_top = WaveformGeolocation::vertical(800, f64::NAN, 380.0);
+        assert_eq!(
+            process_waveform(&wave, NOISE, &nan_top, &s),
+            Err(NoResult::InvalidElevation)
         );
         let mut zero_grid = s.clone();
         zero_grid.subbin_resolution = 0;
