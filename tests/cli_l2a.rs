@@ -70,3 +70,64 @@ fn l2a_cli_rows_agree_with_nasa() {
     assert_eq!(compared, 1800);
     assert!(rh_rate >= 0.99 && elev_rate >= 0.99, "{rh_rate} {elev_rate}");
 }
+
+/// Bad waveforms in an L1B granule (a V2 file written here): each gives rows with a
+/// `no_result: <reason>` status and null values, never a failed run or a panic.
+#[test]
+fn l2a_cli_reports_bad_waveforms_as_no_result_rows() {
+    use gedisim::gedi::granule::{v2_file_name, write_l1b_v2, Beam, GranuleMeta, L1bShot};
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join(v2_file_name("01_B", "2023100120000", 1, 1, 1));
+    let signal: Vec<f32> = (0..600).map(|i| 220.0 + 400.0 * (-0.5 * ((i as f32 - 300.0) / 6.0).powi(2)).exp()).collect();
+    let shot = |k: u64, wave: Vec<f32>, sd: f64| L1bShot {
+        shot_number: 29_320_600_200_465_601 + k,
+        rx_waveform: wave.clone(),
+        tx_waveform: vec![0.0; 128],
+        latitude_bin0: 46.5,
+        longitude_bin0: 3.0,
+        latitude_lastbin: 46.5,
+        longitude_lastbin: 3.0,
+        elevation_bin0: 400.0,
+        elevation_lastbin: 400.0 - 0.15 * wave.len().saturating_sub(1) as f64,
+        noise_mean_corrected: 220.0,
+        noise_stddev_corrected: sd,
+        ..Default::default()
+    };
+    let mut nan = signal.clone();
+    nan[42] = f32::NAN;
+    // All noise: the L2A algorithms do not run on it (NASA's rx_algrunflag = 0).
+    let noise: Vec<f32> = (0..600).map(|i| 220.0 + 2.0 * ((i * 7919) % 13) as f32 / 13.0 - 1.0).collect();
+    let shots = vec![
+        shot(0, signal.clone(), 3.0),
+        shot(1, vec![], 3.0),
+        shot(2, nan, 3.0),
+        shot(3, signal, 0.0),
+        shot(4, noise, 3.0),
+    ];
+    write_l1b_v2(&path, &[Beam::new("BEAM0101", shots)], &GranuleMeta::default()).unwrap();
+    let out = tmp.path().join("l2a.parquet");
+    let (ok, _, err) = gedisim(&["l2a", "--l1b", path.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    let mut status: HashMap<(u64, u8), (String, bool)> = HashMap::new();
+    for b in read(&out) {
+        let sn = b.column_by_name("shot_number").unwrap().as_primitive::<UInt64Type>();
+        let alg = b.column_by_name("algorithm").unwrap().as_primitive::<UInt8Type>();
+        let st = b.column_by_name("status").unwrap().as_string::<i32>();
+        let rh = b.column_by_name("rh").unwrap().as_list::<i32>();
+        for i in 0..b.num_rows() {
+            status.insert((sn.value(i) - 29_320_600_200_465_601, alg.value(i)), (st.value(i).to_string(), rh.is_null(i)));
+        }
+    }
+    assert_eq!(status.len(), 5 * 6, "every shot keeps one row per algorithm");
+    for a in 1..=6u8 {
+        assert_eq!(status[&(0, a)], ("ok".to_string(), false), "a{a}");
+        assert_eq!(status[&(1, a)], ("no_result: empty waveform".to_string(), true), "a{a}");
+        assert_eq!(status[&(2, a)], ("no_result: non-finite sample at index 42".to_string(), true), "a{a}");
+        assert_eq!(
+            status[&(3, a)],
+            ("no_result: invalid noise statistics (mean not finite or stddev not > 0)".to_string(), true),
+            "a{a}"
+        );
+        assert_eq!(status[&(4, a)], ("no_result: no signal above the thresholds".to_string(), true), "a{a}");
+    }
+}

@@ -8,8 +8,6 @@
 
 mod common;
 
-use std::time::Instant;
-
 use common::nasa::{load_real_shots, RealShot};
 use gedisim::process::l2a::{AlgorithmSettings, L2aOutcome, L2aProcessor, RH_COUNT};
 
@@ -184,34 +182,5 @@ fn l2a_matches_nasa_stored_results() {
     assert!(
         table[0][1].rate(table[0][1].ground_choice) >= 98.3,
         "a2 ground choice"
-    );
-}
-
-/// Single-thread throughput on the real waveforms. Run in release:
-/// `cargo test --release --test l2a_validation -- --ignored --nocapture benchmark`
-#[test]
-#[ignore = "benchmark: prints figures, run explicitly in release"]
-fn benchmark_waveform_algorithm_pairs_per_second() {
-    let shots = load_real_shots();
-    let settings = AlgorithmSettings::all_gedi();
-    let mut processor = L2aProcessor::new();
-    let mut outcomes = Vec::new();
-    let mean_len = shots.iter().map(|s| s.wave.len()).sum::<usize>() as f64 / shots.len() as f64;
-    let rounds = 50;
-    let start = Instant::now();
-    let mut ok = 0usize;
-    for _ in 0..rounds {
-        for shot in &shots {
-            processor.process_all(&shot.wave, shot.noise, &shot.geo, &settings, &mut outcomes);
-            ok += outcomes.iter().filter(|o| o.is_ok()).count();
-        }
-    }
-    let secs = start.elapsed().as_secs_f64();
-    let pairs = rounds * shots.len() * settings.len();
-    println!(
-        "L2A benchmark: {pairs} waveform-algorithm pairs ({ok} processed) on {} real waveforms of mean length {mean_len:.0} \
-         in {secs:.3} s = {:.0} pairs/s (single thread)",
-        shots.len(),
-        pairs as f64 / secs
     );
 }

@@ -1,9 +1,12 @@
 //! Denoising of a received waveform: keep only the signal above the noise, mean removed.
 //!
 //! Used to turn a real waveform into a "noise-free" one (e.g. to check the noise twin). Follows
-//! gediMetric's feature detection (simulator-reference.md §2.4) on a smoothed copy: a feature
-//! starts where the smoothed waveform reaches μ + k·σ and is extended both ways while it stays
-//! above μ; inside features the output is max(smoothed − μ, 0), elsewhere 0.
+//! gediMetric's feature detection (simulator-reference.md §2.4), detecting on a smoothed copy: a
+//! feature starts where the smoothed waveform reaches μ + k·σ and is extended both ways while it
+//! stays above μ; inside features the output is the **unsmoothed** max(w − μ, 0), as gediMetric
+//! writes it, elsewhere 0. The output is not smoothed because L2A smooths again: a smoothed
+//! output is smoothed twice, which fills the shallow dips that separate weak modes (docs/l2a.md,
+//! "Why a5 and a6 fall short").
 
 use crate::process::l2a::{GaussianKernel, Noise};
 
@@ -12,7 +15,8 @@ use crate::process::l2a::{GaussianKernel, Noise};
 pub struct DenoiseSettings {
     /// Feature threshold in noise σ above the mean.
     pub threshold_sigmas: f64,
-    /// Nominal smoothing width (samples, as the L2A widths; ≤ 0.4 = no smoothing).
+    /// Nominal smoothing width of the copy features are detected on (samples, as the L2A widths;
+    /// ≤ 0.4 = no smoothing).
     pub smoothing_width: f64,
 }
 
@@ -46,7 +50,7 @@ pub fn denoise(wave: &[f32], noise: Noise, settings: DenoiseSettings) -> Vec<f64
                 end += 1;
             }
             for k in start..=end {
-                out[k] = (smoothed[k] - noise.mean).max(0.0);
+                out[k] = (f64::from(wave[k]) - noise.mean).max(0.0);
             }
             i = end + 1;
         } else {
@@ -79,6 +83,8 @@ mod tests {
         assert_eq!(d.len(), 200);
         assert_eq!(d[10], 0.0);
         assert!(d[100] > 30.0);
+        // Inside the feature the waveform itself is kept, not its smoothed copy.
+        assert_eq!(d[100], f64::from(wave[100]) - 100.0);
         assert!(d.iter().all(|&v| v >= 0.0));
         assert!(denoise(
             &[],

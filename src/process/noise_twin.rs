@@ -4,7 +4,8 @@
 //! Both modes resample the simulated waveform (top to bottom, any normalisation) to GEDI's 1 ns
 //! grid, scale it to digitiser counts (DN), add Gaussian noise on a DC level and quantise:
 //! - [`ShotTwin`] (mode a) copies one real shot: its energy (gain), noise mean and σ, record length
-//!   and optionally its transmit pulse.
+//!   and optionally its transmit pulse; the noise has the correlation and per-sample level of real
+//!   GEDI records ([`NoiseShape::GEDI_V1`], measured) or is white.
 //! - [`LinkMarginTwin`] (mode b) is gediMetric's link-margin model (simulator-reference.md §2.3):
 //!   σ solved from a link margin in dB, signal rescaled so that the noise is `true_sig` DN on an
 //!   `offset` DN level, 12-bit floor digitisation.
@@ -34,13 +35,13 @@ pub enum TwinError {
     /// The simulated waveform carries no positive energy, so it cannot be scaled to a gain.
     #[error("simulated waveform has no positive energy")]
     NoEnergy,
-    /// The waveform placed at `start` does not fit in the record length.
+    /// The waveform placed at `start` has non-zero samples outside the record.
     #[error(
-        "signal of {signal} samples at sample {start} does not fit a record of {record} samples"
+        "signal of {signal} samples placed at sample {start} has energy outside a record of {record} samples"
     )]
     DoesNotFit {
-        /// First sample of the signal in the record.
-        start: usize,
+        /// Record sample of the signal's first sample (negative: before the record).
+        start: isize,
         /// Signal length on the GEDI grid (samples).
         signal: usize,
         /// Record length (samples).
@@ -76,6 +77,68 @@ pub fn resample_to_gedi(wave: &[f64], input_bin_m: f64) -> Vec<f64> {
         .collect()
 }
 
+/// The shape of a twin's noise: N(0,1) draws filtered by a discrete Gaussian of σ = `correlation`
+/// samples (0 = white), scaled so that one sample has the standard deviation `per_sample_ratio`·σ,
+/// where σ is the noise σ the shot reports (and L2A's thresholds use).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoiseShape {
+    /// σ (samples) of the Gaussian filter that correlates neighbouring samples; 0 = white noise.
+    pub correlation: f64,
+    /// Standard deviation of one sample of the record over the reported noise σ.
+    pub per_sample_ratio: f64,
+}
+
+impl NoiseShape {
+    /// Independent samples of standard deviation σ.
+    pub const WHITE: NoiseShape = NoiseShape {
+        correlation: 0.0,
+        per_sample_ratio: 1.0,
+    };
+
+    /// The noise of real GEDI L1B records, **measured** on the noise-only samples (before the
+    /// signal) of the shared V1 granule's calibration half (docs/l2a.md "Noise of the real
+    /// records"): one sample has 0.52× the reported `noise_stddev_corrected`, and neighbouring
+    /// samples are correlated as Gaussian-filtered white noise with σ 1.63 samples
+    /// (autocorrelation 0.91, 0.70, 0.44, 0.22 at lags 1–4). After L2A's smoothing this noise
+    /// has the level of the real records' noise; white noise of σ is 20–30 % weaker.
+    pub const GEDI_V1: NoiseShape = NoiseShape {
+        correlation: 1.63,
+        per_sample_ratio: 0.52,
+    };
+
+    fn is_valid(&self) -> bool {
+        self.correlation.is_finite()
+            && self.correlation >= 0.0
+            && self.per_sample_ratio.is_finite()
+            && self.per_sample_ratio >= 0.0
+    }
+
+    /// Filter taps, normalised to unit energy (Σ t² = 1) so that the filtered draws keep unit
+    /// variance; a single tap for white noise.
+    fn taps(&self) -> Vec<f64> {
+        if self.correlation <= 0.0 {
+            return vec![1.0];
+        }
+        let half = (4.0 * self.correlation).ceil() as i64;
+        let taps: Vec<f64> = (-half..=half)
+            .map(|j| (-0.5 * (j as f64 / self.correlation).powi(2)).exp())
+            .collect();
+        let norm = taps.iter().map(|t| t * t).sum::<f64>().sqrt();
+        taps.into_iter().map(|t| t / norm).collect()
+    }
+}
+
+/// `n` noise draws of unit per-sample variance with the correlation of `shape`, from `seed`.
+/// White noise is the plain N(0,1) stream of the seed.
+fn noise_draws(n: usize, shape: &NoiseShape, seed: u64) -> Vec<f64> {
+    let taps = shape.taps();
+    let mut normal = NormalSource::new(seed);
+    let white: Vec<f64> = (0..n + taps.len() - 1).map(|_| normal.sample()).collect();
+    (0..n)
+        .map(|i| taps.iter().zip(&white[i..]).map(|(t, w)| t * w).sum())
+        .collect()
+}
+
 /// Mode (a): a twin of one real shot.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ShotTwin {
@@ -90,16 +153,21 @@ pub struct ShotTwin {
     pub tx_pulse: Option<Vec<f32>>,
     /// Quantisation step (DN); values are rounded to the nearest multiple (0 = no quantisation).
     pub quantum: f64,
+    /// Correlation and per-sample level of the noise ([`NoiseShape::GEDI_V1`] for real GEDI
+    /// records, [`NoiseShape::WHITE`] for independent samples of σ).
+    pub noise_shape: NoiseShape,
 }
 
 impl ShotTwin {
     /// Make the twin waveform: `sim` (bins of `input_bin_m`, top to bottom) placed with its first
-    /// bin at record sample `start`, noise drawn from `seed`.
+    /// bin at record sample `start`, noise drawn from `seed`. `start` may be negative and the
+    /// signal may run past the record's end, as long as what falls outside is zero (a simulation's
+    /// empty buffer above the canopy and below the ground).
     pub fn apply(
         &self,
         sim: &[f64],
         input_bin_m: f64,
-        start: usize,
+        start: isize,
         seed: u64,
     ) -> Result<TwinWaveform, TwinError> {
         check_signal(sim, input_bin_m)?;
@@ -113,6 +181,9 @@ impl ShotTwin {
         if !self.quantum.is_finite() || self.quantum < 0.0 {
             return Err(TwinError::Invalid("quantum"));
         }
+        if !self.noise_shape.is_valid() {
+            return Err(TwinError::Invalid("noise_shape"));
+        }
         let mut signal = resample_to_gedi(sim, input_bin_m);
         if let Some(pulse) = &self.tx_pulse {
             signal = convolve_with_pulse(&signal, &normalised_pulse(pulse)?);
@@ -124,11 +195,13 @@ impl ShotTwin {
         let gain = self.energy_total / energy;
         let mut record = place(&signal, start, self.sample_count)?;
         record.iter_mut().for_each(|v| *v *= gain);
-        let mut normal = NormalSource::new(seed);
+        let draws = noise_draws(record.len(), &self.noise_shape, seed);
+        let sample_sigma = self.noise.stddev * self.noise_shape.per_sample_ratio;
         let wave = record
             .iter()
-            .map(|&s| {
-                let x = s + self.noise.mean + self.noise.stddev * normal.sample();
+            .zip(&draws)
+            .map(|(&s, &d)| {
+                let x = s + self.noise.mean + sample_sigma * d;
                 (if self.quantum > 0.0 {
                     (x / self.quantum).round() * self.quantum
                 } else {
@@ -136,7 +209,8 @@ impl ShotTwin {
                 }) as f32
             })
             .collect();
-        // Rounding adds a uniform error of variance q²/12 and no bias.
+        // The reported σ is the shot's (what L2A's thresholds use). Rounding adds a uniform
+        // error of variance q²/12 and no bias.
         let stddev = (self.noise.stddev.powi(2) + self.quantum.powi(2) / 12.0).sqrt();
         Ok(TwinWaveform {
             wave,
@@ -262,7 +336,7 @@ impl LinkMarginTwin {
             / (self.cover * self.rho_v + (1.0 - self.cover) * self.rho_g);
         let sigma = self.sigma_link() * refl_scale;
         let n = self.pre_samples + signal.len() + self.post_samples;
-        let record = place(&signal, self.pre_samples, n)?;
+        let record = place(&signal, self.pre_samples as isize, n)?;
         let step = self.max_dn / 2f64.powi(self.bits as i32);
         let top = self.max_dn - step;
         let mut normal = NormalSource::new(seed);
@@ -296,18 +370,24 @@ fn check_signal(sim: &[f64], input_bin_m: f64) -> Result<(), TwinError> {
     Ok(())
 }
 
-/// A record of `len` zeros with `signal` copied from sample `start` on.
-fn place(signal: &[f64], start: usize, len: usize) -> Result<Vec<f64>, TwinError> {
-    let end = start.checked_add(signal.len()).filter(|&e| e <= len);
-    let Some(end) = end else {
-        return Err(TwinError::DoesNotFit {
-            start,
-            signal: signal.len(),
-            record: len,
-        });
-    };
+/// A record of `len` zeros with `signal[k]` at record sample `start + k`; samples falling outside
+/// the record must be zero.
+fn place(signal: &[f64], start: isize, len: usize) -> Result<Vec<f64>, TwinError> {
     let mut record = vec![0.0; len];
-    record[start..end].copy_from_slice(signal);
+    for (k, &v) in signal.iter().enumerate() {
+        let r = start + k as isize;
+        match usize::try_from(r).ok().and_then(|r| record.get_mut(r)) {
+            Some(slot) => *slot = v,
+            None if v == 0.0 => {}
+            None => {
+                return Err(TwinError::DoesNotFit {
+                    start,
+                    signal: signal.len(),
+                    record: len,
+                })
+            }
+        }
+    }
     Ok(record)
 }
 
@@ -470,6 +550,7 @@ mod tests {
             sample_count: 1000,
             tx_pulse: None,
             quantum: 1.0,
+            noise_shape: NoiseShape::WHITE,
         };
         let t = twin.apply(&sim, GEDI_BIN_M, 300, 42).expect("twin");
         assert_eq!(t.wave.len(), 1000);
@@ -491,7 +572,52 @@ mod tests {
                 record: 1000
             })
         );
+        // Zero samples may fall outside the record (a simulation's empty buffers), energy may not.
+        let mut padded = vec![0.0; 50];
+        padded.extend(&sim);
+        padded.extend([0.0; 50]);
+        let shifted = twin.apply(&padded, GEDI_BIN_M, 250, 42).expect("twin");
+        assert_eq!(
+            shifted.wave, t.wave,
+            "the same signal at the same record samples"
+        );
+        let inside = twin
+            .apply(&padded, GEDI_BIN_M, -50, 42)
+            .expect("zeros before the record");
+        let peak = inside
+            .wave
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(i, _)| i);
+        assert!(
+            peak.is_some_and(|p| p.abs_diff(200) <= 3),
+            "peak at {peak:?}"
+        );
+        assert_eq!(
+            twin.apply(&padded, GEDI_BIN_M, -51, 42),
+            Err(TwinError::DoesNotFit {
+                start: -51,
+                signal: 500,
+                record: 1000
+            })
+        );
         assert_eq!(twin.apply(&[], GEDI_BIN_M, 0, 1), Err(TwinError::Empty));
+        assert_eq!(
+            twin.apply(&[0.0, f64::NAN, 1.0], GEDI_BIN_M, 0, 1),
+            Err(TwinError::Invalid("simulated waveform"))
+        );
+        let no_noise = ShotTwin {
+            noise: Noise {
+                mean: 220.0,
+                stddev: f64::NAN,
+            },
+            ..twin.clone()
+        };
+        assert_eq!(
+            no_noise.apply(&sim, GEDI_BIN_M, 0, 1),
+            Err(TwinError::Invalid("noise"))
+        );
         assert_eq!(
             twin.apply(&[0.0; 10], GEDI_BIN_M, 0, 1),
             Err(TwinError::NoEnergy)
@@ -501,6 +627,30 @@ mod tests {
             ..twin.clone()
         };
         assert!(with_pulse.apply(&sim, GEDI_BIN_M, 300, 42).is_ok());
+    }
+
+    #[test]
+    fn correlated_noise_has_the_requested_level_and_correlation() {
+        let shape = NoiseShape::GEDI_V1;
+        let d = noise_draws(200_000, &shape, 5);
+        assert_eq!(d, noise_draws(200_000, &shape, 5));
+        let n = d.len() as f64;
+        let var = d.iter().map(|x| x * x).sum::<f64>() / n;
+        let lag = |l: usize| d.iter().zip(&d[l..]).map(|(a, b)| a * b).sum::<f64>() / n / var;
+        assert!((var - 1.0).abs() < 0.02, "variance {var}");
+        for l in 1..=4 {
+            // Gaussian-filtered white noise: autocorrelation exp(−l²/(4σ²)).
+            let expected = (-((l * l) as f64) / (4.0 * shape.correlation.powi(2))).exp();
+            assert!(
+                (lag(l) - expected).abs() < 0.02,
+                "lag {l}: {} vs {expected}",
+                lag(l)
+            );
+        }
+        // White noise is the plain stream of the seed.
+        let mut normal = NormalSource::new(5);
+        let plain: Vec<f64> = (0..100).map(|_| normal.sample()).collect();
+        assert_eq!(noise_draws(100, &NoiseShape::WHITE, 5), plain);
     }
 
     #[test]

@@ -1,6 +1,8 @@
 //! The DataFusion session: the dataset's tables registered by name, and gedisim's SQL functions
 //! (thin wrappers over the kernels).
 
+pub mod l2a;
+pub mod noise_twin;
 pub mod rh;
 pub mod simulate;
 
@@ -30,10 +32,14 @@ pub async fn session(ds: &Dataset) -> Result<SessionContext> {
     Ok(ctx)
 }
 
-/// Register gedisim's SQL functions: `gedi_rh(wave, z0, dz, ground)` and the table function
-/// `gedi_simulate([profile])`.
+/// Register gedisim's SQL functions: `gedi_rh(wave, z0, dz, ground)`, `gedi_l2a(…)`,
+/// `gedi_noise_twin(…)`, `gedi_link_margin_twin(…)` and the table function `gedi_simulate([profile])`.
 pub fn register_functions(ctx: &SessionContext, ds: &Dataset) {
-    ctx.register_udf(datafusion::logical_expr::ScalarUDF::new_from_impl(rh::GediRh::new()));
+    use datafusion::logical_expr::ScalarUDF;
+    ctx.register_udf(ScalarUDF::new_from_impl(rh::GediRh::new()));
+    ctx.register_udf(ScalarUDF::new_from_impl(l2a::GediL2a::new()));
+    ctx.register_udf(ScalarUDF::new_from_impl(noise_twin::GediNoiseTwin::shot()));
+    ctx.register_udf(ScalarUDF::new_from_impl(noise_twin::GediNoiseTwin::link_margin()));
     ctx.register_udtf("gedi_simulate", Arc::new(simulate::GediSimulate::new(ds.clone())));
 }
 

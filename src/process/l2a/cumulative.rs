@@ -7,34 +7,42 @@ use super::{Mode, WaveformGeolocation, RH_COUNT};
 /// from botloc (j = 0) up to toploc (j = steps). Measured: this reproduces NASA's `rx_cumulative`
 /// far better than the raw waveform (gedi-products.md §4.6).
 pub(super) struct EnergyProfile<'a> {
-    smoothed: &'a [f64],
-    mean: f64,
+    /// Interpolated energy above the noise mean at each grid step.
+    values: &'a [f64],
     botloc: f64,
     grid: f64,
-    steps: usize,
     total: f64,
 }
 
 impl<'a> EnergyProfile<'a> {
-    /// The profile between `toploc` and `botloc`, or `None` when it holds no positive energy.
+    /// The profile between `toploc` and `botloc`, its values written to `buffer` (reused between
+    /// waveforms), or `None` when it holds no positive energy.
     pub(super) fn new(
-        smoothed: &'a [f64],
+        smoothed: &[f64],
         mean: f64,
         toploc: f64,
         botloc: f64,
         grid: f64,
+        buffer: &'a mut Vec<f64>,
     ) -> Option<Self> {
         let steps = ((botloc - toploc) * grid).round().max(0.0) as usize;
-        let mut profile = Self {
-            smoothed,
-            mean,
+        let last = smoothed.len().checked_sub(1)?;
+        buffer.clear();
+        buffer.extend((0..=steps).map(|j| {
+            let p = botloc - j as f64 / grid;
+            // `as` truncates, which is floor for p ≥ 0 (and avoids a libm call per step).
+            let i = (p.max(0.0) as usize).min(last);
+            let f = p - i as f64;
+            let next = smoothed[(i + 1).min(last)];
+            smoothed[i] * (1.0 - f) + next * f - mean
+        }));
+        let total: f64 = buffer.iter().sum();
+        (total > 0.0).then_some(Self {
+            values: buffer,
             botloc,
             grid,
-            steps,
-            total: 0.0,
-        };
-        profile.total = (0..=steps).map(|j| profile.value(j)).sum();
-        (profile.total > 0.0).then_some(profile)
+            total,
+        })
     }
 
     /// Position of grid step `j` (0 = botloc, increasing upward).
@@ -42,23 +50,13 @@ impl<'a> EnergyProfile<'a> {
         self.botloc - j as f64 / self.grid
     }
 
-    /// Interpolated energy above the noise mean at step `j`.
-    fn value(&self, j: usize) -> f64 {
-        let p = self.position(j);
-        let last = self.smoothed.len() - 1;
-        let i = (p.floor().max(0.0) as usize).min(last);
-        let f = p - i as f64;
-        let next = self.smoothed[(i + 1).min(last)];
-        self.smoothed[i] * (1.0 - f) + next * f - self.mean
-    }
-
     /// Positions where the cumulative energy first reaches k % of the total, k = 0..=100.
     pub(super) fn cumulative_positions(&self) -> [f64; RH_COUNT] {
-        let mut out = [self.position(self.steps); RH_COUNT];
+        let mut out = [self.position(self.values.len() - 1); RH_COUNT];
         let mut k = 0;
         let mut cum = 0.0;
-        for j in 0..=self.steps {
-            cum += self.value(j);
+        for (j, &v) in self.values.iter().enumerate() {
+            cum += v;
             while k < RH_COUNT && cum >= self.total * k as f64 / 100.0 {
                 out[k] = self.position(j);
                 k += 1;
@@ -72,9 +70,12 @@ impl<'a> EnergyProfile<'a> {
 
     /// Share (%) of the total energy at or below `position`.
     pub(super) fn percent_below(&self, position: f64) -> f64 {
-        let below: f64 = (0..=self.steps)
-            .take_while(|&j| self.position(j) >= position)
-            .map(|j| self.value(j))
+        let below: f64 = self
+            .values
+            .iter()
+            .enumerate()
+            .take_while(|&(j, _)| self.position(j) >= position)
+            .map(|(_, &v)| v)
             .sum();
         100.0 * below / self.total
     }
@@ -112,14 +113,16 @@ mod tests {
     fn cumulative_runs_from_botloc_to_toploc() {
         // A flat block of energy 1 above the mean between positions 2 and 6.
         let s = [0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0];
-        let p = EnergyProfile::new(&s, 0.0, 2.0, 6.0, 4.0).expect("positive energy");
+        let mut buffer = Vec::new();
+        let p = EnergyProfile::new(&s, 0.0, 2.0, 6.0, 4.0, &mut buffer).expect("positive energy");
         let c = p.cumulative_positions();
         assert_eq!(c[0], 6.0);
         assert_eq!(c[100], 2.0);
         assert!((c[50] - 4.0).abs() <= 0.25);
         assert!(c.windows(2).all(|w| w[1] <= w[0]));
         assert!((p.percent_below(2.0) - 100.0).abs() < 1e-9);
-        assert!(EnergyProfile::new(&[0.0; 9], 1.0, 2.0, 6.0, 4.0).is_none());
+        assert!(EnergyProfile::new(&[0.0; 9], 1.0, 2.0, 6.0, 4.0, &mut buffer).is_none());
+        assert!(EnergyProfile::new(&[], 1.0, 0.0, 0.0, 4.0, &mut buffer).is_none());
     }
 
     #[test]

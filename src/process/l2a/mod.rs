@@ -67,6 +67,9 @@ pub enum NoResult {
         /// Samples in the waveform.
         waveform_len: usize,
     },
+    /// The elevation of the first or last sample is not finite (relative heights need both).
+    #[error("elevation of the first or last sample is not finite")]
+    InvalidElevation,
     /// The smoothed waveform never rises above the front or back threshold, or carries no energy
     /// between them.
     #[error("no signal above the thresholds")]
@@ -130,13 +133,18 @@ impl L2aResult {
 }
 
 /// Reusable L2A processor: keeps kernels and buffers so the hot loop does not allocate, and
-/// smooths each waveform once per distinct width however many algorithms use it.
+/// smooths each waveform once per distinct width however many algorithms use it (also across
+/// [`L2aProcessor::process`] calls on the same waveform, one algorithm after another).
 #[derive(Debug, Default)]
 pub struct L2aProcessor {
     /// One kernel per distinct width seen so far, with its smoothed-waveform buffer.
     smoothers: Vec<Smoother>,
     /// Scratch list of every mode found (may exceed [`MAX_MODE_COUNT`]).
     modes: Vec<Mode>,
+    /// Scratch energy profile on the sub-bin grid (botloc → toploc).
+    profile: Vec<f64>,
+    /// The waveform the cached smoothings belong to (bit patterns), for `process`.
+    last_wave: Vec<u32>,
 }
 
 #[derive(Debug)]
@@ -161,9 +169,22 @@ impl L2aProcessor {
         geo: &WaveformGeolocation,
         settings: &AlgorithmSettings,
     ) -> L2aOutcome {
-        self.begin_waveform();
         validate_input(wave, noise, geo)?;
-        self.run(wave, noise, geo, settings)
+        // Smoothing depends on the samples alone: keep it while the same waveform comes back
+        // (e.g. one SQL row per algorithm). Comparing costs one pass, smoothing about 44.
+        let same = self.last_wave.len() == wave.len()
+            && self
+                .last_wave
+                .iter()
+                .zip(wave)
+                .all(|(&a, b)| a == b.to_bits());
+        if !same {
+            self.begin_waveform();
+            self.last_wave.clear();
+            self.last_wave.extend(wave.iter().map(|w| w.to_bits()));
+        }
+        let energy_total = energy_total(wave, noise.mean);
+        self.run(wave, noise, geo, settings, energy_total)
     }
 
     /// Process one waveform with several algorithms, sharing the smoothing; `out` is cleared and
@@ -182,12 +203,18 @@ impl L2aProcessor {
             out.extend(settings.iter().map(|_| Err(reason)));
             return;
         }
-        out.extend(settings.iter().map(|s| self.run(wave, noise, geo, s)));
+        let energy_total = energy_total(wave, noise.mean);
+        out.extend(
+            settings
+                .iter()
+                .map(|s| self.run(wave, noise, geo, s, energy_total)),
+        );
     }
 
     /// Marks every cached smoothing stale: a new waveform starts.
     fn begin_waveform(&mut self) {
         self.smoothers.iter_mut().for_each(|s| s.fresh = false);
+        self.last_wave.clear();
     }
 
     /// Index of the smoother for `width`, smoothing `wave` with it if not done yet.
@@ -219,6 +246,7 @@ impl L2aProcessor {
         noise: Noise,
         geo: &WaveformGeolocation,
         s: &AlgorithmSettings,
+        energy_total: f64,
     ) -> L2aOutcome {
         let front_threshold = noise.mean + s.front_threshold_sigmas * noise.stddev;
         let back_threshold = noise.mean + s.back_threshold_sigmas * noise.stddev;
@@ -240,8 +268,8 @@ impl L2aProcessor {
         if self.modes.is_empty() {
             return Err(NoResult::NoModes);
         }
-        let profile =
-            EnergyProfile::new(zc, noise.mean, toploc, botloc, grid).ok_or(NoResult::NoSignal)?;
+        let profile = EnergyProfile::new(zc, noise.mean, toploc, botloc, grid, &mut self.profile)
+            .ok_or(NoResult::NoSignal)?;
         let rx_cumulative = profile.cumulative_positions();
         let ground = if s.enable_select_mode {
             cumulative::select_ground(&self.modes, &profile, s.cumulative_energy_thresh)
@@ -257,7 +285,6 @@ impl L2aProcessor {
         modes[..kept.len()].copy_from_slice(kept);
 
         let rh_cm = cumulative::relative_heights_cm(geo, &rx_cumulative, zcross);
-        let energy_total: f64 = wave.iter().map(|&w| f64::from(w) - noise.mean).sum();
         let min_detection_threshold = s.min_detection.threshold(noise.stddev);
         let min_detection_energy = min_detection_energy(min_detection_threshold);
         Ok(L2aResult {
@@ -294,6 +321,11 @@ pub fn process_waveform(
     L2aProcessor::new().process(wave, noise, geo, settings)
 }
 
+/// `Σ (w − mean)` over the whole waveform (counts), NASA's `energy_total` (§4.7).
+fn energy_total(wave: &[f32], mean: f64) -> f64 {
+    wave.iter().map(|&w| f64::from(w) - mean).sum()
+}
+
 /// Area of a Gaussian of amplitude `threshold` and σ = [`MIN_DETECTION_PULSE_WIDTH`] samples.
 pub fn min_detection_energy(threshold: f64) -> f64 {
     threshold * MIN_DETECTION_PULSE_WIDTH * (2.0 * std::f64::consts::PI).sqrt()
@@ -319,11 +351,14 @@ fn validate_input(wave: &[f32], noise: Noise, geo: &WaveformGeolocation) -> Resu
     if !noise.mean.is_finite() || !noise.stddev.is_finite() || noise.stddev <= 0.0 {
         return Err(NoResult::InvalidNoise);
     }
-    if geo.sample_count != wave.len() || !geo.is_valid() {
+    if geo.sample_count != wave.len() {
         return Err(NoResult::GeometryMismatch {
             sample_count: geo.sample_count,
             waveform_len: wave.len(),
         });
+    }
+    if !geo.is_valid() {
+        return Err(NoResult::InvalidElevation);
     }
     Ok(())
 }
@@ -440,6 +475,11 @@ mod tests {
                 sample_count: 10,
                 waveform_len: 800
             })
+        );
+        let nan_top = WaveformGeolocation::vertical(800, f64::NAN, 380.0);
+        assert_eq!(
+            process_waveform(&wave, NOISE, &nan_top, &s),
+            Err(NoResult::InvalidElevation)
         );
         let mut zero_grid = s.clone();
         zero_grid.subbin_resolution = 0;

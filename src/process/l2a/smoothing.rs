@@ -59,26 +59,39 @@ impl GaussianKernel {
         out.clear();
         out.resize(n, 0.0);
         let h = self.half_width();
+        // Interior: every tap falls inside the waveform. The kernel is symmetric, so samples at
+        // ±j share tap j (one multiply for two samples). Tap by tap over all interior samples:
+        // each sample still sums centre, tap 1, tap 2 … in that order, and the loop over samples
+        // vectorises.
+        if n > 2 * h {
+            let centre = self.taps[h];
+            let interior = h..n - h;
+            for i in interior.clone() {
+                out[i] = f64::from(wave[i]) * centre;
+            }
+            for (j, &t) in self.taps[h + 1..].iter().enumerate() {
+                let d = j + 1;
+                let before = &wave[interior.start - d..interior.end - d];
+                let after = &wave[interior.start + d..interior.end + d];
+                for ((o, &b), &a) in out[interior.clone()].iter_mut().zip(before).zip(after) {
+                    *o += (f64::from(b) + f64::from(a)) * t;
+                }
+            }
+        }
+        // Edges: indices clamped to the first/last sample (nearest-edge padding).
         let last = n as isize - 1;
-        for (i, o) in out.iter_mut().enumerate() {
-            *o = if i >= h && i + h < n {
-                // Interior: every tap falls inside the waveform.
-                wave[i - h..=i + h]
-                    .iter()
-                    .zip(&self.taps)
-                    .map(|(&w, &t)| f64::from(w) * t)
-                    .sum()
-            } else {
-                // Edge: indices clamped to the first/last sample (nearest-edge padding).
-                self.taps
-                    .iter()
-                    .enumerate()
-                    .map(|(j, &t)| {
-                        let k = (i as isize + j as isize - h as isize).clamp(0, last) as usize;
-                        f64::from(wave[k]) * t
-                    })
-                    .sum()
-            };
+        let edge = |i: usize| -> f64 {
+            self.taps
+                .iter()
+                .enumerate()
+                .map(|(j, &t)| {
+                    let k = (i as isize + j as isize - h as isize).clamp(0, last) as usize;
+                    f64::from(wave[k]) * t
+                })
+                .sum()
+        };
+        for i in (0..h.min(n)).chain(n.saturating_sub(h).max(h.min(n))..n) {
+            out[i] = edge(i);
         }
     }
 }
@@ -105,9 +118,24 @@ mod tests {
         k.smooth_into(&spike, &mut out);
         assert!((out.iter().sum::<f64>() - 1.0).abs() < 1e-12);
         assert!((out[19] - out[21]).abs() < 1e-15);
-        // Short waveform: every sample is an edge sample.
+        // Interior samples equal the direct weighted sum of the taps.
+        let wave: Vec<f32> = (0..60).map(|i| ((i * 37) % 11) as f32).collect();
+        k.smooth_into(&wave, &mut out);
+        let h = k.half_width();
+        for i in h..60 - h {
+            let direct: f64 = (0..=2 * h)
+                .map(|j| f64::from(wave[i + j - h]) * k.taps[j])
+                .sum();
+            assert!((out[i] - direct).abs() < 1e-12, "sample {i}");
+        }
+        // Short waveforms: every sample is an edge sample (lengths around 2·half + 1 included).
         k.smooth_into(&[1.0, 2.0, 3.0], &mut out);
         assert_eq!(out.len(), 3);
         assert!(out[0] < out[1] && out[1] < out[2]);
+        for n in [0, 1, 2 * h, 2 * h + 1, 2 * h + 2] {
+            k.smooth_into(&vec![5.0; n], &mut out);
+            assert_eq!(out.len(), n);
+            assert!(out.iter().all(|v| (v - 5.0).abs() < 1e-9), "length {n}");
+        }
     }
 }
