@@ -14,6 +14,7 @@ pub mod process;
 pub mod sim;
 pub mod simulate;
 pub mod sql;
+pub mod study;
 pub mod tables;
 
 pub use error::{Error, Result};

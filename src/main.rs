@@ -40,6 +40,19 @@ enum IngestCommand {
     Als(IngestAlsArgs),
     /// GEDI L1B and/or L2A granules (V1 or V2) → <dataset>/shots/ and <dataset>/granules/.
     Gedi(IngestGediArgs),
+    /// Forest type of every shot from a Corine Land Cover GeoTIFF (EPSG:3035) or a CSV
+    /// `shot_number,forest_type` → <dataset>/strata/.
+    Strata(IngestStrataArgs),
+}
+
+#[derive(Args)]
+struct IngestStrataArgs {
+    /// Corine Land Cover GeoTIFF in EPSG:3035 (.tif), or a CSV with columns shot_number, forest_type (.csv).
+    #[arg(long)]
+    landcover: PathBuf,
+    /// Dataset directory (with a shots table for a raster).
+    #[arg(long)]
+    dataset: PathBuf,
 }
 
 #[derive(Args)]
@@ -184,6 +197,7 @@ fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Ingest(IngestCommand::Als(a)) => ingest_als(a),
         Command::Ingest(IngestCommand::Gedi(a)) => ingest_gedi(a),
+        Command::Ingest(IngestCommand::Strata(a)) => ingest_strata(a),
         Command::Simulate(a) => simulate(a),
         Command::L2a(a) => l2a(a),
         Command::Sql(a) => sql(a),
@@ -255,6 +269,28 @@ fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
             GranuleOutcome::Ingested { granule, shots } => eprintln!("{granule}: {shots} shots"),
             GranuleOutcome::AlreadyIngested { granule } => eprintln!("{granule}: already ingested (same content), skipped"),
         }
+    }
+    Ok(())
+}
+
+fn ingest_strata(a: IngestStrataArgs) -> Result<()> {
+    let ds = Dataset::open(&a.dataset)?;
+    let bar = progress(0, "shots");
+    let report = gedisim::ingest::strata::ingest_strata(&ds, &a.landcover, &|n, total| {
+        bar.set_length(total);
+        bar.inc(n);
+    });
+    bar.finish_and_clear();
+    let report = report?;
+    let mut counts: Vec<_> = report.counts.iter().collect();
+    counts.sort();
+    let counts: Vec<String> = counts.iter().map(|(k, v)| format!("{k} {v}")).collect();
+    eprintln!("{} shots → {} ({})", report.rows, report.path.display(), counts.join(", "));
+    if report.outside > 0 || report.no_position > 0 {
+        eprintln!("{} shots outside the raster and {} without a position: forest type `unknown`", report.outside, report.no_position);
+    }
+    if report.not_in_dataset > 0 {
+        eprintln!("warning: {} CSV rows name shots that are not in the dataset's shots table", report.not_in_dataset);
     }
     Ok(())
 }
