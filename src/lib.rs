@@ -11,6 +11,7 @@ pub mod gedi;
 pub mod geo;
 pub mod ingest;
 pub mod process;
+pub mod report;
 pub mod sim;
 pub mod simulate;
 pub mod sql;
