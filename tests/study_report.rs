@@ -60,7 +60,8 @@ fn results_rows(ds: &Dataset) -> Vec<Row> {
         let l = b.column_by_name(name).unwrap().as_list::<i32>().value(i);
         l.as_primitive::<Float32Type>().values().iter().map(|&v| v as f64).collect()
     };
-    let (w, a, g, ft, ph) = (s(&b, "weighting"), s(&b, "algorithm"), s(&b, "sensitivity_group"), s(&b, "forest_type"), s(&b, "phenology"));
+    let (w, a, g, ft, ph) =
+        (s(&b, "weighting"), s(&b, "algorithm"), s(&b, "sensitivity_group"), s(&b, "forest_type"), s(&b, "phenology"));
     let (gg, ag) = (f(&b, "gedi_ground"), f(&b, "als_ground"));
     (0..b.num_rows())
         .map(|i| Row {
@@ -111,7 +112,11 @@ fn report_tables_contracts_and_msd_identity() {
     assert_eq!(&ga[..3], ["default", "default", "default"]);
     assert_eq!(&gg[..3], ["low", "high", "all"]);
     for i in 0..gd.num_rows() {
-        let d: Vec<f64> = rows.iter().filter(|r| r.weighting == "count" && r.algorithm == ga[i] && in_group(r, &gg[i])).map(|r| r.ground_diff).collect();
+        let d: Vec<f64> = rows
+            .iter()
+            .filter(|r| r.weighting == "count" && r.algorithm == ga[i] && in_group(r, &gg[i]))
+            .map(|r| r.ground_diff)
+            .collect();
         assert_eq!(gn.value(i) as usize, d.len(), "{} {}", ga[i], gg[i]);
         let bias = d.iter().sum::<f64>() / d.len() as f64;
         let rmse = (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt();
@@ -132,7 +137,8 @@ fn report_tables_contracts_and_msd_identity() {
     let (mw, ma, mg) = (s(&msd, "weighting"), s(&msd, "algorithm"), s(&msd, "sensitivity_group"));
     let (sb, sdsd, lcs, m, mn) = (f(&msd, "sb"), f(&msd, "sdsd"), f(&msd, "lcs"), f(&msd, "msd"), f(&msd, "n"));
     for i in 0..msd.num_rows() {
-        let sel: Vec<&Row> = rows.iter().filter(|r| r.weighting == mw[i] && r.algorithm == ma[i] && in_group(r, &mg[i])).collect();
+        let sel: Vec<&Row> =
+            rows.iter().filter(|r| r.weighting == mw[i] && r.algorithm == ma[i] && in_group(r, &mg[i])).collect();
         assert!(!sel.is_empty());
         let mut total = 0.0;
         for r in &sel {
@@ -141,7 +147,14 @@ fn report_tables_contracts_and_msd_identity() {
             }
         }
         let direct = total / (99 * sel.len()) as f64;
-        assert!((sb[i] + sdsd[i] + lcs[i] - direct).abs() < 1e-9, "{} {} {}: {} vs {direct}", mw[i], ma[i], mg[i], sb[i] + sdsd[i] + lcs[i]);
+        assert!(
+            (sb[i] + sdsd[i] + lcs[i] - direct).abs() < 1e-9,
+            "{} {} {}: {} vs {direct}",
+            mw[i],
+            ma[i],
+            mg[i],
+            sb[i] + sdsd[i] + lcs[i]
+        );
         assert!((m[i] - direct).abs() < 1e-9);
         assert!(sb[i] >= 0.0 && sdsd[i] >= 0.0 && lcs[i] >= -1e-9);
         assert_eq!(mn[i] as usize, sel.len());
@@ -149,12 +162,14 @@ fn report_tables_contracts_and_msd_identity() {
     // The per-percentile table obeys the identity too, percentile by percentile (checked at RH50:
     // RH k is element k of the 0-based list, `rh[k + 1]` in SQL).
     let prof = study::read(&out.join("msd_profile.parquet"));
-    let (pw, pa, pg, pp) = (s(&prof, "weighting"), s(&prof, "algorithm"), s(&prof, "sensitivity_group"), f(&prof, "percentile"));
+    let (pw, pa, pg, pp) =
+        (s(&prof, "weighting"), s(&prof, "algorithm"), s(&prof, "sensitivity_group"), f(&prof, "percentile"));
     let (psb, psd, plc) = (f(&prof, "sb"), f(&prof, "sdsd"), f(&prof, "lcs"));
     assert_eq!(prof.num_rows(), 3 * 7 * 3 * 99);
     let mut checked = 0;
     for i in (0..prof.num_rows()).filter(|&i| pp[i] == 50.0) {
-        let sel: Vec<&Row> = rows.iter().filter(|r| r.weighting == pw[i] && r.algorithm == pa[i] && in_group(r, &pg[i])).collect();
+        let sel: Vec<&Row> =
+            rows.iter().filter(|r| r.weighting == pw[i] && r.algorithm == pa[i] && in_group(r, &pg[i])).collect();
         let direct = sel.iter().map(|r| (r.y[50] - r.yhat[50]).powi(2)).sum::<f64>() / sel.len() as f64;
         assert!((psb[i] + psd[i] + plc[i] - direct).abs() < 1e-9);
         // and matches the library's own kernel
@@ -168,12 +183,25 @@ fn report_tables_contracts_and_msd_identity() {
 
     // bias profiles: bias at one percentile and the mean |bias| over RH1..RH99.
     let bp = study::read(&out.join("bias_profiles.parquet"));
-    let (bw, ba, bf, bg, bpp, bb, bm) =
-        (s(&bp, "weighting"), s(&bp, "algorithm"), s(&bp, "forest_type"), s(&bp, "sensitivity_group"), f(&bp, "percentile"), f(&bp, "bias"), f(&bp, "mean_abs_bias"));
+    let (bw, ba, bf, bg, bpp, bb, bm) = (
+        s(&bp, "weighting"),
+        s(&bp, "algorithm"),
+        s(&bp, "forest_type"),
+        s(&bp, "sensitivity_group"),
+        f(&bp, "percentile"),
+        f(&bp, "bias"),
+        f(&bp, "mean_abs_bias"),
+    );
     let sel = |ft: &str, g: &str| -> Vec<&Row> {
-        rows.iter().filter(|r| r.weighting == "count" && r.algorithm == "default" && (ft == "all" || r.forest == ft) && in_group(r, g)).collect()
+        rows.iter()
+            .filter(|r| {
+                r.weighting == "count" && r.algorithm == "default" && (ft == "all" || r.forest == ft) && in_group(r, g)
+            })
+            .collect()
     };
-    let profile: Vec<usize> = (0..bp.num_rows()).filter(|&i| bw[i] == "count" && ba[i] == "default" && bf[i] == "coniferous" && bg[i] == "high").collect();
+    let profile: Vec<usize> = (0..bp.num_rows())
+        .filter(|&i| bw[i] == "count" && ba[i] == "default" && bf[i] == "coniferous" && bg[i] == "high")
+        .collect();
     assert_eq!(profile.len(), 99);
     let rs = sel("coniferous", "high");
     let mut abs_sum = 0.0;
@@ -185,19 +213,32 @@ fn report_tables_contracts_and_msd_identity() {
     }
     assert!((bm[profile[0]] - abs_sum / 99.0).abs() < 1e-9);
     let forests: std::collections::BTreeSet<&str> = bf.iter().map(String::as_str).collect();
-    assert_eq!(forests.into_iter().collect::<Vec<_>>(), ["all", "broadleaf", "coniferous", "mixed", "other", "unknown"]);
+    assert_eq!(
+        forests.into_iter().collect::<Vec<_>>(),
+        ["all", "broadleaf", "coniferous", "mixed", "other", "unknown"]
+    );
 
     // phenology: both settings, the three phenologies, R² within [0, 1], bias against a direct mean.
     let ph = study::read(&out.join("phenology.parquet"));
-    let (qp, qw, qa, qk, qb, qr) = (s(&ph, "phenology"), s(&ph, "weighting"), s(&ph, "algorithm"), f(&ph, "percentile"), f(&ph, "bias"), f(&ph, "r2"));
+    let (qp, qw, qa, qk, qb, qr) = (
+        s(&ph, "phenology"),
+        s(&ph, "weighting"),
+        s(&ph, "algorithm"),
+        f(&ph, "percentile"),
+        f(&ph, "bias"),
+        f(&ph, "r2"),
+    );
     assert_eq!(ph.num_rows(), 3 * 2 * 99);
     assert!(qr.iter().all(|r| (0.0..=1.0).contains(r)));
-    let i = (0..ph.num_rows()).find(|&i| qp[i] == "leaf_off" && qw[i] == "int" && qa[i] == "a3" && qk[i] == 90.0).unwrap();
-    let rs: Vec<&Row> = rows.iter().filter(|r| r.phenology == "leaf_off" && r.weighting == "int" && r.algorithm == "a3").collect();
+    let i =
+        (0..ph.num_rows()).find(|&i| qp[i] == "leaf_off" && qw[i] == "int" && qa[i] == "a3" && qk[i] == 90.0).unwrap();
+    let rs: Vec<&Row> =
+        rows.iter().filter(|r| r.phenology == "leaf_off" && r.weighting == "int" && r.algorithm == "a3").collect();
     let direct = rs.iter().map(|r| r.yhat[90] - r.y[90]).sum::<f64>() / rs.len() as f64;
     assert!((qb[i] - direct).abs() < 1e-9);
     // The planted leaf-off effect (real RH 1 m lower) makes leaf-off bias higher than leaf-on.
-    let on = (0..ph.num_rows()).find(|&i| qp[i] == "leaf_on" && qw[i] == "int" && qa[i] == "a3" && qk[i] == 90.0).unwrap();
+    let on =
+        (0..ph.num_rows()).find(|&i| qp[i] == "leaf_on" && qw[i] == "int" && qa[i] == "a3" && qk[i] == 90.0).unwrap();
     assert!(qb[i] - qb[on] > 0.5, "leaf-off {} leaf-on {}", qb[i], qb[on]);
 
     // dataset summary: shot counts, leaf-off share, a1 share.
@@ -231,7 +272,11 @@ fn report_tables_contracts_and_msd_identity() {
         assert!(csv.lines().count() >= n + 1, "{name}");
     }
     // No temporary file left behind.
-    let leftovers: Vec<_> = std::fs::read_dir(&out).unwrap().flatten().filter(|e| e.file_name().to_string_lossy().ends_with(".tmp")).collect();
+    let leftovers: Vec<_> = std::fs::read_dir(&out)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
+        .collect();
     assert!(leftovers.is_empty());
 }
 
@@ -242,6 +287,14 @@ fn figures_html_and_geoparquet() {
     let (ok, _, err) = common::gedisim(&["report", "--dataset", ds.root().to_str().unwrap()]);
     assert!(ok, "{err}");
     let out = ds.root().join("report");
+    // To look at the figures: GEDISIM_KEEP_REPORT=<dir> cargo test --test study_report figures
+    if let Ok(keep) = std::env::var("GEDISIM_KEEP_REPORT") {
+        let keep = Path::new(&keep);
+        std::fs::create_dir_all(keep).unwrap();
+        for e in std::fs::read_dir(&out).unwrap().flatten() {
+            std::fs::copy(e.path(), keep.join(e.file_name())).unwrap();
+        }
+    }
     for name in ["msd_bars", "bias_profiles", "phenology", "collocation", "waveforms"] {
         let png = out.join(format!("{name}.png"));
         let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
@@ -250,7 +303,10 @@ fn figures_html_and_geoparquet() {
         assert!(info.width >= 600 && info.height >= 300, "{name}: {}×{}", info.width, info.height);
         let svg = std::fs::read_to_string(out.join(format!("{name}.svg"))).unwrap();
         assert!(svg.starts_with("<svg") && svg.contains("</svg>"), "{name}");
-        assert!(svg.contains("RH percentile") || svg.contains("elevation") || svg.contains("Pearson"), "{name}: axis text in the SVG");
+        assert!(
+            svg.contains("RH percentile") || svg.contains("elevation") || svg.contains("Pearson"),
+            "{name}: axis text in the SVG"
+        );
     }
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert_eq!(html.matches("data:image/png;base64,").count(), 5);
@@ -282,20 +338,42 @@ fn figures_html_and_geoparquet() {
             assert_eq!(g.len(), 21);
             let x = f64::from_le_bytes(g[5..13].try_into().unwrap());
             let y = f64::from_le_bytes(g[13..21].try_into().unwrap());
-            assert!((x - (5.0 + shot * 1e-3)).abs() < 1e-12 && (y - (45.0 + shot * 1e-3)).abs() < 1e-12, "{table} row {i}");
+            assert!(
+                (x - (5.0 + shot * 1e-3)).abs() < 1e-12 && (y - (45.0 + shot * 1e-3)).abs() < 1e-12,
+                "{table} row {i}"
+            );
             assert_eq!(xmin.value(i), x);
         }
         // Same via the export command.
         let alone = dir.path().join(format!("{table}_export.parquet"));
-        let (ok, _, err) = common::gedisim(&["export", "geoparquet", "--dataset", ds.root().to_str().unwrap(), "--table", table, "--out", alone.to_str().unwrap()]);
+        let (ok, _, err) = common::gedisim(&[
+            "export",
+            "geoparquet",
+            "--dataset",
+            ds.root().to_str().unwrap(),
+            "--table",
+            table,
+            "--out",
+            alone.to_str().unwrap(),
+        ]);
         assert!(ok, "{err}");
         assert_eq!(study::read(&alone).num_rows(), rows);
     }
-    let (ok, _, err) = common::gedisim(&["export", "geoparquet", "--dataset", ds.root().to_str().unwrap(), "--table", "sim", "--out", "/tmp/x.parquet"]);
+    let (ok, _, err) = common::gedisim(&[
+        "export",
+        "geoparquet",
+        "--dataset",
+        ds.root().to_str().unwrap(),
+        "--table",
+        "sim",
+        "--out",
+        "/tmp/x.parquet",
+    ]);
     assert!(!ok && err.contains("--table sim"), "{err}");
 
     // `gedisim sql` still works on a dataset holding a report (report/ is not a table).
-    let (ok, out_sql, err) = common::gedisim(&["sql", "--dataset", ds.root().to_str().unwrap(), "select count(*) as n from results"]);
+    let (ok, out_sql, err) =
+        common::gedisim(&["sql", "--dataset", ds.root().to_str().unwrap(), "select count(*) as n from results"]);
     assert!(ok && out_sql.contains(&format!("{}", N_SHOTS * 21)), "{err}");
 }
 
@@ -316,7 +394,11 @@ fn results_alone_skips_what_needs_other_tables() {
     assert_eq!(skipped["waveform_examples"], ["shots", "sim"]);
     assert!(out.join("msd.parquet").exists() && out.join("report.html").exists());
     assert!(summary.geoparquet.is_empty());
-    assert!(summary.figure_notes.iter().any(|n| n.contains("phenology") && n.contains("unknown")), "{:?}", summary.figure_notes);
+    assert!(
+        summary.figure_notes.iter().any(|n| n.contains("phenology") && n.contains("unknown")),
+        "{:?}",
+        summary.figure_notes
+    );
     let ph = study::read(&out.join("phenology.parquet"));
     assert!(s(&ph, "phenology").iter().all(|p| p == "unknown"));
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();

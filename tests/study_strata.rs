@@ -103,7 +103,10 @@ fn write_grid_tiff(path: &Path, values: &[u8], fill: u8, geokeys: Option<&[u16]>
 
 fn read_strata(ds: &Dataset) -> Vec<(u64, String, String, Option<u16>)> {
     let f = ds.table_file("strata", "strata").unwrap();
-    let r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(std::fs::File::open(f).unwrap()).unwrap().build().unwrap();
+    let r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(std::fs::File::open(f).unwrap())
+        .unwrap()
+        .build()
+        .unwrap();
     let mut out = Vec::new();
     for b in r {
         let b = b.unwrap();
@@ -112,7 +115,12 @@ fn read_strata(ds: &Dataset) -> Vec<(u64, String, String, Option<u16>)> {
         let src = b.column(2).as_string::<i32>();
         let code = b.column(3).as_primitive::<UInt16Type>();
         for i in 0..b.num_rows() {
-            out.push((sn.value(i), ft.value(i).to_string(), src.value(i).to_string(), (!arrow::array::Array::is_null(code, i)).then(|| code.value(i))));
+            out.push((
+                sn.value(i),
+                ft.value(i).to_string(),
+                src.value(i).to_string(),
+                (!arrow::array::Array::is_null(code, i)).then(|| code.value(i)),
+            ));
         }
     }
     out.sort();
@@ -199,7 +207,14 @@ fn wrong_or_missing_crs_is_a_one_line_error_naming_file_and_field() {
     assert!(!ds.has_table("strata"));
 
     // Through the CLI: non-zero exit, one line.
-    let (ok, _, err) = common::gedisim(&["ingest", "strata", "--landcover", tif.to_str().unwrap(), "--dataset", ds.root().to_str().unwrap()]);
+    let (ok, _, err) = common::gedisim(&[
+        "ingest",
+        "strata",
+        "--landcover",
+        tif.to_str().unwrap(),
+        "--dataset",
+        ds.root().to_str().unwrap(),
+    ]);
     assert!(!ok);
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(err.contains("lambert93.tif"), "{err}");
@@ -210,8 +225,19 @@ fn csv_strata_and_its_errors() {
     let dir = tempfile::tempdir().unwrap();
     let ds = dataset_with_shots(&dir.path().join("ds"));
     let csv = dir.path().join("types.csv");
-    std::fs::write(&csv, "forest_type,shot_number,comment\nConiferous,19640513500108371,x\nbroadleaf,19640513500108370,\nmixed,42,\n").unwrap();
-    let (ok, _, err) = common::gedisim(&["ingest", "strata", "--landcover", csv.to_str().unwrap(), "--dataset", ds.root().to_str().unwrap()]);
+    std::fs::write(
+        &csv,
+        "forest_type,shot_number,comment\nConiferous,19640513500108371,x\nbroadleaf,19640513500108370,\nmixed,42,\n",
+    )
+    .unwrap();
+    let (ok, _, err) = common::gedisim(&[
+        "ingest",
+        "strata",
+        "--landcover",
+        csv.to_str().unwrap(),
+        "--dataset",
+        ds.root().to_str().unwrap(),
+    ]);
     assert!(ok, "{err}");
     assert!(err.contains("not in the dataset"), "{err}");
     let got = read_strata(&ds);

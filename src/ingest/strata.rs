@@ -122,21 +122,31 @@ pub fn strata_batch(strata: &[Stratum], source: &str) -> Result<RecordBatch> {
 pub fn read_strata_csv(path: &Path) -> Result<Vec<Stratum>> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
     let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
-    let (_, header) = lines.next().ok_or_else(|| Error::file(path, "empty file (expected a header `shot_number,forest_type`)"))?;
+    let (_, header) =
+        lines.next().ok_or_else(|| Error::file(path, "empty file (expected a header `shot_number,forest_type`)"))?;
     let names: Vec<String> = header.split(',').map(|h| h.trim().trim_matches('"').to_ascii_lowercase()).collect();
     let col = |name: &str| {
-        names.iter().position(|n| n == name).ok_or_else(|| Error::field(path, name, format!("missing column (header: `{}`)", header.trim())))
+        names
+            .iter()
+            .position(|n| n == name)
+            .ok_or_else(|| Error::field(path, name, format!("missing column (header: `{}`)", header.trim())))
     };
     let (i_shot, i_type) = (col("shot_number")?, col("forest_type")?);
     let mut seen = std::collections::HashSet::new();
     let mut out = Vec::new();
     for (i, line) in lines {
         let fields: Vec<&str> = line.split(',').map(|f| f.trim().trim_matches('"')).collect();
-        let at = |k: usize, name: &str| fields.get(k).copied().ok_or_else(|| Error::field(path, format!("line {}: {name}", i + 1), "missing value"));
+        let at = |k: usize, name: &str| {
+            fields.get(k).copied().ok_or_else(|| Error::field(path, format!("line {}: {name}", i + 1), "missing value"))
+        };
         let shot_text = at(i_shot, "shot_number")?;
-        let shot_number: u64 = shot_text
-            .parse()
-            .map_err(|_| Error::field(path, format!("line {}: shot_number", i + 1), format!("`{shot_text}` is not an unsigned integer")))?;
+        let shot_number: u64 = shot_text.parse().map_err(|_| {
+            Error::field(
+                path,
+                format!("line {}: shot_number", i + 1),
+                format!("`{shot_text}` is not an unsigned integer"),
+            )
+        })?;
         let type_text = at(i_type, "forest_type")?;
         let forest_type = classes::parse_forest_type(type_text).ok_or_else(|| {
             Error::field(
@@ -146,7 +156,11 @@ pub fn read_strata_csv(path: &Path) -> Result<Vec<Stratum>> {
             )
         })?;
         if !seen.insert(shot_number) {
-            return Err(Error::field(path, format!("line {}: shot_number", i + 1), format!("shot {shot_number} appears twice")));
+            return Err(Error::field(
+                path,
+                format!("line {}: shot_number", i + 1),
+                format!("shot {shot_number} appears twice"),
+            ));
         }
         out.push(Stratum { shot_number, forest_type, clc_code: None });
     }
@@ -157,21 +171,27 @@ pub fn read_strata_csv(path: &Path) -> Result<Vec<Stratum>> {
 /// the L1B bin0 and last bin; `None` when neither exists.
 pub fn shot_positions(ds: &Dataset) -> Result<Vec<(u64, Option<(f64, f64)>)>> {
     let dir = ds.root().join(tables::SHOTS);
-    let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi` first")))?;
+    let files = dataset::table_files(&dir)
+        .map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi` first")))?;
     if files.is_empty() {
         return Err(Error::file(&dir, "no shots table: run `gedisim ingest gedi` first"));
     }
-    const COLUMNS: [&str; 7] = ["shot_number", "lat_lowestmode", "lon_lowestmode", "lat_bin0", "lon_bin0", "lat_lastbin", "lon_lastbin"];
+    const COLUMNS: [&str; 7] =
+        ["shot_number", "lat_lowestmode", "lon_lowestmode", "lat_bin0", "lon_bin0", "lat_lastbin", "lon_lastbin"];
     let mut out = Vec::new();
     for f in files {
         let file = File::open(&f).map_err(|e| Error::file(&f, e))?;
-        let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| Error::table(&f, e))?;
+        let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+            .map_err(|e| Error::table(&f, e))?;
         let mask = parquet::arrow::ProjectionMask::columns(builder.parquet_schema(), COLUMNS);
         for b in builder.with_projection(mask).build().map_err(|e| Error::table(&f, e))? {
             let b = b.map_err(|e| Error::table(&f, e))?;
-            let get = |n: &str| b.column_by_name(n).cloned().ok_or_else(|| Error::field(&f, n, "column missing from the shots table"));
+            let get = |n: &str| {
+                b.column_by_name(n).cloned().ok_or_else(|| Error::field(&f, n, "column missing from the shots table"))
+            };
             let sn = get("shot_number")?;
-            let sn = sn.as_primitive_opt::<UInt64Type>().ok_or_else(|| Error::field(&f, "shot_number", "not uint64"))?;
+            let sn =
+                sn.as_primitive_opt::<UInt64Type>().ok_or_else(|| Error::field(&f, "shot_number", "not uint64"))?;
             let mut cols = Vec::new();
             for n in &COLUMNS[1..] {
                 let c = arrow::compute::cast(&get(n)?, &DataType::Float64).map_err(|e| Error::field(&f, *n, e))?;
@@ -303,12 +323,19 @@ impl LandCoverRaster {
     pub fn open(path: &Path) -> Result<Self> {
         let file = File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
         let terr = |field: &str, e: tiff::TiffError| Error::field(path, field, e);
-        let mut decoder = Decoder::new(BufReader::new(file)).map_err(|e| Error::file(path, format!("not a readable TIFF: {e}")))?;
+        let mut decoder =
+            Decoder::new(BufReader::new(file)).map_err(|e| Error::file(path, format!("not a readable TIFF: {e}")))?;
         let (width, height) = decoder.dimensions().map_err(|e| terr("ImageWidth", e))?;
         let codes = match decoder.colortype().map_err(|e| terr("BitsPerSample", e))? {
             tiff::ColorType::Gray(8) | tiff::ColorType::Palette(8) => Codes::Grid,
             tiff::ColorType::Gray(16) | tiff::ColorType::Gray(32) | tiff::ColorType::Palette(16) => Codes::Clc,
-            other => return Err(Error::field(path, "BitsPerSample", format!("{other:?}: expected one band of 8-, 16- or 32-bit class codes"))),
+            other => {
+                return Err(Error::field(
+                    path,
+                    "BitsPerSample",
+                    format!("{other:?}: expected one band of 8-, 16- or 32-bit class codes"),
+                ))
+            }
         };
         if let Some(fmt) = decoder.find_tag_unsigned::<u16>(Tag::SampleFormat).map_err(|e| terr("SampleFormat", e))? {
             if fmt == 3 {
@@ -322,12 +349,26 @@ impl LandCoverRaster {
         match (keys.get(&geokey::PROJECTED_CS_TYPE), keys.get(&geokey::GEOGRAPHIC_TYPE)) {
             (Some(&LANDCOVER_EPSG), _) => {}
             (Some(&code), _) => {
-                return Err(Error::field(path, "GeoKeyDirectory/ProjectedCSTypeGeoKey", format!("EPSG:{code}, expected EPSG:{LANDCOVER_EPSG} (Corine Land Cover's LAEA Europe)")))
+                return Err(Error::field(
+                    path,
+                    "GeoKeyDirectory/ProjectedCSTypeGeoKey",
+                    format!("EPSG:{code}, expected EPSG:{LANDCOVER_EPSG} (Corine Land Cover's LAEA Europe)"),
+                ))
             }
             (None, Some(&code)) => {
-                return Err(Error::field(path, "GeoKeyDirectory/GeographicTypeGeoKey", format!("geographic EPSG:{code}, expected projected EPSG:{LANDCOVER_EPSG}")))
+                return Err(Error::field(
+                    path,
+                    "GeoKeyDirectory/GeographicTypeGeoKey",
+                    format!("geographic EPSG:{code}, expected projected EPSG:{LANDCOVER_EPSG}"),
+                ))
             }
-            (None, None) => return Err(Error::field(path, "GeoKeyDirectory/ProjectedCSTypeGeoKey", format!("missing, expected EPSG:{LANDCOVER_EPSG}"))),
+            (None, None) => {
+                return Err(Error::field(
+                    path,
+                    "GeoKeyDirectory/ProjectedCSTypeGeoKey",
+                    format!("missing, expected EPSG:{LANDCOVER_EPSG}"),
+                ))
+            }
         }
         let pixel_is_point = keys.get(&geokey::RASTER_TYPE) == Some(&2);
         let f64s = |d: &mut Decoder<BufReader<File>>, tag: Tag, name: &str| -> Result<Option<Vec<f64>>> {
@@ -340,9 +381,17 @@ impl LandCoverRaster {
         let tie = f64s(&mut decoder, Tag::ModelTiepointTag, "ModelTiepoint")?;
         let matrix = f64s(&mut decoder, Tag::ModelTransformationTag, "ModelTransformation")?;
         let transform = match (scale, tie, matrix) {
-            (Some(s), Some(t), _) => GeoTransform::from_tiepoint(&s, &t, pixel_is_point).map_err(|e| Error::field(path, "ModelPixelScale/ModelTiepoint", e))?,
-            (_, _, Some(m)) => GeoTransform::from_matrix(&m, pixel_is_point).map_err(|e| Error::field(path, "ModelTransformation", e))?,
-            _ => return Err(Error::field(path, "ModelPixelScale/ModelTiepoint", "missing: the raster is not georeferenced")),
+            (Some(s), Some(t), _) => GeoTransform::from_tiepoint(&s, &t, pixel_is_point)
+                .map_err(|e| Error::field(path, "ModelPixelScale/ModelTiepoint", e))?,
+            (_, _, Some(m)) => GeoTransform::from_matrix(&m, pixel_is_point)
+                .map_err(|e| Error::field(path, "ModelTransformation", e))?,
+            _ => {
+                return Err(Error::field(
+                    path,
+                    "ModelPixelScale/ModelTiepoint",
+                    "missing: the raster is not georeferenced",
+                ))
+            }
         };
         let nodata = match decoder.find_tag(Tag::GdalNodata).map_err(|e| terr("GDAL_NODATA", e))? {
             Some(v) => {
@@ -357,7 +406,17 @@ impl LandCoverRaster {
             return Err(Error::field(path, "RowsPerStrip/TileWidth", "zero-sized strips or tiles"));
         }
         let chunks_across = width.div_ceil(chunk.0);
-        Ok(LandCoverRaster { path: path.to_path_buf(), decoder, width, height, transform, chunk, chunks_across, codes, nodata })
+        Ok(LandCoverRaster {
+            path: path.to_path_buf(),
+            decoder,
+            width,
+            height,
+            transform,
+            chunk,
+            chunks_across,
+            codes,
+            nodata,
+        })
     }
 
     /// The raster's georeferencing.
@@ -367,11 +426,16 @@ impl LandCoverRaster {
 
     /// Forest type (and CLC code) of every shot; returns the strata and the counts of shots
     /// outside the raster and without position (both `unknown`). Strips/tiles are decoded once each.
-    pub fn sample_shots(&mut self, shots: &[(u64, Option<(f64, f64)>)], on_shots: &dyn Fn(u64, u64)) -> Result<(Vec<Stratum>, usize, usize)> {
+    pub fn sample_shots(
+        &mut self,
+        shots: &[(u64, Option<(f64, f64)>)],
+        on_shots: &dyn Fn(u64, u64),
+    ) -> Result<(Vec<Stratum>, usize, usize)> {
         let projector = Projector::new(LANDCOVER_EPSG as u32)?;
         // (index in shots, chunk, offset within chunk)
         let mut located: Vec<(usize, u32, usize)> = Vec::new();
-        let mut out: Vec<Stratum> = shots.iter().map(|s| Stratum { shot_number: s.0, forest_type: UNKNOWN, clc_code: None }).collect();
+        let mut out: Vec<Stratum> =
+            shots.iter().map(|s| Stratum { shot_number: s.0, forest_type: UNKNOWN, clc_code: None }).collect();
         let (mut outside, mut no_position) = (0, 0);
         for (i, (_, pos)) in shots.iter().enumerate() {
             let Some((lon, lat)) = *pos else {
@@ -416,7 +480,8 @@ impl LandCoverRaster {
 
     /// The samples of one strip or tile, row-major with the chunk's full width as stride.
     fn read_chunk(&mut self, chunk: u32) -> Result<Vec<i64>> {
-        let data = self.decoder.read_chunk(chunk).map_err(|e| Error::field(&self.path, format!("strip/tile {chunk}"), e))?;
+        let data =
+            self.decoder.read_chunk(chunk).map_err(|e| Error::field(&self.path, format!("strip/tile {chunk}"), e))?;
         // Strips at the bottom may be shorter; tiles are always padded to the full tile size.
         let values: Vec<i64> = match data {
             DecodingResult::U8(v) => v.into_iter().map(i64::from).collect(),
@@ -448,14 +513,18 @@ mod tests {
 
     #[test]
     fn tiepoint_transform_maps_corners() {
-        let t = GeoTransform::from_tiepoint(&[100.0, 100.0, 0.0], &[0.0, 0.0, 0.0, 3_500_000.0, 2_600_000.0, 0.0], false).unwrap();
+        let t =
+            GeoTransform::from_tiepoint(&[100.0, 100.0, 0.0], &[0.0, 0.0, 0.0, 3_500_000.0, 2_600_000.0, 0.0], false)
+                .unwrap();
         assert_eq!(t.pixel_of(3_500_000.0, 2_600_000.0, 10, 10), Some((0, 0)));
         assert_eq!(t.pixel_of(3_500_099.9, 2_599_900.1, 10, 10), Some((0, 0)));
         assert_eq!(t.pixel_of(3_500_100.0, 2_599_899.0, 10, 10), Some((1, 1)));
         assert_eq!(t.pixel_of(3_499_999.0, 2_599_999.0, 10, 10), None);
         assert_eq!(t.pixel_of(3_501_000.0, 2_599_999.0, 10, 10), None);
         // PixelIsPoint: the tie point is the centre of pixel (0, 0).
-        let p = GeoTransform::from_tiepoint(&[100.0, 100.0, 0.0], &[0.0, 0.0, 0.0, 3_500_050.0, 2_599_950.0, 0.0], true).unwrap();
+        let p =
+            GeoTransform::from_tiepoint(&[100.0, 100.0, 0.0], &[0.0, 0.0, 0.0, 3_500_050.0, 2_599_950.0, 0.0], true)
+                .unwrap();
         assert_eq!((p.x0, p.y0), (3_500_000.0, 2_600_000.0));
     }
 
@@ -471,7 +540,10 @@ mod tests {
         m[1] = 0.0;
         m[3] = 100.0;
         m[7] = 200.0;
-        assert_eq!(GeoTransform::from_matrix(&m, false).unwrap(), GeoTransform { x0: 100.0, y0: 200.0, sx: 10.0, sy: 10.0 });
+        assert_eq!(
+            GeoTransform::from_matrix(&m, false).unwrap(),
+            GeoTransform { x0: 100.0, y0: 200.0, sx: 10.0, sy: 10.0 }
+        );
     }
 
     #[test]

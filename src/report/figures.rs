@@ -92,6 +92,20 @@ fn font(size: u32) -> TextStyle<'static> {
     (FAMILY, size).into_font().color(&BLACK)
 }
 
+/// Axis tick text: at most two decimals, trailing zeros dropped (10 not 10.0, 0.25, 1.5).
+fn tick(v: &f64) -> String {
+    let t = format!("{v:.2}");
+    let t = t.trim_end_matches('0').trim_end_matches('.');
+    if t == "-0" {
+        "0".to_string()
+    } else {
+        t.to_string()
+    }
+}
+
+/// Colour of the fine grid lines.
+const LIGHT: RGBColor = RGBColor(236, 236, 236);
+
 /// Range of `values` with a margin; a fallback when empty or flat.
 fn padded_range(values: impl Iterator<Item = f64>, include_zero: bool) -> std::ops::Range<f64> {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -144,11 +158,15 @@ impl Figure for MsdBars {
             let mut chart = ChartBuilder::on(area)
                 .caption(&panel.title, font(18))
                 .margin(10)
+                .margin_right(25)
                 .x_label_area_size(40)
                 .y_label_area_size(70)
                 .build_cartesian_2d(0f64..100f64, 0f64..ymax)?;
             chart
                 .configure_mesh()
+                .x_label_formatter(&tick)
+                .y_label_formatter(&tick)
+                .light_line_style(LIGHT)
                 .disable_x_mesh()
                 .x_desc("RH percentile")
                 .y_desc("MSD (m²)")
@@ -191,6 +209,8 @@ pub struct LinePanels {
     pub panels: Vec<(String, Vec<(String, Vec<(f64, f64)>)>)>,
     /// Draw y = 0.
     pub zero_line: bool,
+    /// Where the legend goes.
+    pub legend_lower: bool,
 }
 
 impl Figure for LinePanels {
@@ -215,21 +235,37 @@ impl Figure for LinePanels {
                 .x_label_area_size(40)
                 .y_label_area_size(55)
                 .build_cartesian_2d(xr.clone(), yr.clone())?;
-            chart.configure_mesh().x_desc(&self.x_desc).y_desc(&self.y_desc).label_style(font(13)).axis_desc_style(font(14)).draw()?;
+            chart
+                .configure_mesh()
+                .x_label_formatter(&tick)
+                .y_label_formatter(&tick)
+                .light_line_style(LIGHT)
+                .x_desc(&self.x_desc)
+                .y_desc(&self.y_desc)
+                .label_style(font(13))
+                .axis_desc_style(font(14))
+                .draw()?;
             if self.zero_line {
                 chart.draw_series(LineSeries::new([(xr.start, 0.0), (xr.end, 0.0)], BLACK.mix(0.5)))?;
             }
             for (k, (label, pts)) in series.iter().enumerate() {
-                let color = COLORS[k % COLORS.len()];
+                // The pooled series ("all …") in black and thicker, over the others.
+                let pooled = label.starts_with("all");
+                let color = if pooled { BLACK } else { COLORS[k % (COLORS.len() - 1)] };
+                let color = color.stroke_width(if pooled { 3 } else { 2 });
                 chart
-                    .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))?
+                    .draw_series(LineSeries::new(pts.iter().copied(), color))?
                     .label(label.as_str())
-                    .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], color.stroke_width(2)));
+                    .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], color));
             }
             if !series.is_empty() {
                 chart
                     .configure_series_labels()
-                    .position(SeriesLabelPosition::UpperLeft)
+                    .position(if self.legend_lower {
+                        SeriesLabelPosition::LowerLeft
+                    } else {
+                        SeriesLabelPosition::UpperLeft
+                    })
                     .label_font(font(13))
                     .background_style(WHITE.mix(0.85))
                     .border_style(BLACK)
@@ -269,6 +305,9 @@ impl Figure for PhenologyBands {
                 .build_cartesian_2d(0f64..100f64, yr.clone())?;
             chart
                 .configure_mesh()
+                .x_label_formatter(&tick)
+                .y_label_formatter(&tick)
+                .light_line_style(LIGHT)
                 .x_desc("RH percentile")
                 .y_desc("bias, simulated − real (m)")
                 .label_style(font(13))
@@ -284,7 +323,9 @@ impl Figure for PhenologyBands {
                 chart
                     .draw_series(std::iter::once(Polygon::new(poly, RGBColor(150, 150, 150).mix(0.35).filled())))?
                     .label("|ΔBias|")
-                    .legend(|(x, y)| Rectangle::new([(x, y - 6), (x + 14, y + 6)], RGBColor(150, 150, 150).mix(0.35).filled()));
+                    .legend(|(x, y)| {
+                        Rectangle::new([(x, y - 6), (x + 14, y + 6)], RGBColor(150, 150, 150).mix(0.35).filled())
+                    });
             }
             for (label, pts, color) in [("leaf-on", on, COLORS[2]), ("leaf-off", off, COLORS[5])] {
                 chart
@@ -331,6 +372,9 @@ impl Figure for CollocationScatter {
             .build_cartesian_2d(lo..hi, lo..hi)?;
         chart
             .configure_mesh()
+            .x_label_formatter(&tick)
+            .y_label_formatter(&tick)
+            .light_line_style(LIGHT)
             .x_desc("Pearson r at the reported position")
             .y_desc("Pearson r after collocation")
             .label_style(font(13))
@@ -385,6 +429,9 @@ impl Figure for Waveforms {
                 .build_cartesian_2d(xr, yr)?;
             chart
                 .configure_mesh()
+                .x_label_formatter(&tick)
+                .y_label_formatter(&tick)
+                .light_line_style(LIGHT)
                 .x_desc("amplitude (unit area)")
                 .y_desc("elevation (m)")
                 .label_style(font(12))
@@ -392,7 +439,7 @@ impl Figure for Waveforms {
                 .draw()?;
             for (k, (label, pts)) in series.iter().enumerate() {
                 let color = if label == "GEDI" { BLACK } else { COLORS[k % COLORS.len()] };
-                let width = if label == "GEDI" { 2 } else { 1 };
+                let width = if label == "GEDI" { 3 } else { 2 };
                 chart
                     .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(width)))?
                     .label(label.as_str())

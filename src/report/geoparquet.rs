@@ -78,13 +78,17 @@ pub async fn export(ds: &Dataset, table: &str, out: &Path, crs: GeoCrs) -> Resul
     let sql = select(table)?;
     for needed in [table, tables::SHOTS] {
         if !ds.has_table(needed) {
-            return Err(Error::file(ds.root().join(needed), format!("no {needed} table: GeoParquet export of {table} needs it")));
+            return Err(Error::file(
+                ds.root().join(needed),
+                format!("no {needed} table: GeoParquet export of {table} needs it"),
+            ));
         }
     }
     let ctx = crate::sql::session(ds).await?;
     let df = ctx.sql(&sql).await.map_err(|e| Error::field(ds.root().join(table), "GeoParquet export", e))?;
     let in_schema: SchemaRef = super::plain_schema(df.schema().as_arrow());
-    let keep: Vec<usize> = (0..in_schema.fields().len()).filter(|&i| !in_schema.field(i).name().starts_with("__")).collect();
+    let keep: Vec<usize> =
+        (0..in_schema.fields().len()).filter(|&i| !in_schema.field(i).name().starts_with("__")).collect();
     let mut fields: Vec<Field> = keep.iter().map(|&i| in_schema.field(i).clone()).collect();
     fields.push(Field::new("geometry", DataType::Binary, true));
     fields.push(Field::new("bbox", DataType::Struct(bbox_fields()), true));
@@ -115,7 +119,8 @@ pub async fn export(ds: &Dataset, table: &str, out: &Path, crs: GeoCrs) -> Resul
             valid.push(ok);
         }
         let (x, y): (ArrayRef, ArrayRef) = (Arc::new(Float64Array::from(xs)), Arc::new(Float64Array::from(ys)));
-        let bbox = StructArray::try_new(bbox_fields(), vec![x.clone(), y.clone(), x, y], Some(valid.into())).map_err(|e| Error::table(out, e))?;
+        let bbox = StructArray::try_new(bbox_fields(), vec![x.clone(), y.clone(), x, y], Some(valid.into()))
+            .map_err(|e| Error::table(out, e))?;
         let mut cols: Vec<ArrayRef> = keep.iter().map(|&i| batch.column(i).clone()).collect();
         cols.push(Arc::new(geom.finish()));
         cols.push(Arc::new(bbox));

@@ -44,7 +44,11 @@ pub fn html_table(b: &RecordBatch, max_rows: usize) -> std::result::Result<Strin
         let _ = write!(s, "<th>{}</th>", escape(f.name()));
     }
     s.push_str("</tr></thead>\n<tbody>\n");
-    let fmts = b.columns().iter().map(|c| ArrayFormatter::try_new(c.as_ref(), &opts)).collect::<std::result::Result<Vec<_>, _>>()?;
+    let fmts = b
+        .columns()
+        .iter()
+        .map(|c| ArrayFormatter::try_new(c.as_ref(), &opts))
+        .collect::<std::result::Result<Vec<_>, _>>()?;
     for i in 0..b.num_rows().min(max_rows) {
         s.push_str("<tr>");
         for (f, fmt) in b.schema().fields().iter().zip(&fmts) {
@@ -68,9 +72,18 @@ pub fn html_table(b: &RecordBatch, max_rows: usize) -> std::result::Result<Strin
 }
 
 /// The page.
-pub fn page(ds: &Dataset, ran: &[TableOutput], summary: &ReportSummary, figures: &[(&str, String)], geo_notes: &[String]) -> Result<String> {
+pub fn page(
+    ds: &Dataset,
+    ran: &[TableOutput],
+    summary: &ReportSummary,
+    figures: &[(&str, String)],
+    geo_notes: &[String],
+) -> Result<String> {
     let mut s = String::new();
-    let title = format!("gedisim study report — {}", ds.root().file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
+    let title = format!(
+        "gedisim study report — {}",
+        ds.root().file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()
+    );
     let _ = write!(
         s,
         "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{}</title>\n<style>\n\
@@ -125,7 +138,12 @@ pub fn page(ds: &Dataset, ran: &[TableOutput], summary: &ReportSummary, figures:
         s.push_str(&html_table(&b, MAX_ROWS).map_err(|e| Error::table(t.query.name, e))?);
     }
     for (name, missing) in &summary.skipped {
-        let _ = writeln!(s, "<p class=\"note\">Table <code>{}</code> not computed: the dataset has no {} table.</p>", escape(name), escape(&missing.join(", ")));
+        let _ = writeln!(
+            s,
+            "<p class=\"note\">Table <code>{}</code> not computed: the dataset has no {} table.</p>",
+            escape(name),
+            escape(&missing.join(", "))
+        );
     }
     if !summary.geoparquet.is_empty() || !geo_notes.is_empty() {
         s.push_str("<h2>GeoParquet hand-off</h2>\n<ul>\n");
@@ -148,7 +166,15 @@ mod tests {
 
     #[test]
     fn base64_matches_rfc4648_vectors() {
-        for (i, o) in [("", ""), ("f", "Zg=="), ("fo", "Zm8="), ("foo", "Zm9v"), ("foob", "Zm9vYg=="), ("fooba", "Zm9vYmE="), ("foobar", "Zm9vYmFy")] {
+        for (i, o) in [
+            ("", ""),
+            ("f", "Zg=="),
+            ("fo", "Zm8="),
+            ("foo", "Zm9v"),
+            ("foob", "Zm9vYg=="),
+            ("fooba", "Zm9vYmE="),
+            ("foobar", "Zm9vYmFy"),
+        ] {
             assert_eq!(base64(i.as_bytes()), o);
         }
     }

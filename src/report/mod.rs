@@ -80,7 +80,10 @@ impl TableOutput {
 pub enum QueryOutcome {
     Ran(TableOutput),
     /// Not run: these tables are missing from the dataset.
-    Skipped { query: Query, missing: Vec<String> },
+    Skipped {
+        query: Query,
+        missing: Vec<String>,
+    },
 }
 
 /// Run every query of [`QUERIES`] whose tables exist. `on_query(name)` is called before each.
@@ -116,12 +119,17 @@ pub fn plain_schema(schema: &arrow::datatypes::Schema) -> SchemaRef {
             DataType::Utf8View => DataType::Utf8,
             DataType::BinaryView => DataType::Binary,
             DataType::List(f) => DataType::List(Arc::new(f.as_ref().clone().with_data_type(plain(f.data_type())))),
-            DataType::LargeList(f) => DataType::LargeList(Arc::new(f.as_ref().clone().with_data_type(plain(f.data_type())))),
+            DataType::LargeList(f) => {
+                DataType::LargeList(Arc::new(f.as_ref().clone().with_data_type(plain(f.data_type()))))
+            }
             other => other.clone(),
         }
     }
-    let fields: Vec<arrow::datatypes::Field> =
-        schema.fields().iter().map(|f| f.as_ref().clone().with_data_type(plain(f.data_type())).with_nullable(true)).collect();
+    let fields: Vec<arrow::datatypes::Field> = schema
+        .fields()
+        .iter()
+        .map(|f| f.as_ref().clone().with_data_type(plain(f.data_type())).with_nullable(true))
+        .collect();
     Arc::new(arrow::datatypes::Schema::new(fields))
 }
 
@@ -131,7 +139,15 @@ pub fn plain_batch(b: &RecordBatch, schema: &SchemaRef) -> Result<RecordBatch> {
         .columns()
         .iter()
         .zip(schema.fields())
-        .map(|(c, f)| if c.data_type() == f.data_type() { Ok(c.clone()) } else { arrow::compute::cast(c, f.data_type()) })
+        .map(
+            |(c, f)| {
+                if c.data_type() == f.data_type() {
+                    Ok(c.clone())
+                } else {
+                    arrow::compute::cast(c, f.data_type())
+                }
+            },
+        )
         .collect::<std::result::Result<Vec<_>, _>>()
         .map_err(|e| Error::table("report", e))?;
     RecordBatch::try_new(schema.clone(), cols).map_err(|e| Error::table("report", e))
@@ -161,7 +177,8 @@ fn lists_as_text(b: &RecordBatch) -> std::result::Result<RecordBatch, arrow::err
         if matches!(f.data_type(), DataType::List(_) | DataType::LargeList(_)) {
             let opts = arrow::util::display::FormatOptions::default();
             let fmt = arrow::util::display::ArrayFormatter::try_new(c.as_ref(), &opts)?;
-            let text: arrow::array::StringArray = (0..c.len()).map(|i| (!c.is_null(i)).then(|| fmt.value(i).to_string())).collect();
+            let text: arrow::array::StringArray =
+                (0..c.len()).map(|i| (!c.is_null(i)).then(|| fmt.value(i).to_string())).collect();
             fields.push(arrow::datatypes::Field::new(f.name(), DataType::Utf8, true));
             cols.push(Arc::new(text) as _);
         } else {
@@ -198,7 +215,8 @@ pub fn run_report(ds: &Dataset, out: Option<&Path>, on_step: &dyn Fn(&str)) -> R
         None => ds.root().join(tables::REPORT),
     };
     std::fs::create_dir_all(&dir).map_err(|e| Error::file(&dir, format!("cannot create report directory: {e}")))?;
-    let rt = tokio::runtime::Runtime::new().map_err(|e| Error::Usage(format!("cannot start the query runtime: {e}")))?;
+    let rt =
+        tokio::runtime::Runtime::new().map_err(|e| Error::Usage(format!("cannot start the query runtime: {e}")))?;
     let outcomes = rt.block_on(run_queries(ds, &|name| on_step(&format!("query {name}"))))?;
     let mut summary = ReportSummary { dir: dir.clone(), ..Default::default() };
     let mut ran = Vec::new();
@@ -260,19 +278,27 @@ impl AnyFigure {
     /// The caption shown under the figure in report.html.
     pub fn caption(&self) -> String {
         match self {
-            AnyFigure::Msd(_) => "Per-percentile MSD split (SB: bias, SDSD: spread, LCS: lack of correlation) of the baseline \
+            AnyFigure::Msd(_) => {
+                "Per-percentile MSD split (SB: bias, SDSD: spread, LCS: lack of correlation) of the baseline \
                                   (count weighting, default algorithm) and of the setting with the lowest MSD."
-                .into(),
+                    .into()
+            }
             AnyFigure::Lines(f) => f.title.clone(),
-            AnyFigure::Phenology(_) => "Bias of simulated RH per percentile for leaf-on and leaf-off shots; the grey band is \
+            AnyFigure::Phenology(_) => {
+                "Bias of simulated RH per percentile for leaf-on and leaf-off shots; the grey band is \
                                         |ΔBias| between the two."
-                .into(),
-            AnyFigure::Collocation(_) => "Mean Pearson r between real and simulated waveforms of each segment at the reported \
+                    .into()
+            }
+            AnyFigure::Collocation(_) => {
+                "Mean Pearson r between real and simulated waveforms of each segment at the reported \
                                           position and at the collocated offset."
-                .into(),
-            AnyFigure::Waveforms(_) => "Real GEDI waveform (noise mean removed) and the simulated waveforms of the three \
+                    .into()
+            }
+            AnyFigure::Waveforms(_) => {
+                "Real GEDI waveform (noise mean removed) and the simulated waveforms of the three \
                                         weightings, each scaled to unit area, on the ALS vertical datum."
-                .into(),
+                    .into()
+            }
         }
     }
 }
@@ -310,32 +336,52 @@ pub fn figure_data(ran: &[TableOutput]) -> Result<FigureData> {
     // MSD bars: baseline count–default and the (weighting, algorithm) of lowest MSD over all shots.
     if let (Some(msd), Some(profile)) = (table(ran, "msd"), table(ran, "msd_profile")) {
         let b = msd.batch()?;
-        let (w, a, g, m) = (strings(&b, "weighting")?, strings(&b, "algorithm")?, strings(&b, "sensitivity_group")?, floats(&b, "msd")?);
+        let (w, a, g, m) = (
+            strings(&b, "weighting")?,
+            strings(&b, "algorithm")?,
+            strings(&b, "sensitivity_group")?,
+            floats(&b, "msd")?,
+        );
         let best = (0..b.num_rows())
             .filter(|&i| g[i].as_deref() == Some("all") && m[i].is_finite())
             .min_by(|&i, &j| m[i].total_cmp(&m[j]))
             .map(|i| (w[i].clone().unwrap_or_default(), a[i].clone().unwrap_or_default(), m[i]));
         let p = profile.batch()?;
-        let (pw, pa, pg, pp) = (strings(&p, "weighting")?, strings(&p, "algorithm")?, strings(&p, "sensitivity_group")?, floats(&p, "percentile")?);
+        let (pw, pa, pg, pp) = (
+            strings(&p, "weighting")?,
+            strings(&p, "algorithm")?,
+            strings(&p, "sensitivity_group")?,
+            floats(&p, "percentile")?,
+        );
         let (sb, sdsd, lcs) = (floats(&p, "sb")?, floats(&p, "sdsd")?, floats(&p, "lcs")?);
         let bars = |wt: &str, al: &str| -> Vec<(u32, f64, f64, f64)> {
             (0..p.num_rows())
-                .filter(|&i| pw[i].as_deref() == Some(wt) && pa[i].as_deref() == Some(al) && pg[i].as_deref() == Some("all"))
+                .filter(|&i| {
+                    pw[i].as_deref() == Some(wt) && pa[i].as_deref() == Some(al) && pg[i].as_deref() == Some("all")
+                })
                 .map(|i| (pp[i] as u32, sb[i], sdsd[i], lcs[i]))
                 .collect()
         };
         let mut panels = Vec::new();
         let base = bars("count", "default");
         let base_msd = (0..b.num_rows())
-            .find(|&i| w[i].as_deref() == Some("count") && a[i].as_deref() == Some("default") && g[i].as_deref() == Some("all"))
+            .find(|&i| {
+                w[i].as_deref() == Some("count") && a[i].as_deref() == Some("default") && g[i].as_deref() == Some("all")
+            })
             .map(|i| m[i]);
         if let Some(bm) = base_msd.filter(|_| !base.is_empty()) {
             let also_best = best.as_ref().map(|(bw, ba, _)| bw == "count" && ba == "default").unwrap_or(false);
-            let title = format!("baseline: count weighting, default algorithm (MSD {bm:.2} m²){}", if also_best { ", also the lowest" } else { "" });
+            let title = format!(
+                "baseline: count weighting, default algorithm (MSD {bm:.2} m²){}",
+                if also_best { ", also the lowest" } else { "" }
+            );
             panels.push(figures::MsdPanel { title, bars: base });
         }
         if let Some((bw, ba, bm)) = best.filter(|(bw, ba, _)| !(bw == "count" && ba == "default")) {
-            panels.push(figures::MsdPanel { title: format!("lowest MSD: {bw} weighting, algorithm {ba} (MSD {bm:.2} m²)"), bars: bars(&bw, &ba) });
+            panels.push(figures::MsdPanel {
+                title: format!("lowest MSD: {bw} weighting, algorithm {ba} (MSD {bm:.2} m²)"),
+                bars: bars(&bw, &ba),
+            });
         }
         if panels.is_empty() {
             fd.notes.push("msd_bars: no rows in msd_profile".into());
@@ -346,7 +392,12 @@ pub fn figure_data(ran: &[TableOutput]) -> Result<FigureData> {
     // Bias profiles by forest type, one panel per sensitivity group, baseline setting.
     if let Some(t) = table(ran, "bias_profiles") {
         let b = t.batch()?;
-        let (w, a, f, g) = (strings(&b, "weighting")?, strings(&b, "algorithm")?, strings(&b, "forest_type")?, strings(&b, "sensitivity_group")?);
+        let (w, a, f, g) = (
+            strings(&b, "weighting")?,
+            strings(&b, "algorithm")?,
+            strings(&b, "forest_type")?,
+            strings(&b, "sensitivity_group")?,
+        );
         let (p, bias, n) = (floats(&b, "percentile")?, floats(&b, "bias")?, floats(&b, "n")?);
         let mut panels = Vec::new();
         for group in ["low", "high", "all"] {
@@ -381,6 +432,7 @@ pub fn figure_data(ran: &[TableOutput]) -> Result<FigureData> {
                     y_desc: "bias, simulated − real (m)".into(),
                     panels,
                     zero_line: true,
+                    legend_lower: true,
                 }),
             ));
         }
@@ -392,12 +444,16 @@ pub fn figure_data(ran: &[TableOutput]) -> Result<FigureData> {
         let (p, bias) = (floats(&b, "percentile")?, floats(&b, "bias")?);
         let curve = |phen: &str, wt: &str, al: &str| -> Vec<(f64, f64)> {
             (0..b.num_rows())
-                .filter(|&i| ph[i].as_deref() == Some(phen) && w[i].as_deref() == Some(wt) && a[i].as_deref() == Some(al))
+                .filter(|&i| {
+                    ph[i].as_deref() == Some(phen) && w[i].as_deref() == Some(wt) && a[i].as_deref() == Some(al)
+                })
                 .map(|i| (p[i], bias[i]))
                 .collect()
         };
         let mut panels = Vec::new();
-        for (wt, al, title) in [("count", "default", "count weighting, default algorithm"), ("int", "a3", "int weighting, algorithm a3")] {
+        for (wt, al, title) in
+            [("count", "default", "count weighting, default algorithm"), ("int", "a3", "int weighting, algorithm a3")]
+        {
             let (on, off) = (curve("leaf_on", wt, al), curve("leaf_off", wt, al));
             if !on.is_empty() || !off.is_empty() {
                 panels.push((title.to_string(), on, off));
@@ -416,7 +472,8 @@ pub fn figure_data(ran: &[TableOutput]) -> Result<FigureData> {
         Some(t) => {
             let b = t.batch()?;
             let (rb, ra) = (floats(&b, "r_before")?, floats(&b, "r_after")?);
-            let points: Vec<(f64, f64)> = rb.into_iter().zip(ra).filter(|(a, b)| a.is_finite() && b.is_finite()).collect();
+            let points: Vec<(f64, f64)> =
+                rb.into_iter().zip(ra).filter(|(a, b)| a.is_finite() && b.is_finite()).collect();
             if points.is_empty() {
                 fd.notes.push("collocation: no segment with both correlations".into());
             } else {
@@ -446,12 +503,17 @@ pub fn waveform_panels(b: &RecordBatch) -> Result<figures::Waveforms> {
     let (shot, source) = (strings(b, "shot_number")?, strings(b, "source")?);
     let (z0, dz, noise) = (floats(b, "z0")?, floats(b, "dz")?, floats(b, "noise_mean")?);
     let wave = b.column_by_name("wave").ok_or_else(|| Error::field("waveform_examples", "wave", "column missing"))?;
-    let wave = arrow::compute::cast(wave, &DataType::List(Arc::new(arrow::datatypes::Field::new_list_field(DataType::Float64, true))))
-        .map_err(|e| Error::field("waveform_examples", "wave", e))?;
+    let wave = arrow::compute::cast(
+        wave,
+        &DataType::List(Arc::new(arrow::datatypes::Field::new_list_field(DataType::Float64, true))),
+    )
+    .map_err(|e| Error::field("waveform_examples", "wave", e))?;
     let wave = wave.as_list::<i32>();
     let mut panels: Vec<(String, Vec<(String, Vec<(f64, f64)>)>)> = Vec::new();
     for i in 0..b.num_rows() {
-        let (Some(s), Some(src)) = (&shot[i], &source[i]) else { continue };
+        let (Some(s), Some(src)) = (&shot[i], &source[i]) else {
+            continue;
+        };
         if wave.is_null(i) || !(dz[i] > 0.0) || !z0[i].is_finite() {
             continue;
         }
@@ -470,6 +532,10 @@ pub fn waveform_panels(b: &RecordBatch) -> Result<figures::Waveforms> {
             Some(p) => p.1.push((label, pts)),
             None => panels.push((title, vec![(label, pts)])),
         }
+    }
+    // The real waveform first, then the weightings.
+    for (_, series) in panels.iter_mut() {
+        series.sort_by_key(|s| (s.0 != "GEDI", s.0.clone()));
     }
     // A panel needs the real waveform and at least one simulated one.
     panels.retain(|p| p.1.iter().any(|s| s.0 == "GEDI") && p.1.len() > 1);

@@ -114,7 +114,9 @@ pub fn results_metadata() -> HashMap<String, String> {
 /// long, a sensitivity below the study's 0.90 (filter before), an unknown weighting or algorithm.
 pub fn results_batch(rows: &[ResultInput]) -> Result<RecordBatch> {
     let n = rows.len();
-    let bad = |r: &ResultInput, field: &str, msg: String| Error::field("results", format!("shot {} {field}", r.shot_number), msg);
+    let bad = |r: &ResultInput, field: &str, msg: String| {
+        Error::field("results", format!("shot {} {field}", r.shot_number), msg)
+    };
     let mut rh_sim = ListBuilder::with_capacity(Float32Builder::with_capacity(n * RH_LEN), n);
     let mut rh_gedi = ListBuilder::with_capacity(Float32Builder::with_capacity(n * RH_LEN), n);
     let mut rh_aligned = ListBuilder::with_capacity(Float32Builder::with_capacity(n * RH_LEN), n);
@@ -134,8 +136,9 @@ pub fn results_batch(rows: &[ResultInput]) -> Result<RecordBatch> {
                 return Err(bad(r, "algorithm", format!("a{k} is not a GEDI algorithm (1..6)")));
             }
         }
-        let group = classes::sensitivity_group(r.sensitivity)
-            .ok_or_else(|| bad(r, "sensitivity", format!("{} is below the study's 0.90 (apply the filter first)", r.sensitivity)))?;
+        let group = classes::sensitivity_group(r.sensitivity).ok_or_else(|| {
+            bad(r, "sensitivity", format!("{} is below the study's 0.90 (apply the filter first)", r.sensitivity))
+        })?;
         groups.push(group);
         let ground = r.vertical_reference.to_als_datum(r.elev_lowestmode);
         gedi_ground.push(ground);
@@ -143,7 +146,9 @@ pub fn results_batch(rows: &[ResultInput]) -> Result<RecordBatch> {
         rh_gedi.append_value(r.rh_gedi.iter().map(|&v| Some(v)));
         rh_aligned.append_value(align_rh(&r.rh_gedi, ground, r.als_ground).into_iter().map(Some));
     }
-    let strings = |f: &dyn Fn(&ResultInput) -> String| -> ArrayRef { Arc::new(rows.iter().map(f).map(Some).collect::<StringArray>()) };
+    let strings = |f: &dyn Fn(&ResultInput) -> String| -> ArrayRef {
+        Arc::new(rows.iter().map(f).map(Some).collect::<StringArray>())
+    };
     let columns: Vec<ArrayRef> = vec![
         Arc::new(rows.iter().map(|r| r.shot_number).collect::<UInt64Array>()),
         strings(&|r| r.granule.clone()),

@@ -5,7 +5,9 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use arrow::array::{ArrayRef, Float32Builder, Float64Array, ListBuilder, RecordBatch, StringArray, UInt32Array, UInt64Array};
+use arrow::array::{
+    ArrayRef, Float32Builder, Float64Array, ListBuilder, RecordBatch, StringArray, UInt32Array, UInt64Array,
+};
 use arrow::datatypes::{DataType, Field, Schema};
 use gedisim::dataset::{write_parquet, Dataset};
 use gedisim::study::align::VerticalReference;
@@ -55,7 +57,8 @@ pub fn synthetic_results(n: usize) -> Vec<ResultInput> {
             let e = GROUND_OFFSET[a] + 0.3 * r.normal();
             let leaf = if leaf_off_flag == Some(1) { -1.0 } else { 0.0 };
             let rh_gedi: Vec<f32> = rh_true.iter().map(|h| (h - e + 0.5 * r.normal() + leaf) as f32).collect();
-            for (w, (scale, bias)) in ["count", "frac", "int"].into_iter().zip([(0.95, 0.0), (1.0, 0.2), (1.02, -0.3)]) {
+            for (w, (scale, bias)) in ["count", "frac", "int"].into_iter().zip([(0.95, 0.0), (1.0, 0.2), (1.02, -0.3)])
+            {
                 let rh_sim: Vec<f32> = rh_true.iter().map(|h| (h * scale + bias + 0.4 * r.normal()) as f32).collect();
                 rows.push(ResultInput {
                     shot_number: FIRST_SHOT + i as u64,
@@ -86,7 +89,8 @@ pub fn synthetic_results(n: usize) -> Vec<ResultInput> {
 /// Write `rows` as `<dataset>/results/part-0.parquet`.
 pub fn write_results(ds: &Dataset, rows: &[ResultInput]) {
     let batch = results_batch(rows).unwrap();
-    write_parquet(&ds.table_file("results", "part-0").unwrap(), results_schema(), &[batch], &results_metadata()).unwrap();
+    write_parquet(&ds.table_file("results", "part-0").unwrap(), results_schema(), &[batch], &results_metadata())
+        .unwrap();
 }
 
 /// An offsets table of `n` segments with the contract's columns.
@@ -147,7 +151,8 @@ fn gauss(z: f64, mu: f64, s: f64) -> f64 {
 pub fn write_shots_and_sim(ds: &Dataset, n: usize) {
     let list = || ListBuilder::new(Float32Builder::new());
     let (mut rx, mut sim_wave) = (list(), list());
-    let (mut sn, mut lat, mut lon, mut bin0, mut last, mut count, mut noise, mut elev) = (vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
+    let (mut sn, mut lat, mut lon, mut bin0, mut last, mut count, mut noise, mut elev) =
+        (vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
     let (mut fid, mut wt, mut st, mut z0s, mut dzs) = (vec![], vec![], vec![], vec![], vec![]);
     for i in 0..n {
         let (ground, h, _, _) = truth(i);
@@ -164,7 +169,10 @@ pub fn write_shots_and_sim(ds: &Dataset, n: usize) {
         elev.push(ground + GEOID + GROUND_OFFSET[0]);
         rx.append_value((0..ns).map(|k| {
             let z = top - k as f64 * dz;
-            Some((200.0 + 300.0 * gauss(z, ground + GEOID, 0.8) + 150.0 * gauss(z, ground + GEOID + 0.7 * h, 2.5)) as f32)
+            Some(
+                (200.0 + 300.0 * gauss(z, ground + GEOID, 0.8) + 150.0 * gauss(z, ground + GEOID + 0.7 * h, 2.5))
+                    as f32,
+            )
         }));
         for (w, canopy) in [("count", 0.8), ("frac", 1.0), ("int", 1.2)] {
             let top = ground + h + 10.0;
@@ -173,10 +181,12 @@ pub fn write_shots_and_sim(ds: &Dataset, n: usize) {
             st.push("ok");
             z0s.push(top);
             dzs.push(dz);
-            let raw: Vec<f64> = (0..300).map(|k| {
-                let z = top - k as f64 * dz;
-                gauss(z, ground, 0.7) + canopy * 0.5 * gauss(z, ground + 0.7 * h, 2.2)
-            }).collect();
+            let raw: Vec<f64> = (0..300)
+                .map(|k| {
+                    let z = top - k as f64 * dz;
+                    gauss(z, ground, 0.7) + canopy * 0.5 * gauss(z, ground + 0.7 * h, 2.2)
+                })
+                .collect();
             let area: f64 = raw.iter().sum::<f64>() * dz;
             sim_wave.append_value(raw.iter().map(|v| Some((v / area) as f32)));
         }
