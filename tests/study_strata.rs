@@ -10,7 +10,7 @@ use arrow::array::{AsArray, Float64Array, RecordBatch, UInt64Array};
 use arrow::datatypes::{DataType, Field, Schema, UInt16Type, UInt64Type};
 use gedisim::dataset::{write_parquet, Dataset};
 use gedisim::geo::projection::Projector;
-use gedisim::ingest::strata::ingest_strata;
+use gedisim::ingest::strata::{ingest_strata, PixelSample};
 use tiff::encoder::{colortype, TiffEncoder};
 use tiff::tags::Tag;
 
@@ -60,9 +60,12 @@ fn dataset_with_shots(dir: &Path) -> Dataset {
     ds
 }
 
+/// The raster's top-left corner and each shot's pixel (column, row), if inside.
+type Layout = ((f64, f64), Vec<Option<(u32, u32)>>);
+
 /// A 40 × 30 raster of 100 m pixels in EPSG:3035 whose top-left corner lies 500 m west and north
 /// of shot 0; returns (x0, y0) and the pixel (col, row) of each shot inside it.
-fn layout() -> ((f64, f64), Vec<Option<(u32, u32)>>) {
+fn layout() -> Layout {
     let p = Projector::new(3035).unwrap();
     let (sx, sy) = p.project(5.0, 45.0).unwrap();
     let (x0, y0) = ((sx / 100.0).floor() * 100.0 - 500.0, (sy / 100.0).ceil() * 100.0 + 500.0);
@@ -264,4 +267,128 @@ fn csv_strata_and_its_errors() {
     }
     let e = ingest_strata(&ds, &dir.path().join("x.shp"), &|_, _| {}).unwrap_err().to_string();
     assert!(e.contains("x.shp") && e.contains("GeoTIFF"), "{e}");
+}
+
+/// A tiled GeoTIFF written byte by byte (the `tiff` encoder writes strips only): 40 × 30 pixels in
+/// 16 × 16 tiles, so the right and bottom tiles are partly outside the image.
+fn write_tiled_tiff(path: &Path, data: &[u8], (x0, y0): (f64, f64)) {
+    let (w, h, t) = (40u32, 30u32, 16u32);
+    let (across, down) = (w.div_ceil(t), h.div_ceil(t));
+    let mut tiles: Vec<Vec<u8>> = Vec::new();
+    for ty in 0..down {
+        for tx in 0..across {
+            let mut tile = vec![0u8; (t * t) as usize];
+            for r in 0..t {
+                for c in 0..t {
+                    let (col, row) = (tx * t + c, ty * t + r);
+                    if col < w && row < h {
+                        tile[(r * t + c) as usize] = data[(row * w + col) as usize];
+                    }
+                }
+            }
+            tiles.push(tile);
+        }
+    }
+    // Layout: header, IFD, then the arrays and the tiles.
+    let entries: u32 = 15;
+    let ifd_len = 2 + 12 * entries + 4;
+    let mut extra: Vec<u8> = Vec::new();
+    let base = 8 + ifd_len;
+    let mut put = |bytes: &[u8]| -> u32 {
+        let at = base + extra.len() as u32;
+        extra.extend_from_slice(bytes);
+        at
+    };
+    let n_tiles = tiles.len() as u32;
+    let scale: Vec<u8> = [100.0f64, 100.0, 0.0].iter().flat_map(|v| v.to_le_bytes()).collect();
+    let tie: Vec<u8> = [0.0f64, 0.0, 0.0, x0, y0, 0.0].iter().flat_map(|v| v.to_le_bytes()).collect();
+    let keys: Vec<u8> = GEOKEYS_3035.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let scale_at = put(&scale);
+    let tie_at = put(&tie);
+    let keys_at = put(&keys);
+    let counts_at = put(&vec![0u8; 4 * n_tiles as usize]);
+    let offsets_at = put(&vec![0u8; 4 * n_tiles as usize]);
+    let mut tile_offsets = Vec::new();
+    for tile in &tiles {
+        tile_offsets.push(put(tile));
+    }
+    for (k, off) in tile_offsets.iter().enumerate() {
+        let i = (offsets_at - base) as usize + 4 * k;
+        extra[i..i + 4].copy_from_slice(&off.to_le_bytes());
+        let j = (counts_at - base) as usize + 4 * k;
+        extra[j..j + 4].copy_from_slice(&(t * t).to_le_bytes());
+    }
+    // (tag, type, count, value or offset): types 3 SHORT, 4 LONG, 12 DOUBLE.
+    let ifd: [(u16, u16, u32, u32); 15] = [
+        (256, 4, 1, w),
+        (257, 4, 1, h),
+        (258, 3, 1, 8),
+        (259, 3, 1, 1),
+        (262, 3, 1, 1),
+        (277, 3, 1, 1),
+        (284, 3, 1, 1),
+        (322, 4, 1, t),
+        (323, 4, 1, t),
+        (324, 4, n_tiles, offsets_at),
+        (325, 4, n_tiles, counts_at),
+        (339, 3, 1, 1),
+        (33550, 12, 3, scale_at),
+        (33922, 12, 6, tie_at),
+        (34735, 3, GEOKEYS_3035.len() as u32, keys_at),
+    ];
+    let mut out: Vec<u8> = b"II".to_vec();
+    out.extend_from_slice(&42u16.to_le_bytes());
+    out.extend_from_slice(&8u32.to_le_bytes());
+    out.extend_from_slice(&(entries as u16).to_le_bytes());
+    for (tag, typ, count, value) in ifd {
+        out.extend_from_slice(&tag.to_le_bytes());
+        out.extend_from_slice(&typ.to_le_bytes());
+        out.extend_from_slice(&count.to_le_bytes());
+        if typ == 3 && count == 1 {
+            out.extend_from_slice(&(value as u16).to_le_bytes());
+            out.extend_from_slice(&[0, 0]);
+        } else {
+            out.extend_from_slice(&value.to_le_bytes());
+        }
+    }
+    out.extend_from_slice(&0u32.to_le_bytes());
+    out.extend_from_slice(&extra);
+    std::fs::write(path, out).unwrap();
+}
+
+#[test]
+fn tiled_raster_including_edge_tiles() {
+    let ((x0, y0), pixels) = layout();
+    // Every pixel gets a value from its position, so a wrong offset inside a tile shows.
+    let grid = |c: u32, r: u32| [23u8, 24, 25, 12, 1][((c * 7 + r * 3) % 5) as usize];
+    let data: Vec<u8> = (0..30).flat_map(|r| (0..40).map(move |c| grid(c, r))).collect();
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dataset_with_shots(&dir.path().join("ds"));
+    let tif = dir.path().join("tiled.tif");
+    write_tiled_tiff(&tif, &data, (x0, y0));
+    ingest_strata(&ds, &tif, &|_, _| {}).unwrap();
+    let got = read_strata(&ds);
+    let name = |v: u8| match v {
+        23 => "broadleaf",
+        24 => "coniferous",
+        25 => "mixed",
+        _ => "other",
+    };
+    for (k, px) in pixels.iter().enumerate() {
+        let expected = px.map(|(c, r)| name(grid(c, r))).unwrap_or("unknown");
+        assert_eq!(got[k].1, expected, "shot {k} at {px:?}");
+    }
+    // Every pixel centre, including those of the partial right-hand and bottom tiles.
+    let mut raster = gedisim::ingest::strata::LandCoverRaster::open(&tif).unwrap();
+    let centres: Vec<(f64, f64)> = (0..30)
+        .flat_map(|r| (0..40).map(move |c| (x0 + 100.0 * c as f64 + 50.0, y0 - 100.0 * r as f64 - 50.0)))
+        .collect();
+    let samples = raster.sample_xy(&centres, &|_| {}).unwrap();
+    let clc = |v: u8| gedisim::study::classes::clc_code_of_grid_code(v as u16).unwrap();
+    for (k, s) in samples.iter().enumerate() {
+        let (c, r) = ((k % 40) as u32, (k / 40) as u32);
+        assert_eq!(*s, PixelSample::Clc(clc(grid(c, r))), "pixel ({c}, {r})");
+    }
+    let outside = raster.sample_xy(&[(x0 - 1.0, y0 - 1.0), (x0 + 4000.5, y0 - 10.0)], &|_| {}).unwrap();
+    assert_eq!(outside, [PixelSample::Outside, PixelSample::Outside]);
 }

@@ -167,9 +167,12 @@ pub fn read_strata_csv(path: &Path) -> Result<Vec<Stratum>> {
     Ok(out)
 }
 
+/// A shot's number and WGS84 position (lon, lat), if any.
+pub type ShotPosition = (u64, Option<(f64, f64)>);
+
 /// Each shot's number and WGS84 position (lon, lat): the lowest mode when valid, else the mean of
 /// the L1B bin0 and last bin; `None` when neither exists.
-pub fn shot_positions(ds: &Dataset) -> Result<Vec<(u64, Option<(f64, f64)>)>> {
+pub fn shot_positions(ds: &Dataset) -> Result<Vec<ShotPosition>> {
     let dir = ds.root().join(tables::SHOTS);
     let files = dataset::table_files(&dir)
         .map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi` first")))?;
@@ -299,6 +302,17 @@ enum Codes {
     Clc,
 }
 
+/// What the raster holds at a point.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PixelSample {
+    /// The point is outside the raster.
+    Outside,
+    /// No data, or a value that is not a CLC class.
+    NoData,
+    /// A CLC level-3 code.
+    Clc(u16),
+}
+
 /// A CLC GeoTIFF opened for sampling.
 pub struct LandCoverRaster {
     path: PathBuf,
@@ -425,38 +439,56 @@ impl LandCoverRaster {
     }
 
     /// Forest type (and CLC code) of every shot; returns the strata and the counts of shots
-    /// outside the raster and without position (both `unknown`). Strips/tiles are decoded once each.
+    /// outside the raster and without position (both `unknown`).
     pub fn sample_shots(
         &mut self,
-        shots: &[(u64, Option<(f64, f64)>)],
+        shots: &[ShotPosition],
         on_shots: &dyn Fn(u64, u64),
     ) -> Result<(Vec<Stratum>, usize, usize)> {
         let projector = Projector::new(LANDCOVER_EPSG as u32)?;
-        // (index in shots, chunk, offset within chunk)
-        let mut located: Vec<(usize, u32, usize)> = Vec::new();
         let mut out: Vec<Stratum> =
             shots.iter().map(|s| Stratum { shot_number: s.0, forest_type: UNKNOWN, clc_code: None }).collect();
-        let (mut outside, mut no_position) = (0, 0);
+        let mut no_position = 0;
+        // (index in shots, projected position)
+        let mut points: Vec<(usize, (f64, f64))> = Vec::with_capacity(shots.len());
         for (i, (_, pos)) in shots.iter().enumerate() {
-            let Some((lon, lat)) = *pos else {
-                no_position += 1;
-                continue;
-            };
-            let Ok((x, y)) = projector.project(lon, lat) else {
-                no_position += 1;
-                continue;
-            };
-            match self.transform.pixel_of(x, y, self.width, self.height) {
-                Some((c, r)) => {
-                    let chunk = (r / self.chunk.1) * self.chunks_across + c / self.chunk.0;
-                    let offset = ((r % self.chunk.1) * self.chunk.0 + c % self.chunk.0) as usize;
-                    located.push((i, chunk, offset));
-                }
-                None => outside += 1,
+            match pos.map(|(lon, lat)| projector.project(lon, lat)) {
+                Some(Ok(xy)) => points.push((i, xy)),
+                _ => no_position += 1,
             }
         }
         let total = shots.len() as u64;
-        on_shots((shots.len() - located.len()) as u64, total);
+        on_shots(no_position as u64, total);
+        let xy: Vec<(f64, f64)> = points.iter().map(|p| p.1).collect();
+        let samples = self.sample_xy(&xy, &|n| on_shots(n, total))?;
+        let mut outside = 0;
+        for ((i, _), sample) in points.iter().zip(samples) {
+            match sample {
+                PixelSample::Outside => outside += 1,
+                PixelSample::NoData => {}
+                PixelSample::Clc(code) => {
+                    out[*i].clc_code = Some(code);
+                    out[*i].forest_type = classes::forest_type_of_clc(code);
+                }
+            }
+        }
+        Ok((out, outside, no_position))
+    }
+
+    /// The CLC class at each EPSG:3035 point. Each strip or tile holding a point is decoded once;
+    /// `on_points(n)` reports progress.
+    pub fn sample_xy(&mut self, points: &[(f64, f64)], on_points: &dyn Fn(u64)) -> Result<Vec<PixelSample>> {
+        let mut out = vec![PixelSample::Outside; points.len()];
+        // (index in points, chunk, offset within the chunk)
+        let mut located: Vec<(usize, u32, usize)> = Vec::new();
+        for (i, &(x, y)) in points.iter().enumerate() {
+            if let Some((c, r)) = self.transform.pixel_of(x, y, self.width, self.height) {
+                let chunk = (r / self.chunk.1) * self.chunks_across + c / self.chunk.0;
+                let offset = ((r % self.chunk.1) * self.chunk.0 + c % self.chunk.0) as usize;
+                located.push((i, chunk, offset));
+            }
+        }
+        on_points((points.len() - located.len()) as u64);
         located.sort_by_key(|l| l.1);
         let mut k = 0;
         while k < located.len() {
@@ -469,20 +501,20 @@ impl LandCoverRaster {
                     Codes::Grid => u16::try_from(v).ok().and_then(classes::clc_code_of_grid_code),
                     Codes::Clc => u16::try_from(v).ok().filter(|c| classes::CLC_CODES.contains(c)),
                 });
-                out[i].clc_code = code;
-                out[i].forest_type = code.map(classes::forest_type_of_clc).unwrap_or(UNKNOWN);
+                out[i] = code.map(PixelSample::Clc).unwrap_or(PixelSample::NoData);
             }
-            on_shots((end - k) as u64, total);
+            on_points((end - k) as u64);
             k = end;
         }
-        Ok((out, outside, no_position))
+        Ok(out)
     }
 
     /// The samples of one strip or tile, row-major with the chunk's full width as stride.
     fn read_chunk(&mut self, chunk: u32) -> Result<Vec<i64>> {
         let data =
             self.decoder.read_chunk(chunk).map_err(|e| Error::field(&self.path, format!("strip/tile {chunk}"), e))?;
-        // Strips at the bottom may be shorter; tiles are always padded to the full tile size.
+        // The decoder returns a chunk's data only: the last strip is shorter, and edge tiles are
+        // narrower and shorter than the nominal tile.
         let values: Vec<i64> = match data {
             DecodingResult::U8(v) => v.into_iter().map(i64::from).collect(),
             DecodingResult::U16(v) => v.into_iter().map(i64::from).collect(),

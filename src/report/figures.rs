@@ -199,6 +199,13 @@ impl Figure for MsdBars {
     }
 }
 
+/// A named series of (x, y) points.
+pub type Series = (String, Vec<(f64, f64)>);
+/// A titled panel of series.
+pub type Panel = (String, Vec<Series>);
+/// A phenology panel: title, leaf-on (percentile, bias), leaf-off (percentile, bias).
+pub type PhenologyPanel = (String, Vec<(f64, f64)>, Vec<(f64, f64)>);
+
 /// A multi-panel line chart: per panel, named series of (x, y) points.
 #[derive(Debug, Clone)]
 pub struct LinePanels {
@@ -206,7 +213,7 @@ pub struct LinePanels {
     pub x_desc: String,
     pub y_desc: String,
     /// (panel title, [(series label, points)])
-    pub panels: Vec<(String, Vec<(String, Vec<(f64, f64)>)>)>,
+    pub panels: Vec<Panel>,
     /// Draw y = 0.
     pub zero_line: bool,
     /// Where the legend goes.
@@ -280,7 +287,7 @@ impl Figure for LinePanels {
 #[derive(Debug, Clone)]
 pub struct PhenologyBands {
     /// (panel title, leaf-on (percentile, bias), leaf-off (percentile, bias))
-    pub panels: Vec<(String, Vec<(f64, f64)>, Vec<(f64, f64)>)>,
+    pub panels: Vec<PhenologyPanel>,
 }
 
 impl Figure for PhenologyBands {
@@ -403,7 +410,7 @@ impl Figure for CollocationScatter {
 #[derive(Debug, Clone)]
 pub struct Waveforms {
     /// (panel title, [(series label, [(amplitude, elevation)])])
-    pub panels: Vec<(String, Vec<(String, Vec<(f64, f64)>)>)>,
+    pub panels: Vec<Panel>,
 }
 
 impl Figure for Waveforms {

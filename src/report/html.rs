@@ -11,8 +11,11 @@ use super::{ReportSummary, TableOutput};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 
-/// Tables shown in full in the page (others are linked as CSV; long tables are cut).
-const MAX_ROWS: usize = 60;
+/// Rows shown of a table in the page (the CSV has them all).
+const MAX_ROWS: usize = 100;
+
+/// Per-percentile tables: linked only (their figures show them).
+const LINK_ONLY: [&str; 4] = ["msd_profile", "bias_profiles", "phenology", "waveform_examples"];
 
 /// Escape text for HTML.
 pub fn escape(s: &str) -> String {
@@ -131,8 +134,8 @@ pub fn page(
             t.rows(),
             n = escape(t.query.name)
         );
-        if t.query.name == "waveform_examples" {
-            continue; // waveforms: see the figure
+        if LINK_ONLY.contains(&t.query.name) {
+            continue;
         }
         let b = t.batch()?;
         s.push_str(&html_table(&b, MAX_ROWS).map_err(|e| Error::table(t.query.name, e))?);

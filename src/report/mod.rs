@@ -401,7 +401,7 @@ pub fn figure_data(ran: &[TableOutput]) -> Result<FigureData> {
         let (p, bias, n) = (floats(&b, "percentile")?, floats(&b, "bias")?, floats(&b, "n")?);
         let mut panels = Vec::new();
         for group in ["low", "high", "all"] {
-            let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+            let mut series: Vec<figures::Series> = Vec::new();
             for ft in crate::study::classes::FOREST_TYPES.iter().copied().chain(["all"]) {
                 let rows: Vec<usize> = (0..b.num_rows())
                     .filter(|&i| {
@@ -509,12 +509,12 @@ pub fn waveform_panels(b: &RecordBatch) -> Result<figures::Waveforms> {
     )
     .map_err(|e| Error::field("waveform_examples", "wave", e))?;
     let wave = wave.as_list::<i32>();
-    let mut panels: Vec<(String, Vec<(String, Vec<(f64, f64)>)>)> = Vec::new();
+    let mut panels: Vec<figures::Panel> = Vec::new();
     for i in 0..b.num_rows() {
         let (Some(s), Some(src)) = (&shot[i], &source[i]) else {
             continue;
         };
-        if wave.is_null(i) || !(dz[i] > 0.0) || !z0[i].is_finite() {
+        if wave.is_null(i) || dz[i].is_nan() || dz[i] <= 0.0 || !z0[i].is_finite() {
             continue;
         }
         let v = wave.value(i);
@@ -522,7 +522,7 @@ pub fn waveform_panels(b: &RecordBatch) -> Result<figures::Waveforms> {
         let nm = if noise[i].is_finite() { noise[i] } else { 0.0 };
         let amps: Vec<f64> = (0..v.len()).map(|k| if v.is_null(k) { 0.0 } else { v.value(k) - nm }).collect();
         let area: f64 = amps.iter().map(|a| a.max(0.0)).sum::<f64>() * dz[i];
-        if !(area > 0.0) {
+        if area.is_nan() || area <= 0.0 {
             continue;
         }
         let pts: Vec<(f64, f64)> = amps.iter().enumerate().map(|(k, a)| (a / area, z0[i] - k as f64 * dz[i])).collect();
