@@ -35,6 +35,14 @@ pub mod tables {
     pub const GRANULES: &str = "granules";
     /// Simulated waveforms and RH.
     pub const SIM: &str = "sim";
+    /// Shot → forest type (`ingest strata`).
+    pub const STRATA: &str = "strata";
+    /// One row per shot × weighting × algorithm: the study's input (`run`).
+    pub const RESULTS: &str = "results";
+    /// Collocation offsets per track segment (`collocate`).
+    pub const OFFSETS: &str = "offsets";
+    /// Report outputs (`report`): not a table; the SQL session does not register it.
+    pub const REPORT: &str = "report";
 }
 
 /// A dataset directory.

@@ -11,9 +11,11 @@ pub mod gedi;
 pub mod geo;
 pub mod ingest;
 pub mod process;
+pub mod report;
 pub mod sim;
 pub mod simulate;
 pub mod sql;
+pub mod study;
 pub mod tables;
 
 pub use error::{Error, Result};

@@ -29,6 +29,11 @@ enum Command {
     L2a(L2aArgs),
     /// Run SQL over a dataset's tables (with gedisim's functions).
     Sql(SqlArgs),
+    /// The study's tables (queries/*.sql over results/), figures and report.html → <dataset>/report/.
+    Report(ReportArgs),
+    /// Hand a table off in another format.
+    #[command(subcommand)]
+    Export(ExportCommand),
     /// Measurements used by the benchmarks.
     #[command(subcommand, hide = true)]
     Bench(BenchCommand),
@@ -40,6 +45,19 @@ enum IngestCommand {
     Als(IngestAlsArgs),
     /// GEDI L1B and/or L2A granules (V1 or V2) → <dataset>/shots/ and <dataset>/granules/.
     Gedi(IngestGediArgs),
+    /// Forest type of every shot from a Corine Land Cover GeoTIFF (EPSG:3035) or a CSV
+    /// `shot_number,forest_type` → <dataset>/strata/.
+    Strata(IngestStrataArgs),
+}
+
+#[derive(Args)]
+struct IngestStrataArgs {
+    /// Corine Land Cover GeoTIFF in EPSG:3035 (.tif), or a CSV with columns shot_number, forest_type (.csv).
+    #[arg(long)]
+    landcover: PathBuf,
+    /// Dataset directory (with a shots table for a raster).
+    #[arg(long)]
+    dataset: PathBuf,
 }
 
 #[derive(Args)]
@@ -161,6 +179,35 @@ struct SqlArgs {
     out: Option<PathBuf>,
 }
 
+#[derive(Args)]
+struct ReportArgs {
+    /// Dataset directory (with a results table).
+    #[arg(long)]
+    dataset: PathBuf,
+    /// Output directory (default <dataset>/report).
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+#[derive(Subcommand)]
+enum ExportCommand {
+    /// A table (shots or results) as GeoParquet 1.1: WKB point geometry (lon, lat; OGC:CRS84) and a bbox covering column.
+    Geoparquet(ExportGeoArgs),
+}
+
+#[derive(Args)]
+struct ExportGeoArgs {
+    /// Dataset directory.
+    #[arg(long)]
+    dataset: PathBuf,
+    /// Table to export: shots or results.
+    #[arg(long)]
+    table: String,
+    /// Output file (.parquet).
+    #[arg(long)]
+    out: PathBuf,
+}
+
 #[derive(Subcommand)]
 enum BenchCommand {
     /// Decode a LAS/LAZ file with the las crate alone (the baseline of the ingest benchmark).
@@ -190,9 +237,12 @@ fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Ingest(IngestCommand::Als(a)) => ingest_als(a),
         Command::Ingest(IngestCommand::Gedi(a)) => ingest_gedi(a),
+        Command::Ingest(IngestCommand::Strata(a)) => ingest_strata(a),
         Command::Simulate(a) => simulate(a),
         Command::L2a(a) => l2a(a),
         Command::Sql(a) => sql(a),
+        Command::Report(a) => report(a),
+        Command::Export(ExportCommand::Geoparquet(a)) => export_geoparquet(a),
         Command::Bench(BenchCommand::Decode { file }) => bench_decode(file),
     }
 }
@@ -261,6 +311,28 @@ fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
             GranuleOutcome::Ingested { granule, shots } => eprintln!("{granule}: {shots} shots"),
             GranuleOutcome::AlreadyIngested { granule } => eprintln!("{granule}: already ingested (same content), skipped"),
         }
+    }
+    Ok(())
+}
+
+fn ingest_strata(a: IngestStrataArgs) -> Result<()> {
+    let ds = Dataset::open(&a.dataset)?;
+    let bar = progress(0, "shots");
+    let report = gedisim::ingest::strata::ingest_strata(&ds, &a.landcover, &|n, total| {
+        bar.set_length(total);
+        bar.inc(n);
+    });
+    bar.finish_and_clear();
+    let report = report?;
+    let mut counts: Vec<_> = report.counts.iter().collect();
+    counts.sort();
+    let counts: Vec<String> = counts.iter().map(|(k, v)| format!("{k} {v}")).collect();
+    eprintln!("{} shots → {} ({})", report.rows, report.path.display(), counts.join(", "));
+    if report.outside > 0 || report.no_position > 0 {
+        eprintln!("{} shots outside the raster and {} without a position: forest type `unknown`", report.outside, report.no_position);
+    }
+    if report.not_in_dataset > 0 {
+        eprintln!("warning: {} CSV rows name shots that are not in the dataset's shots table", report.not_in_dataset);
     }
     Ok(())
 }
@@ -385,6 +457,39 @@ fn sql(a: SqlArgs) -> Result<()> {
         }
         Ok(())
     })
+}
+
+fn report(a: ReportArgs) -> Result<()> {
+    let ds = Dataset::open(&a.dataset)?;
+    let bar = ProgressBar::new_spinner();
+    let s = gedisim::report::run_report(&ds, a.out.as_deref(), &|step| bar.set_message(step.to_string()));
+    bar.finish_and_clear();
+    let s = s?;
+    for (name, rows) in &s.tables {
+        eprintln!("{name}: {rows} rows");
+    }
+    for (name, missing) in &s.skipped {
+        eprintln!("{name}: skipped (no {} table)", missing.join(", "));
+    }
+    for note in &s.figure_notes {
+        eprintln!("figure not drawn: {note}");
+    }
+    eprintln!(
+        "{} tables, {} figures (PNG + SVG), {} GeoParquet files → {}",
+        s.tables.len(),
+        s.figures.len() / 2,
+        s.geoparquet.len(),
+        s.html.display()
+    );
+    Ok(())
+}
+
+fn export_geoparquet(a: ExportGeoArgs) -> Result<()> {
+    let ds = Dataset::open(&a.dataset)?;
+    let rt = tokio::runtime::Runtime::new().map_err(|e| Error::Usage(e.to_string()))?;
+    let rows = rt.block_on(gedisim::report::geoparquet::export(&ds, &a.table, &a.out, gedisim::report::geoparquet::GeoCrs::Wgs84))?;
+    eprintln!("{rows} rows → {}", a.out.display());
+    Ok(())
 }
 
 fn bench_decode(file: PathBuf) -> Result<()> {

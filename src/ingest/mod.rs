@@ -4,6 +4,7 @@ pub mod als;
 pub mod footprints;
 pub mod gedi;
 pub mod las;
+pub mod strata;
 
 use std::path::{Path, PathBuf};
 

@@ -24,7 +24,8 @@ pub async fn session(ds: &Dataset) -> Result<SessionContext> {
     for entry in std::fs::read_dir(ds.root()).map_err(|e| Error::file(ds.root(), e))? {
         let dir = entry.map_err(|e| Error::file(ds.root(), e))?.path();
         let Some(name) = dir.file_name().and_then(|n| n.to_str()).map(str::to_string) else { continue };
-        if !dir.is_dir() || dataset::table_files(&dir).map(|f| f.is_empty()).unwrap_or(true) {
+        // `report/` holds the report's outputs (many schemas), not a table.
+        if name == dataset::tables::REPORT || !dir.is_dir() || dataset::table_files(&dir).map(|f| f.is_empty()).unwrap_or(true) {
             continue;
         }
         register_table(&ctx, &name, &dir).await?;

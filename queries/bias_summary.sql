@@ -1,0 +1,31 @@
+-- bias_summary: one line per bias profile (see bias_profiles): mean |bias| and mean bias over
+-- RH1..RH99 (m), by weighting, algorithm, forest type (and all), sensitivity group (and all).
+-- n = shots.
+-- requires: results
+WITH p AS (
+    SELECT
+        r.weighting, r.algorithm, r.forest_type, r.sensitivity_group, k.value AS percentile,
+        CAST(r.rh_sim[k.value + 1] AS DOUBLE) - CAST(r.rh_aligned[k.value + 1] AS DOUBLE) AS diff
+    FROM results r CROSS JOIN generate_series(1, 99) AS k
+),
+b AS (
+    SELECT
+        weighting, algorithm,
+        COALESCE(forest_type, 'all') AS forest_type,
+        COALESCE(sensitivity_group, 'all') AS sensitivity_group,
+        percentile, count(*) AS n, avg(diff) AS bias
+    FROM p
+    WHERE NOT isnan(diff)
+    GROUP BY GROUPING SETS (
+        (weighting, algorithm, forest_type, sensitivity_group, percentile),
+        (weighting, algorithm, forest_type, percentile),
+        (weighting, algorithm, sensitivity_group, percentile),
+        (weighting, algorithm, percentile))
+)
+SELECT
+    weighting, algorithm, forest_type, sensitivity_group,
+    max(n) AS n, avg(abs(bias)) AS mean_abs_bias, avg(bias) AS mean_bias
+FROM b
+GROUP BY weighting, algorithm, forest_type, sensitivity_group
+ORDER BY weighting, CASE WHEN algorithm = 'default' THEN 0 ELSE 1 END, algorithm, forest_type,
+    CASE sensitivity_group WHEN 'low' THEN 0 WHEN 'high' THEN 1 ELSE 2 END

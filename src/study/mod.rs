@@ -1,0 +1,7 @@
+//! The study's pure kernels: RH alignment to the ALS ground, the strata classes, the study's
+//! quality filter and the MSD decomposition. No I/O, no Arrow: the `results` table
+//! (`tables::results`), `ingest strata` and `report` call them.
+
+pub mod align;
+pub mod classes;
+pub mod msd;
