@@ -11,6 +11,8 @@ pub mod gedi;
 pub mod geo;
 pub mod ingest;
 pub mod process;
+pub mod scenario;
+pub mod scenario_io;
 pub mod sim;
 pub mod simulate;
 pub mod sql;
