@@ -186,7 +186,7 @@ struct ScenarioArgs {
     #[arg(long)]
     out: PathBuf,
     /// Granules (passes, eight beams each) crossing each tile.
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = 8)]
     passes: usize,
     /// Nominal geoid height N (m) stored in geophys_corr/geoid.
     #[arg(long, allow_hyphen_values = true, default_value_t = gedisim::scenario_io::DEFAULT_GEOID_M)]

@@ -277,6 +277,15 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
         }
     }
 
+    if shots_json.is_empty() {
+        return Err(Error::Usage(format!(
+            "--als: no shot fits {} m inside the tiles ({} planned, {} dropped); give larger tiles or more --passes",
+            margin,
+            layout.shots.len(),
+            dropped_json.len()
+        )));
+    }
+
     // Write: granules and tiles under temporary names, then truth.json.
     let tmp = opts.out.join(format!(".scenario-tmp-{}", std::process::id()));
     let mk = |d: &Path| std::fs::create_dir_all(d).map_err(|e| Error::file(d, format!("cannot create folder: {e}")));
