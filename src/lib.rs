@@ -12,6 +12,8 @@ pub mod geo;
 pub mod ingest;
 pub mod process;
 pub mod report;
+pub mod scenario;
+pub mod scenario_io;
 pub mod sim;
 pub mod simulate;
 pub mod sql;

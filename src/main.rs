@@ -34,6 +34,9 @@ enum Command {
     /// Hand a table off in another format.
     #[command(subcommand)]
     Export(ExportCommand),
+    /// Build a test world: real ALS tiles + pseudo-real GEDI L1B/L2A granules with one withheld
+    /// effect, and truth.json (docs/scenario.md).
+    Scenario(ScenarioArgs),
     /// Measurements used by the benchmarks.
     #[command(subcommand, hide = true)]
     Bench(BenchCommand),
@@ -208,6 +211,44 @@ struct ExportGeoArgs {
     out: PathBuf,
 }
 
+#[derive(Args)]
+struct ScenarioArgs {
+    /// Withheld effect: none, geolocation, datum, weighting, pulse, footprint, noise,
+    /// canopy_change, occlusion, ground_detection, or a pair such as datum+pulse.
+    #[arg(long)]
+    effect: String,
+    /// Scale of the main parameter's departure from nominal (1 = the realistic default).
+    #[arg(long, allow_hyphen_values = true)]
+    magnitude: Option<f64>,
+    /// Effect parameter as key=value (repeatable), e.g. --param dz_m=0.8; effect.key for a pair.
+    #[arg(long = "param", value_name = "KEY=VALUE")]
+    params: Vec<String>,
+    /// Seed of every random draw (same seed, same granules).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// LAS/LAZ files or folders (default: the bundled tests/data/als tiles).
+    #[arg(long, num_args = 1..)]
+    als: Vec<PathBuf>,
+    /// Output folder: als/, gedi/, truth.json.
+    #[arg(long)]
+    out: PathBuf,
+    /// Granules (passes, eight beams each) crossing each tile.
+    #[arg(long, default_value_t = 8)]
+    passes: usize,
+    /// Nominal geoid height N (m) stored in geophys_corr/geoid.
+    #[arg(long, allow_hyphen_values = true, default_value_t = gedisim::scenario_io::DEFAULT_GEOID_M)]
+    geoid: f64,
+    /// RMS per axis of the random horizontal offset of each track (m).
+    #[arg(long, default_value_t = 3.0)]
+    offset_sigma: f64,
+    /// CRS of tiles that carry none.
+    #[arg(long, default_value_t = 2154)]
+    epsg: u32,
+    /// Replace a world already in --out.
+    #[arg(long)]
+    force: bool,
+}
+
 #[derive(Subcommand)]
 enum BenchCommand {
     /// Decode a LAS/LAZ file with the las crate alone (the baseline of the ingest benchmark).
@@ -243,6 +284,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Sql(a) => sql(a),
         Command::Report(a) => report(a),
         Command::Export(ExportCommand::Geoparquet(a)) => export_geoparquet(a),
+        Command::Scenario(a) => scenario(a),
         Command::Bench(BenchCommand::Decode { file }) => bench_decode(file),
     }
 }
@@ -480,6 +522,51 @@ fn report(a: ReportArgs) -> Result<()> {
         s.figures.len() / 2,
         s.geoparquet.len(),
         s.html.display()
+    );
+    Ok(())
+}
+
+fn scenario(a: ScenarioArgs) -> Result<()> {
+    let params = a
+        .params
+        .iter()
+        .map(|p| {
+            p.split_once('=')
+                .map(|(k, v)| (k.trim().to_string(), v.trim().to_string()))
+                .ok_or_else(|| Error::Usage(format!("--param {p}: expected key=value")))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let effects = gedisim::scenario::EffectSet::parse(&a.effect, a.magnitude, &params).map_err(|e| Error::Usage(e.to_string()))?;
+    let inputs = if a.als.is_empty() {
+        vec![PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/als")]
+    } else {
+        a.als.clone()
+    };
+    let tiles = als::expand_inputs(&inputs)?;
+    let opts = gedisim::scenario_io::ScenarioOptions {
+        effect_spec: a.effect.clone(),
+        effects,
+        magnitude: a.magnitude,
+        params,
+        seed: a.seed,
+        tiles,
+        out: a.out.clone(),
+        passes_per_tile: a.passes,
+        geoid_m: a.geoid,
+        track_offset_sigma_m: a.offset_sigma,
+        default_epsg: a.epsg,
+        force: a.force,
+    };
+    let r = gedisim::scenario_io::make_scenario(&opts)?;
+    eprintln!(
+        "scenario {}: {} tiles, {} granules, {} tracks, {} shots ({} dropped) → {}",
+        a.effect,
+        r.tiles,
+        r.granules,
+        r.tracks,
+        r.shots,
+        r.dropped,
+        r.truth.display()
     );
     Ok(())
 }

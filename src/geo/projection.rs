@@ -93,6 +93,20 @@ impl Projector {
             Err(format!("(lon {lon_deg}, lat {lat_deg}) has no finite EPSG:{} coordinate", self.epsg))
         }
     }
+    /// Inverse of [`Projector::project`]: projected (x, y) to WGS84 (longitude, latitude) in degrees.
+    pub fn unproject(&self, x: f64, y: f64) -> std::result::Result<(f64, f64), String> {
+        if !x.is_finite() || !y.is_finite() {
+            return Err(format!("non-finite coordinate (x {x}, y {y})"));
+        }
+        let (lon, lat) = transform_xy(&self.dst, &self.src, x, y)
+            .map_err(|e| format!("cannot unproject (x {x}, y {y}) from EPSG:{}: {e}", self.epsg))?;
+        let (lon, lat) = (lon.to_degrees(), lat.to_degrees());
+        if lon.is_finite() && lat.is_finite() {
+            Ok((lon, lat))
+        } else {
+            Err(format!("(x {x}, y {y}) has no finite WGS84 coordinate"))
+        }
+    }
 }
 
 #[cfg(test)]
@@ -124,6 +138,15 @@ mod tests {
     fn utm_central_meridian_false_easting() {
         let (x, _) = Projector::new(32631).unwrap().project(3.0, 45.0).unwrap();
         assert!((x - 500_000.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn unproject_inverts_project() {
+        let p = Projector::new(2154).unwrap();
+        let (x, y) = p.project(4.4991, 45.23664).unwrap();
+        let (lon, lat) = p.unproject(x, y).unwrap();
+        assert!((lon - 4.4991).abs() < 1e-9 && (lat - 45.23664).abs() < 1e-9, "{lon} {lat}");
+        assert!(p.unproject(f64::NAN, 0.0).is_err());
     }
 
     #[test]
