@@ -159,16 +159,16 @@ pub fn offset_waves(
         return None;
     }
 
-    // Pulse convolution: S[m] = Σⱼ W[m − offⱼ]·yⱼ on the absolute grid (the simulator's taps
-    // `offⱼ` count bins downwards, hence the sign).
+    // Pulse convolution on the absolute grid: the simulator's tap j moves a bin's energy
+    // `offsets[j]` bins up (its bins count downwards: out[i] = Σⱼ in[i + offⱼ]·yⱼ).
     let offsets = tap_offsets(&model.pulse, model);
     let (omin, omax) = (*offsets.iter().min().unwrap_or(&0), *offsets.iter().max().unwrap_or(&0));
-    // Row r of the output is absolute bin lo − omax + r.
+    // Row r of the output is absolute bin lo + omin + r.
     let rows = raw_rows + (omax - omin) as usize;
     let mut out = vec![0f32; rows * n_off];
     for (&o, &yj) in offsets.iter().zip(&model.pulse.y) {
-        // Input row r (bin lo + r) lands on bin lo + r − o, i.e. output row r − o + omax.
-        let shift = (omax - o) as usize;
+        // Input row r (bin lo + r) lands on bin lo + r + o, i.e. output row r + o − omin.
+        let shift = (o - omin) as usize;
         for r in 0..raw_rows {
             let src = &w[r * n_off..(r + 1) * n_off];
             let dst = &mut out[(r + shift) * n_off..(r + shift + 1) * n_off];
@@ -177,7 +177,7 @@ pub fn offset_waves(
             }
         }
     }
-    Some(OffsetWaves { first_bin: lo - omax, dz, n_offsets: n_off, values: out })
+    Some(OffsetWaves { first_bin: lo + omin, dz, n_offsets: n_off, values: out })
 }
 
 #[cfg(test)]
