@@ -32,6 +32,8 @@ pub mod tables {
     pub const GRANULES: &str = "granules";
     /// Simulated waveforms and RH.
     pub const SIM: &str = "sim";
+    /// Geolocation offsets of collocated shot segments.
+    pub const OFFSETS: &str = "offsets";
 }
 
 /// A dataset directory.

@@ -6,6 +6,7 @@
 
 pub mod als_table;
 pub mod collocate;
+pub mod collocation;
 pub mod dataset;
 pub mod error;
 pub mod gedi;

@@ -25,6 +25,8 @@ enum Command {
     Ingest(IngestCommand),
     /// Simulate GEDI waveforms from ALS: direct mode (--als, --footprints, --out) or dataset mode (--dataset).
     Simulate(SimulateArgs),
+    /// Geolocation offsets (dx, dy, dz) of the shots against the ALS → <dataset>/offsets/.
+    Collocate(CollocateArgs),
     /// GEDI L2A processing (algorithms a1–a6) of the waveforms of an L1B file.
     L2a(L2aArgs),
     /// Run SQL over a dataset's tables (with gedisim's functions).
@@ -121,6 +123,36 @@ struct SimulateArgs {
     keep_all_classes: bool,
 }
 
+#[derive(Args)]
+struct CollocateArgs {
+    /// Dataset directory with ingested shots (with L1B waveforms) and ALS.
+    #[arg(long)]
+    dataset: PathBuf,
+    /// beam: each beam cut into segments; track: all beams of a granule share an offset per
+    /// along-track segment; shot: one offset per shot from it and its neighbours.
+    #[arg(long, value_enum, default_value = "beam")]
+    level: LevelArg,
+    /// Longest segment: shots (beam level) or along-track shot steps (track level).
+    #[arg(long, default_value_t = 40)]
+    segment: usize,
+    /// Largest horizontal shift searched (m).
+    #[arg(long, default_value_t = 10.0)]
+    max_shift: f64,
+    /// Horizontal grid step (m).
+    #[arg(long, default_value_t = 1.0)]
+    step: f64,
+    /// Print wall time and peak memory at the end.
+    #[arg(long)]
+    stats: bool,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum LevelArg {
+    Beam,
+    Track,
+    Shot,
+}
+
 #[derive(Clone, Copy, clap::ValueEnum)]
 enum ProfileArg {
     Gedirat,
@@ -179,6 +211,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Ingest(IngestCommand::Als(a)) => ingest_als(a),
         Command::Ingest(IngestCommand::Gedi(a)) => ingest_gedi(a),
         Command::Simulate(a) => simulate(a),
+        Command::Collocate(a) => collocate(a),
         Command::L2a(a) => l2a(a),
         Command::Sql(a) => sql(a),
         Command::Bench(BenchCommand::Decode { file }) => bench_decode(file),
@@ -304,6 +337,36 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     }
     let (ok, skipped) = gedisim::simulate::simulate_direct(&points, &footprints, &cfg, profile, &out)?;
     eprintln!("{ok} footprints simulated, {skipped} skipped (see the status column) → {}", out.display());
+    Ok(())
+}
+
+fn collocate(a: CollocateArgs) -> Result<()> {
+    use gedisim::collocate::segments::Level;
+    use gedisim::collocation::{CollocateOptions, Collocation};
+    let start = Instant::now();
+    let level = match a.level {
+        LevelArg::Beam => Level::Beam,
+        LevelArg::Track => Level::Track,
+        LevelArg::Shot => Level::Shot,
+    };
+    let ds = Dataset::open(&a.dataset)?;
+    let opts = CollocateOptions { level, segment: a.segment, max_shift: a.max_shift, step: a.step };
+    let plan = Collocation::plan(&ds, &opts)?;
+    let bar = progress(plan.shots_to_process() as u64, "shots");
+    let result = plan.run(&|| bar.inc(1));
+    bar.finish_and_clear();
+    let report = result?;
+    for s in &report.short_runs {
+        eprintln!("too short, not collocated: {s}");
+    }
+    let skipped: Vec<String> = report.skipped.iter().map(|(k, v)| format!("{k} {v}")).collect();
+    if !skipped.is_empty() {
+        eprintln!("shots not used: {}", skipped.join(", "));
+    }
+    eprintln!("{} shots read, {} {} offsets → {}", report.shots, report.segments, level.name(), report.table.display());
+    if a.stats {
+        println!("collocate: {:.2} s, peak RSS {:.1} MB", start.elapsed().as_secs_f64(), peak_rss_mb());
+    }
     Ok(())
 }
 

@@ -1,6 +1,7 @@
 //! Derived tables: their Arrow schemas and the conversion of kernel outputs into record batches.
 
 pub mod l2a;
+pub mod offsets;
 pub mod sim;
 
 use std::sync::Arc;
