@@ -1,6 +1,7 @@
 //! `gedi_simulate([profile])`: the simulation as a SQL table function. It streams the `sim`
 //! rows of every ingested shot, batch by batch: shots sorted by spatial cell, each batch reading
-//! only the ALS row groups its footprints touch, then the simulation kernel.
+//! only the ALS row groups its footprints touch, then the simulation kernel. Shots are moved by
+//! their collocation offsets when the dataset has an `offsets/` table.
 
 use std::fmt;
 use std::sync::Arc;
@@ -91,16 +92,16 @@ impl PartitionStream for SimulatedShots {
         let this = self.clone();
         let batches = move || -> crate::Result<Box<dyn Iterator<Item = DfResult<arrow::record_batch::RecordBatch>> + Send>> {
             let mut shots = shot_footprints(&this.dataset)?;
-            shots.sort_by_key(|f| cell_key(f.x, f.y));
+            shots.sort_by_key(|(f, _)| cell_key(f.x, f.y));
             let als = AlsTable::open(&this.dataset)?;
             let cfg = SimConfig::new(this.profile);
             let half = sim::footprint::gauss_sep(cfg.fsigma, sim::footprint::I_THRESH) as f64 + 1.0;
-            let chunks: Vec<Vec<sim::Footprint>> = shots.chunks(DATASET_BATCH).map(|c| c.to_vec()).collect();
-            Ok(Box::new(chunks.into_iter().map(move |batch| {
+            let chunks: Vec<(Vec<sim::Footprint>, Vec<_>)> = shots.chunks(DATASET_BATCH).map(|c| c.iter().cloned().unzip()).collect();
+            Ok(Box::new(chunks.into_iter().map(move |(batch, applied)| {
                 let boxes: Vec<BBox> = batch.iter().map(|f| [f.x - half, f.y - half, f.x + half, f.y + half]).collect();
                 let (points, _) = als.points_near(&boxes).map_err(to_df)?;
                 let results = sim::simulate(&points, &batch, &cfg).map_err(to_df)?;
-                sim_batch(&batch, &results, &Weighting::ALL).map_err(to_df)
+                sim_batch(&batch, &results, &Weighting::ALL, &applied).map_err(to_df)
             })))
         };
         let iter: Box<dyn Iterator<Item = DfResult<arrow::record_batch::RecordBatch>> + Send> = match batches() {
