@@ -67,6 +67,40 @@ fn contributes(d_sq: f64, fsigma: f32) -> bool {
     footprint_weight(d_sq.sqrt(), fsigma) > I_THRESH
 }
 
+/// The largest squared distance that passes the simulator's contribution test (the test is
+/// monotone in the distance): found once by bisection on the f64 values, so that each return
+/// needs a comparison instead of a square root and an exponential.
+fn contributing_d_sq_max(fsigma: f32) -> f64 {
+    let r = cut_off_radius(fsigma) + 1.0;
+    if !contributes(0.0, fsigma) {
+        return -1.0;
+    }
+    // Positive f64 values order like their bit patterns.
+    let (mut lo, mut hi) = (0f64.to_bits(), (r * r).to_bits());
+    while hi - lo > 1 {
+        let mid = lo + (hi - lo) / 2;
+        if contributes(f64::from_bits(mid), fsigma) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    f64::from_bits(lo)
+}
+
+/// exp(−(e − k·s)²/(2σ²)) for k = 0, 1, …, out.len() − 1, by the recurrence
+/// g_{k+1} = g_k·ρ_k, ρ_{k+1} = ρ_k·q (three exponentials instead of one per offset).
+#[inline(always)]
+fn gaussian_ladder(e: f64, s: f64, two_var: f64, q: f64, out: &mut [f32]) {
+    let mut g = (-e * e / two_var).exp();
+    let mut rho = ((2.0 * s * e - s * s) / two_var).exp();
+    for o in out.iter_mut() {
+        *o = g as f32;
+        g *= rho;
+        rho *= q;
+    }
+}
+
 /// Builds the waveforms of every offset of `grid` around (x0, y0) from the returns `candidates`
 /// (indices into `x`, `y`, `z`; returns beyond the support are ignored), with the footprint,
 /// bin size and pulse of `model`. `None` when no return contributes at any offset.
@@ -85,6 +119,7 @@ pub fn offset_waves(
     let dz = model.res;
     let r_cut = cut_off_radius(model.fsigma);
     let r_cut_sq = r_cut * r_cut;
+    let d_sq_max = contributing_d_sq_max(model.fsigma);
     let reach = r_cut + grid.max_offset();
     let centres: Vec<(f64, f64)> = (0..n).map(|i| (x0 + grid.offset(i), y0 + grid.offset(i))).collect();
 
@@ -110,49 +145,45 @@ pub fn offset_waves(
     let mut w = vec![0f32; raw_rows * n_off];
     let norm = 1.0 / (sigma * (2.0 * std::f64::consts::PI).sqrt());
     let two_var = 2.0 * sigma * sigma;
+    let step = grid.step;
+    let q = (-2.0 * step * step / two_var).exp();
+    let first = grid.offset(0);
     let mut gx = vec![0f32; n];
     let mut gy = vec![0f32; n];
+    let mut ey_sq = vec![0f64; n];
     let mut any = false;
     for &(c, b) in &kept {
         let p = c as usize;
         let (px, py) = (x[p], y[p]);
-        for i in 0..n {
-            let ex = px - centres[i].0;
-            gx[i] = ((-ex * ex / two_var).exp() * norm) as f32;
-            let ey = py - centres[i].1;
-            gy[i] = (-ey * ey / two_var).exp() as f32;
+        // Offsets advance by +step, so the distances to the centres shrink by step.
+        gaussian_ladder(px - (x0 + first), step, two_var, q, &mut gx);
+        gaussian_ladder(py - (y0 + first), step, two_var, q, &mut gy);
+        for (e, c) in ey_sq.iter_mut().zip(&centres) {
+            // Distances as the simulator forms them: return minus footprint centre.
+            let ey = py - c.1;
+            *e = ey * ey;
         }
-        let row = &mut w[(b - lo) as usize * n_off..(b - lo + 1) as usize * n_off];
-        for i in 0..n {
+        // Plain `while` loops over indices: the hot loop must stay fast in the unoptimised
+        // profiles too, where range iterators and sub-slices are calls.
+        let row0 = (b - lo) as usize * n_off;
+        let mut i = 0;
+        while i < n {
             let ex = px - centres[i].0;
-            let rem = r_cut_sq - ex * ex;
-            if rem < 0.0 {
-                continue;
+            let ex_sq = ex * ex;
+            if ex_sq <= d_sq_max {
+                any = true;
+                let g = (gx[i] as f64 * norm) as f32;
+                let base = row0 + i * n;
+                // Branch-free: every offset j, masked by the simulator's cut-off test on
+                // d² = ex² + ey² (the same f64 operations as the simulator).
+                let mut j = 0;
+                while j < n {
+                    let inside = ex_sq + ey_sq[j] <= d_sq_max;
+                    w[base + j] += if inside { g * gy[j] } else { 0.0 };
+                    j += 1;
+                }
             }
-            // Offsets j with |py − cy_j| ≤ √rem, then the exact test at both ends.
-            let s = rem.sqrt();
-            let rel = |v: f64| v / grid.step + grid.half() as f64;
-            let mut j0 = rel(py - y0 - s).ceil().max(0.0) as i64;
-            let mut j1 = rel(py - y0 + s).floor().min((n - 1) as f64) as i64;
-            let d_sq = |j: i64| {
-                let ey = py - centres[j as usize].1;
-                ex * ex + ey * ey
-            };
-            while j0 <= j1 && !contributes(d_sq(j0), model.fsigma) {
-                j0 += 1;
-            }
-            while j1 >= j0 && !contributes(d_sq(j1), model.fsigma) {
-                j1 -= 1;
-            }
-            if j0 > j1 {
-                continue;
-            }
-            any = true;
-            let g = gx[i];
-            let dst = &mut row[i * n + j0 as usize..=i * n + j1 as usize];
-            for (d, &gyj) in dst.iter_mut().zip(&gy[j0 as usize..=j1 as usize]) {
-                *d += g * gyj;
-            }
+            i += 1;
         }
     }
     if !any {
@@ -190,6 +221,24 @@ mod tests {
         let r = cut_off_radius(5.5);
         assert!(contributes((r - 2e-3) * (r - 2e-3), 5.5));
         assert!(!contributes(r * r, 5.5));
+        let m = contributing_d_sq_max(5.5);
+        assert!(contributes(m, 5.5) && !contributes(f64::from_bits(m.to_bits() + 1), 5.5));
+        // Monotone around the boundary: a thousand values either side agree with the comparison.
+        for k in 1..1000u64 {
+            assert!(contributes(f64::from_bits(m.to_bits() - k * 1_000_000), 5.5));
+            assert!(!contributes(f64::from_bits(m.to_bits() + k * 1_000_000), 5.5));
+        }
+    }
+
+    #[test]
+    fn gaussian_ladder_matches_direct_exponentials() {
+        let mut g = vec![0f32; 21];
+        gaussian_ladder(13.7, 1.0, 60.5, (-2.0f64 / 60.5).exp(), &mut g);
+        for (k, v) in g.iter().enumerate() {
+            let e = 13.7 - k as f64;
+            let want = (-e * e / 60.5).exp() as f32;
+            assert!((v - want).abs() <= want * 1e-6, "{k}: {v} vs {want}");
+        }
     }
 
     #[test]
