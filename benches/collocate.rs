@@ -67,7 +67,7 @@ fn main() {
     let t = Instant::now();
     let out = run(&["collocate", "--dataset", tmp.path().to_str().unwrap(), "--stats"]);
     let wall = t.elapsed().as_secs_f64();
-    let rss_mb = field(&out, " MB").unwrap_or(f64::NAN);
+    let rss_mb = field(&out, " MB,").unwrap_or(f64::NAN);
     println!("collocate benchmark: 24,719,400 ALS points, 40 shots, ±10 m at 1 m (441 offsets), vertical solve included (2 cores)");
     println!("  gedisim collocate : {wall:.2} s wall (process), {}", out.trim());
     println!("  reference         : {REFERENCE_S} s, {REFERENCE_GB} GB (collocateWaves, simulator-reference.md §6.4)");

@@ -57,6 +57,10 @@ pub struct CollocateReport {
     pub short_runs: Vec<String>,
     /// The table written.
     pub table: PathBuf,
+    /// ALS points read (x, y, z) and kept inside the shots' search squares.
+    pub als_points_read: u64,
+    /// ALS row groups decoded (a row group read for two sub-batches counts twice).
+    pub als_row_groups_read: u64,
 }
 
 /// The cheap columns of one shot (pass A).
@@ -144,12 +148,14 @@ impl<'a> Collocation<'a> {
     pub fn run(mut self, on_shot: &(dyn Fn() + Sync)) -> Result<CollocateReport> {
         let mut rows = Vec::new();
         let mut skipped = std::mem::take(&mut self.report.skipped);
+        let mut read = (0u64, 0u64);
         for g in &self.granules {
             for unit in &g.units {
-                rows.extend(self.solve_unit(g, unit, &mut skipped, on_shot)?);
+                rows.extend(self.solve_unit(g, unit, &mut skipped, &mut read, on_shot)?);
             }
         }
         self.report.skipped = skipped;
+        (self.report.als_points_read, self.report.als_row_groups_read) = read;
         let dest = self.ds.table_file(tables::OFFSETS, "offsets")?;
         let mut metadata = std::collections::HashMap::new();
         metadata.insert("gedisim:collocate_level".to_string(), self.opts.level.name().to_string());
@@ -161,7 +167,14 @@ impl<'a> Collocation<'a> {
         Ok(self.report)
     }
 
-    fn solve_unit(&self, g: &GranulePlan, unit: &Unit, skipped: &mut BTreeMap<String, usize>, on_shot: &(dyn Fn() + Sync)) -> Result<Vec<OffsetRow>> {
+    fn solve_unit(
+        &self,
+        g: &GranulePlan,
+        unit: &Unit,
+        skipped: &mut BTreeMap<String, usize>,
+        read: &mut (u64, u64),
+        on_shot: &(dyn Fn() + Sync),
+    ) -> Result<Vec<OffsetRow>> {
         let mut skip = |reason: &str| *skipped.entry(reason.to_string()).or_default() += 1;
         let support = support_of(&unit.plans);
         let waves = read_waveforms(&g.path, support.iter().map(|&i| g.shots[i].row))?;
@@ -200,7 +213,10 @@ impl<'a> Collocation<'a> {
         let als = &self.als;
         let mut points_for = |idx: &[usize]| -> Result<PointCloud> {
             let boxes: Vec<BBox> = idx.iter().map(|&k| [shots[k].x - half, shots[k].y - half, shots[k].x + half, shots[k].y + half]).collect();
-            Ok(als.xyz_in_boxes(&boxes)?.0)
+            let (cloud, stats) = als.xyz_in_boxes(&boxes)?;
+            read.0 += cloud.len() as u64;
+            read.1 += stats.row_groups_read as u64;
+            Ok(cloud)
         };
         let (solutions, skips) = collocate_unit(&shots, &plans, &self.cfg, &mut points_for, on_shot)?;
         for s in skips.iter().flatten() {

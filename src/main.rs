@@ -365,7 +365,13 @@ fn collocate(a: CollocateArgs) -> Result<()> {
     }
     eprintln!("{} shots read, {} {} offsets → {}", report.shots, report.segments, level.name(), report.table.display());
     if a.stats {
-        println!("collocate: {:.2} s, peak RSS {:.1} MB", start.elapsed().as_secs_f64(), peak_rss_mb());
+        println!(
+            "collocate: {:.2} s, peak RSS {:.1} MB, {} ALS points kept from {} row groups",
+            start.elapsed().as_secs_f64(),
+            peak_rss_mb(),
+            report.als_points_read,
+            report.als_row_groups_read
+        );
     }
     Ok(())
 }

@@ -273,3 +273,82 @@ fn shot_level_gives_every_shot_an_offset_from_its_neighbours() {
     assert!(within_1m >= 34, "shots within 1 m: {within_1m}/48");
     assert_eq!(inside_region, 48, "the reported half-extents cover the planted offset");
 }
+
+// ---------------------------------------------------------------------------------------------
+// Bad input and nothing to do: one-line errors, reasons, no panics
+// ---------------------------------------------------------------------------------------------
+
+/// A dataset with one real tile ingested.
+fn one_tile_dataset() -> tempfile::TempDir {
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = Dataset::create(tmp.path()).unwrap();
+    gedisim::ingest::als::ingest_tiles(&ds, &[data("als/lidarforfuel_2_bas_lig.laz")], &Default::default(), &|_| {}).unwrap();
+    tmp
+}
+
+#[test]
+fn missing_tables_and_bad_options_are_one_line_errors() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().to_str().unwrap();
+    let (ok, _, err) = gedisim(&["collocate", "--dataset", dir]);
+    assert!(!ok && err.trim().lines().count() == 1 && err.contains("als"), "{err}");
+
+    let tmp = one_tile_dataset();
+    let dir = tmp.path().to_str().unwrap();
+    let (ok, _, err) = gedisim(&["collocate", "--dataset", dir]);
+    assert!(!ok && err.trim().lines().count() == 1 && err.contains("shots"), "{err}");
+    let (ok, _, err) = gedisim(&["collocate", "--dataset", dir, "--step", "0"]);
+    assert!(!ok && err.trim().lines().count() == 1 && err.contains("--step"), "{err}");
+
+    // A shots table without L1B waveforms (positions only) names the file and the column.
+    let schema = std::sync::Arc::new(arrow::datatypes::Schema::new(vec![
+        arrow::datatypes::Field::new("shot_number", arrow::datatypes::DataType::UInt64, false),
+        arrow::datatypes::Field::new("x", arrow::datatypes::DataType::Float64, true),
+        arrow::datatypes::Field::new("y", arrow::datatypes::DataType::Float64, true),
+    ]));
+    let batch = arrow::record_batch::RecordBatch::try_new(
+        schema.clone(),
+        vec![
+            std::sync::Arc::new(arrow::array::UInt64Array::from(vec![1u64])),
+            std::sync::Arc::new(arrow::array::Float64Array::from(vec![368528.0])),
+            std::sync::Arc::new(arrow::array::Float64Array::from(vec![6807456.0])),
+        ],
+    )
+    .unwrap();
+    let ds = Dataset::open(tmp.path()).unwrap();
+    let dest = ds.table_file("shots", "positions").unwrap();
+    gedisim::dataset::write_parquet(&dest, schema, &[batch], &Default::default()).unwrap();
+    let (ok, _, err) = gedisim(&["collocate", "--dataset", dir]);
+    assert!(!ok && err.trim().lines().count() == 1, "{err}");
+    assert!(err.contains("positions.parquet") && err.contains("rx_waveform"), "{err}");
+}
+
+#[test]
+fn shots_off_the_als_and_short_runs_are_reported_not_solved() {
+    // The 300 real shots of the shared granule lie far from the tile: all skipped as no_als.
+    let tmp = one_tile_dataset();
+    let dir = tmp.path().to_str().unwrap();
+    let (l1b, l2a) = (data("gedi/GEDI01_B_2019108080338_O01964_T05337_02_003_01_sub.h5"), data("gedi/GEDI02_A_2019108080338_O01964_T05337_02_001_01_sub.h5"));
+    let (ok, _, err) = gedisim(&["ingest", "gedi", "--l1b", l1b.to_str().unwrap(), "--l2a", l2a.to_str().unwrap(), "--out", dir]);
+    assert!(ok, "{err}");
+    let (ok, _, err) = gedisim(&["collocate", "--dataset", dir]);
+    assert!(ok, "{err}");
+    assert!(err.contains("301 shots read, 0 beam offsets"), "{err}");
+    assert!(err.contains("no_als 300") && err.contains("no_waveform 1"), "{err}");
+    assert!(read_offsets(tmp.path()).is_empty());
+
+    // Ten planted shots on the tile: a run shorter than 20 is reported and not solved.
+    let tmp = one_tile_dataset();
+    let ds = Dataset::open(tmp.path()).unwrap();
+    let (x0, y0) = TILE_MIN;
+    let beam = PlantedBeam { name: "BEAM1011", start: (x0 + 35.0, y0 + 35.0), end: (x0 + 65.0, y0 + 65.0), shots: 10, energy: 6000.0 };
+    let l1b = tmp.path().join(gedisim::gedi::granule::v2_file_name("01_B", "2019108080338", 1964, 2, 5337));
+    write_planted_l1b(&ds, &[beam], &PLANT, &l1b);
+    let dir = tmp.path().to_str().unwrap();
+    let (ok, _, err) = gedisim(&["ingest", "gedi", "--l1b", l1b.to_str().unwrap(), "--out", dir]);
+    assert!(ok, "{err}");
+    let (ok, _, err) = gedisim(&["collocate", "--dataset", dir]);
+    assert!(ok, "{err}");
+    assert!(err.contains("too short, not collocated") && err.contains("BEAM1011: 10 usable shots"), "{err}");
+    assert!(read_offsets(tmp.path()).is_empty());
+}

@@ -29,7 +29,7 @@ use crate::sim::{Profile, SimConfig};
 
 use correlation::{LagWindow, SimulatedProfiles};
 use profile::GridProfile;
-use raster::{offset_waves, support_half_width};
+use raster::{offset_waves, support_half_width, RasterError};
 use segments::SegmentPlan;
 use surface::{Optimum, Surface};
 
@@ -203,8 +203,10 @@ pub enum ShotSkip {
     },
     /// No return contributes at the reported position.
     NoPoints,
-    /// The real and simulated waveforms never overlap in height.
+    /// The real and simulated waveforms never overlap in height (within the vertical search).
     NoOverlap,
+    /// The returns near the shot span more than 3 km of height (corrupt ALS heights).
+    HeightRange,
 }
 
 impl ShotSkip {
@@ -214,6 +216,7 @@ impl ShotSkip {
             ShotSkip::PartlyCovered { .. } => "partly_covered",
             ShotSkip::NoPoints => "no_points",
             ShotSkip::NoOverlap => "no_overlap",
+            ShotSkip::HeightRange => "als_height_range",
         }
     }
 }
@@ -262,7 +265,7 @@ pub fn collocate_unit<E>(
         if window.is_none() {
             let usable: Vec<(&GridProfile, &SimulatedProfiles)> =
                 chunk.iter().zip(&preps).filter_map(|(&s, p)| p.as_ref().ok().map(|(_, z)| (&shots[s].real, z))).collect();
-            window = coarse_lag(&usable).map(|c| LagWindow::around(c, cfg.lag_half()));
+            window = coarse_lag(&usable, cfg.model.res).map(|c| LagWindow::around(c, cfg.lag_half()));
         }
         let surfaces: Vec<Option<Vec<f32>>> = chunk
             .par_iter()
@@ -370,7 +373,10 @@ fn prepare(shot: &ShotInput, cloud: &PointCloud, index: &CellGrid, cfg: &Colloca
     }
     let zero = OffsetGrid { step: cfg.grid.step, half: 0 };
     let cand = candidates(cloud, index, centre, support_half_width(&zero, &cfg.model));
-    let waves = offset_waves(&cloud.x, &cloud.y, &cloud.z, &cand, centre, &zero, &cfg.model).ok_or(ShotSkip::NoPoints)?;
+    let waves = offset_waves(&cloud.x, &cloud.y, &cloud.z, &cand, centre, &zero, &cfg.model).map_err(|e| match e {
+        RasterError::NoReturns => ShotSkip::NoPoints,
+        RasterError::HeightRange => ShotSkip::HeightRange,
+    })?;
     let sim = SimulatedProfiles::new(waves);
     if sim.extent(0).is_none() {
         return Err(ShotSkip::NoPoints);
@@ -382,7 +388,7 @@ fn prepare(shot: &ShotInput, cloud: &PointCloud, index: &CellGrid, cfg: &Colloca
 fn shot_surface(shot: &ShotInput, cloud: &PointCloud, index: &CellGrid, window: LagWindow, cfg: &CollocateConfig) -> Option<Vec<f32>> {
     let centre = (shot.x, shot.y);
     let cand = candidates(cloud, index, centre, cfg.support_half_width());
-    let waves = offset_waves(&cloud.x, &cloud.y, &cloud.z, &cand, centre, &cfg.grid, &cfg.model)?;
+    let waves = offset_waves(&cloud.x, &cloud.y, &cloud.z, &cand, centre, &cfg.grid, &cfg.model).ok()?;
     Some(SimulatedProfiles::new(waves).correlate(&shot.real, window))
 }
 
@@ -411,10 +417,20 @@ fn covered_fraction(cloud: &PointCloud, near: &[u32], centre: (f64, f64), radius
     if within == 0 { 1.0 } else { covered as f32 / within as f32 }
 }
 
-/// The vertical lag (bins) maximising the summed zero-offset r of the shots over every lag at
-/// which any of them overlaps its simulation: the coarse full-range vertical search.
-pub fn coarse_lag(shots: &[(&GridProfile, &SimulatedProfiles)]) -> Option<i64> {
-    let ranges: Vec<(i64, i64)> = shots.iter().filter_map(|(real, sim)| sim.overlap_lags(real, 0)).collect();
+/// Largest vertical offset (m) the coarse search considers, either way: far beyond any datum gap
+/// (tens of metres), it bounds the work when a waveform's heights are corrupt.
+pub const MAX_VERTICAL_OFFSET_M: f64 = 1000.0;
+
+/// The vertical lag (bins of `dz`) maximising the summed zero-offset r of the shots over every lag
+/// at which any of them overlaps its simulation (within ±[`MAX_VERTICAL_OFFSET_M`]): the coarse
+/// full-range vertical search.
+pub fn coarse_lag(shots: &[(&GridProfile, &SimulatedProfiles)], dz: f64) -> Option<i64> {
+    let limit = (MAX_VERTICAL_OFFSET_M / dz).ceil() as i64;
+    let ranges: Vec<(i64, i64)> = shots
+        .iter()
+        .filter_map(|(real, sim)| sim.overlap_lags(real, 0))
+        .filter_map(|(a, b)| (a <= limit && b >= -limit).then(|| (a.max(-limit), b.min(limit))))
+        .collect();
     let lo = ranges.iter().map(|r| r.0).min()?;
     let hi = ranges.iter().map(|r| r.1).max()?;
     let window = LagWindow { first: lo, len: (hi - lo + 1) as usize };

@@ -45,6 +45,19 @@ impl OffsetWaves {
     }
 }
 
+/// Why no raster was built.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RasterError {
+    /// No return contributes at any offset.
+    NoReturns,
+    /// The returns span more than [`MAX_HEIGHT_BINS`] bins.
+    HeightRange,
+}
+
+/// Most bins a shot's returns may span (3 km at 0.15 m): beyond, the heights are corrupt and the
+/// raster is not built (it would take 441 × 4 bytes per bin).
+pub const MAX_HEIGHT_BINS: i64 = 20_000;
+
 /// Radius (m) beyond which the simulator's footprint weight is certainly below the cut-off
 /// (slightly larger than the exact radius; the exact test is applied at the boundary).
 fn cut_off_radius(fsigma: f32) -> f64 {
@@ -103,7 +116,7 @@ fn gaussian_ladder(e: f64, s: f64, two_var: f64, q: f64, out: &mut [f32]) {
 
 /// Builds the waveforms of every offset of `grid` around (x0, y0) from the returns `candidates`
 /// (indices into `x`, `y`, `z`; returns beyond the support are ignored), with the footprint,
-/// bin size and pulse of `model`. `None` when no return contributes at any offset.
+/// bin size and pulse of `model`.
 pub fn offset_waves(
     x: &[f64],
     y: &[f64],
@@ -112,7 +125,7 @@ pub fn offset_waves(
     (x0, y0): (f64, f64),
     grid: &OffsetGrid,
     model: &SimConfig,
-) -> Option<OffsetWaves> {
+) -> Result<OffsetWaves, RasterError> {
     let n = grid.n();
     let n_off = n * n;
     let sigma = model.fsigma as f64;
@@ -139,7 +152,10 @@ pub fn offset_waves(
         kept.push((c, b));
     }
     if kept.is_empty() {
-        return None;
+        return Err(RasterError::NoReturns);
+    }
+    if hi - lo >= MAX_HEIGHT_BINS {
+        return Err(RasterError::HeightRange);
     }
     let raw_rows = (hi - lo + 1) as usize;
     let mut w = vec![0f32; raw_rows * n_off];
@@ -187,7 +203,7 @@ pub fn offset_waves(
         }
     }
     if !any {
-        return None;
+        return Err(RasterError::NoReturns);
     }
 
     // Pulse convolution on the absolute grid: the simulator's tap j moves a bin's energy
@@ -208,7 +224,7 @@ pub fn offset_waves(
             }
         }
     }
-    Some(OffsetWaves { first_bin: lo + omin, dz, n_offsets: n_off, values: out })
+    Ok(OffsetWaves { first_bin: lo + omin, dz, n_offsets: n_off, values: out })
 }
 
 #[cfg(test)]
@@ -254,6 +270,8 @@ mod tests {
         // The corner offsets (distance √2 m) weigh less than the centre.
         let corner = w.column(0);
         assert!(corner[peak] < centre[peak] && corner[peak] > 0.0);
-        assert!(offset_waves(&[100.0], &[0.0], &[10.0], &[0], (0.0, 0.0), &grid, &model).is_none());
+        assert_eq!(offset_waves(&[100.0], &[0.0], &[10.0], &[0], (0.0, 0.0), &grid, &model), Err(RasterError::NoReturns));
+        let far = offset_waves(&[0.0, 0.0], &[0.0, 0.0], &[10.0, 5000.0], &[0, 1], (0.0, 0.0), &grid, &model);
+        assert_eq!(far, Err(RasterError::HeightRange));
     }
 }
