@@ -179,27 +179,27 @@ pub fn offset_waves(
             let ey = py - c.1;
             *e = ey * ey;
         }
-        // Plain `while` loops over indices: the hot loop must stay fast in the unoptimised
-        // profiles too, where range iterators and sub-slices are calls.
-        let row0 = (b - lo) as usize * n_off;
-        let mut i = 0;
-        while i < n {
+        let row = &mut w[(b - lo) as usize * n_off..(b - lo + 1) as usize * n_off];
+        let (gy, ey_sq) = (&gy[..n], &ey_sq[..n]);
+        for (i, dst) in row.chunks_exact_mut(n).enumerate() {
             let ex = px - centres[i].0;
             let ex_sq = ex * ex;
-            if ex_sq <= d_sq_max {
-                any = true;
-                let g = (gx[i] as f64 * norm) as f32;
-                let base = row0 + i * n;
-                // Branch-free: every offset j, masked by the simulator's cut-off test on
-                // d² = ex² + ey² (the same f64 operations as the simulator).
-                let mut j = 0;
-                while j < n {
-                    let inside = ex_sq + ey_sq[j] <= d_sq_max;
-                    w[base + j] += if inside { g * gy[j] } else { 0.0 };
-                    j += 1;
-                }
+            if !(ex_sq <= d_sq_max) {
+                continue;
             }
-            i += 1;
+            any = true;
+            let g = (gx[i] as f64 * norm) as f32;
+            // Branch-free over every offset j, masked by the simulator's cut-off test on
+            // d² = ex² + ey² (the same f64 operations as the simulator). The product is formed
+            // before the select so that optimised builds vectorise the loop; an indexed `while`
+            // over equal-length slices keeps the unoptimised profiles fast too (no iterator calls,
+            // no bounds checks left at opt-level 3).
+            let mut j = 0;
+            while j < dst.len() {
+                let v = g * gy[j];
+                dst[j] += if ex_sq + ey_sq[j] <= d_sq_max { v } else { 0.0 };
+                j += 1;
+            }
         }
     }
     if !any {
