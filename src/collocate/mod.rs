@@ -232,13 +232,8 @@ pub struct SegmentSolution {
     pub used: Vec<usize>,
 }
 
-/// Per shot of a unit: what was computed for it.
-struct ShotState {
-    /// r at zero offset, the zero-offset simulated profile (for the coarse vertical search).
-    prep: std::result::Result<(f64, SimulatedProfiles), ShotSkip>,
-    /// r over offsets × lags of the unit's window.
-    surface: Option<Vec<f32>>,
-}
+/// Per shot of a unit: r at zero offset and r over offsets × lags of the unit's window.
+type ShotOutcome = std::result::Result<(f64, Vec<f32>), ShotSkip>;
 
 /// Solves the segments `plans` of one unit of `shots` (plans index into `shots`). Points are
 /// requested through `points_for(shot indices)`, which must return at least the returns within
@@ -256,65 +251,57 @@ pub fn collocate_unit<E>(
     let mut wanted: Vec<usize> = plans.iter().flat_map(|p| p.support.iter().copied()).collect();
     wanted.sort_unstable();
     wanted.dedup();
-    let mut states: Vec<Option<ShotState>> = (0..shots.len()).map(|_| None).collect();
+    let zero = cfg.grid.zero_column();
+    let mut states: Vec<Option<ShotOutcome>> = (0..shots.len()).map(|_| None).collect();
     let mut window: Option<LagWindow> = None;
     for chunk in wanted.chunks(SUB_BATCH) {
         let cloud = points_for(chunk)?;
         let index = CellGrid::from_xy(&cloud.x, &cloud.y, INDEX_CELL);
-        let preps: Vec<_> = chunk.par_iter().map(|&s| prepare(&shots[s], &cloud, &index, cfg)).collect();
+        // One raster per shot (all offsets); its zero-offset column serves r_before and the coarse
+        // vertical search, which the first sub-batch with usable shots settles for the unit.
+        let rasters: Vec<_> = chunk.par_iter().map(|&s| rasterise(&shots[s], &cloud, &index, cfg)).collect();
+        drop((cloud, index));
         if window.is_none() {
             let usable: Vec<(&GridProfile, &SimulatedProfiles)> =
-                chunk.iter().zip(&preps).filter_map(|(&s, p)| p.as_ref().ok().map(|(_, z)| (&shots[s].real, z))).collect();
-            window = coarse_lag(&usable, cfg.model.res).map(|c| LagWindow::around(c, cfg.lag_half()));
+                chunk.iter().zip(&rasters).filter_map(|(&s, r)| r.as_ref().ok().map(|p| (&shots[s].real, p))).collect();
+            window = coarse_lag(&usable, zero, cfg.model.res).map(|c| LagWindow::around(c, cfg.lag_half()));
         }
-        let surfaces: Vec<Option<Vec<f32>>> = chunk
+        let outcomes: Vec<ShotOutcome> = chunk
             .par_iter()
-            .zip(&preps)
-            .map(|(&s, p)| {
-                let out = match (p, window) {
-                    (Ok(_), Some(w)) => shot_surface(&shots[s], &cloud, &index, w, cfg),
-                    _ => None,
-                };
+            .zip(rasters)
+            .map(|(&s, raster)| {
+                let real = &shots[s].real;
+                let out = raster.and_then(|p| {
+                    let w = window.ok_or(ShotSkip::NoOverlap)?;
+                    Ok((p.correlate_one(real, zero, 0), p.correlate(real, w)))
+                });
                 on_shot();
                 out
             })
             .collect();
-        for ((&s, prep), surface) in chunk.iter().zip(preps).zip(surfaces) {
-            states[s] = Some(ShotState { prep, surface });
+        for (&s, o) in chunk.iter().zip(outcomes) {
+            states[s] = Some(o);
         }
     }
 
-    let skips: Vec<Option<ShotSkip>> = states
-        .iter()
-        .map(|st| match st {
-            Some(ShotState { prep: Err(e), .. }) => Some(*e),
-            Some(ShotState { prep: Ok(_), surface: None }) => Some(ShotSkip::NoOverlap),
-            _ => None,
-        })
-        .collect();
+    let skips: Vec<Option<ShotSkip>> = states.iter().map(|st| st.as_ref().and_then(|o| o.as_ref().err().copied())).collect();
     let mut solutions = Vec::with_capacity(plans.len());
     for plan in plans {
         let used: Vec<usize> = plan
             .support
             .iter()
             .copied()
-            .filter(|&s| matches!(&states[s], Some(ShotState { prep: Ok(_), surface: Some(_) })))
+            .filter(|&s| matches!(&states[s], Some(Ok(_))))
             .collect();
         let Some(mut w) = window.filter(|_| !used.is_empty()) else {
             solutions.push(None);
             continue;
         };
-        let r_before = used
-            .iter()
-            .map(|&s| match &states[s] {
-                Some(ShotState { prep: Ok((r, _)), .. }) => *r,
-                _ => 0.0,
-            })
-            .sum::<f64>()
-            / used.len() as f64;
         let mut surface = Surface::new(cfg.grid, w, cfg.model.res);
+        let mut r_before = 0.0;
         for &s in &used {
-            if let Some(Some(v)) = states[s].as_ref().map(|st| st.surface.as_ref()) {
+            if let Some(Ok((r, v))) = &states[s] {
+                r_before += r / used.len() as f64;
                 surface.add(v);
             }
         }
@@ -362,8 +349,8 @@ fn candidates(cloud: &PointCloud, index: &CellGrid, (x0, y0): (f64, f64), half: 
         .collect()
 }
 
-/// Coverage check, zero-offset simulation and r at zero offset of one shot.
-fn prepare(shot: &ShotInput, cloud: &PointCloud, index: &CellGrid, cfg: &CollocateConfig) -> std::result::Result<(f64, SimulatedProfiles), ShotSkip> {
+/// Coverage check and the raster of every offset of one shot, cut to the signal extents.
+fn rasterise(shot: &ShotInput, cloud: &PointCloud, index: &CellGrid, cfg: &CollocateConfig) -> std::result::Result<SimulatedProfiles, ShotSkip> {
     let centre = (shot.x, shot.y);
     let radius = cfg.model.fsigma as f64;
     let near = candidates(cloud, index, centre, radius);
@@ -371,17 +358,16 @@ fn prepare(shot: &ShotInput, cloud: &PointCloud, index: &CellGrid, cfg: &Colloca
     if covered_fraction < cfg.min_covered_fraction {
         return Err(ShotSkip::PartlyCovered { covered_fraction });
     }
-    let zero = OffsetGrid { step: cfg.grid.step, half: 0 };
-    let cand = candidates(cloud, index, centre, support_half_width(&zero, &cfg.model));
-    let waves = offset_waves(&cloud.x, &cloud.y, &cloud.z, &cand, centre, &zero, &cfg.model).map_err(|e| match e {
+    let cand = candidates(cloud, index, centre, cfg.support_half_width());
+    let waves = offset_waves(&cloud.x, &cloud.y, &cloud.z, &cand, centre, &cfg.grid, &cfg.model).map_err(|e| match e {
         RasterError::NoReturns => ShotSkip::NoPoints,
         RasterError::HeightRange => ShotSkip::HeightRange,
     })?;
-    let sim = SimulatedProfiles::new(waves);
-    if sim.extent(0).is_none() {
+    let profiles = SimulatedProfiles::new(waves);
+    if profiles.extent(cfg.grid.zero_column()).is_none() {
         return Err(ShotSkip::NoPoints);
     }
-    Ok((sim.correlate_one(&shot.real, 0, 0), sim))
+    Ok(profiles)
 }
 
 /// r over every offset × lag of `window` for one shot (`None` when nothing contributes).
@@ -421,14 +407,14 @@ fn covered_fraction(cloud: &PointCloud, near: &[u32], centre: (f64, f64), radius
 /// (tens of metres), it bounds the work when a waveform's heights are corrupt.
 pub const MAX_VERTICAL_OFFSET_M: f64 = 1000.0;
 
-/// The vertical lag (bins of `dz`) maximising the summed zero-offset r of the shots over every lag
-/// at which any of them overlaps its simulation (within ±[`MAX_VERTICAL_OFFSET_M`]): the coarse
-/// full-range vertical search.
-pub fn coarse_lag(shots: &[(&GridProfile, &SimulatedProfiles)], dz: f64) -> Option<i64> {
+/// The vertical lag (bins of `dz`) maximising the summed r of the shots at offset `column` over
+/// every lag at which any of them overlaps its simulation (within ±[`MAX_VERTICAL_OFFSET_M`]): the
+/// coarse full-range vertical search.
+pub fn coarse_lag(shots: &[(&GridProfile, &SimulatedProfiles)], column: usize, dz: f64) -> Option<i64> {
     let limit = (MAX_VERTICAL_OFFSET_M / dz).ceil() as i64;
     let ranges: Vec<(i64, i64)> = shots
         .iter()
-        .filter_map(|(real, sim)| sim.overlap_lags(real, 0))
+        .filter_map(|(real, sim)| sim.overlap_lags(real, column))
         .filter_map(|(a, b)| (a <= limit && b >= -limit).then(|| (a.max(-limit), b.min(limit))))
         .collect();
     let lo = ranges.iter().map(|r| r.0).min()?;
@@ -436,8 +422,8 @@ pub fn coarse_lag(shots: &[(&GridProfile, &SimulatedProfiles)], dz: f64) -> Opti
     let window = LagWindow { first: lo, len: (hi - lo + 1) as usize };
     let mut sum = vec![0f64; window.len];
     for (real, sim) in shots {
-        for (s, r) in sum.iter_mut().zip(sim.correlate(real, window)) {
-            *s += r as f64;
+        for (s, li) in sum.iter_mut().zip(0..window.len) {
+            *s += sim.correlate_one(real, column, window.lag(li));
         }
     }
     let best = sum.iter().enumerate().fold(0, |b, (i, &v)| if v > sum[b] { i } else { b });
