@@ -366,8 +366,9 @@ fn collocate(a: CollocateArgs) -> Result<()> {
     eprintln!("{} shots read, {} {} offsets → {}", report.shots, report.segments, level.name(), report.table.display());
     if a.stats {
         println!(
-            "collocate: {:.2} s, peak RSS {:.1} MB, {} ALS points kept from {} row groups",
+            "collocate: {:.2} s, CPU {:.2} s, peak RSS {:.1} MB, {} ALS points kept from {} row groups",
             start.elapsed().as_secs_f64(),
+            cpu_seconds(),
             peak_rss_mb(),
             report.als_points_read,
             report.als_row_groups_read
@@ -449,6 +450,20 @@ fn progress(total: u64, unit: &str) -> ProgressBar {
             .progress_chars("=> "),
     );
     bar
+}
+
+/// User + system CPU time of this process, all threads (s); 0 where /proc is unavailable.
+/// `/proc/self/stat` counts in USER_HZ, which Linux fixes at 100 for this interface.
+fn cpu_seconds() -> f64 {
+    std::fs::read_to_string("/proc/self/stat")
+        .ok()
+        .and_then(|s| {
+            // Fields after the parenthesised command name; utime and stime are fields 14 and 15.
+            let rest = s.rsplit_once(')')?.1;
+            let f: Vec<&str> = rest.split_whitespace().collect();
+            Some((f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?) / 100.0)
+        })
+        .unwrap_or(0.0)
 }
 
 /// Peak resident memory of this process (VmHWM), MB; 0 where /proc is unavailable.
