@@ -209,6 +209,14 @@ fn beam_level_recovers_the_planted_offset_and_simulate_applies_it() {
         assert_recovered(r, dz_true);
     }
 
+    // The table is queryable in SQL like every other table.
+    let q = "select level, count(*) as segments, sum(n_shots) as shots, min(cardinality(shot_numbers)) as listed from offsets group by level";
+    let (ok, out, err) = gedisim(&["sql", "--dataset", tmp.path().to_str().unwrap(), q]);
+    assert!(ok, "{err}");
+    let row = out.lines().nth(3).unwrap_or_default();
+    let cells: Vec<&str> = row.split('|').map(str::trim).filter(|s| !s.is_empty()).collect();
+    assert_eq!(cells, ["beam", "2", "48", "24"], "{out}");
+
     // simulate --dataset moves each shot by its segment's offset and says which.
     let (ok, _, err) = gedisim(&["simulate", "--dataset", tmp.path().to_str().unwrap()]);
     assert!(ok, "{err}");

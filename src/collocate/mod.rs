@@ -44,14 +44,14 @@ pub struct OffsetGrid {
 impl OffsetGrid {
     /// Offsets −max_shift … +max_shift (m) every `step` m (the largest multiple of `step` not
     /// beyond `max_shift`); a usage error for a non-positive step, a negative shift or more than
-    /// 401 offsets per axis.
+    /// 101 offsets per axis (a shot's raster holds every offset: 101² × its bins).
     pub fn new(max_shift: f64, step: f64) -> Result<OffsetGrid> {
         if !(step > 0.0) || !step.is_finite() || !(max_shift >= 0.0) || !max_shift.is_finite() {
             return Err(Error::Usage(format!("--max-shift {max_shift} / --step {step}: need a shift ≥ 0 and a step > 0")));
         }
         let half = (max_shift / step + 1e-9).floor() as usize;
-        if half > 200 {
-            return Err(Error::Usage(format!("--max-shift {max_shift} / --step {step}: more than 401 offsets per axis")));
+        if half > 50 {
+            return Err(Error::Usage(format!("--max-shift {max_shift} / --step {step}: more than 101 offsets per axis")));
         }
         Ok(OffsetGrid { step, half })
     }
@@ -305,7 +305,10 @@ pub fn collocate_unit<E>(
                 surface.add(v);
             }
         }
-        let mut optimum = surface.optimum(cfg.tolerance).expect("the segment has shots");
+        let Some(mut optimum) = surface.optimum(cfg.tolerance) else {
+            solutions.push(None);
+            continue;
+        };
         // Follow an optimum on the window's edge (steep terrain, or a coarse estimate misled).
         for _ in 0..MAX_RECENTRES {
             if !optimum.at_window_edge {
