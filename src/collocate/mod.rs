@@ -235,6 +235,9 @@ pub struct SegmentSolution {
 /// Per shot of a unit: r at zero offset and r over offsets × lags of the unit's window.
 type ShotOutcome = std::result::Result<(f64, Vec<f32>), ShotSkip>;
 
+/// One solution per plan (`None`: none of its shots could be used) and each shot's skip reason.
+pub type UnitResult = (Vec<Option<SegmentSolution>>, Vec<Option<ShotSkip>>);
+
 /// Solves the segments `plans` of one unit of `shots` (plans index into `shots`). Points are
 /// requested through `points_for(shot indices)`, which must return at least the returns within
 /// [`CollocateConfig::support_half_width`] of each of those shots; it is called for sub-batches
@@ -247,7 +250,7 @@ pub fn collocate_unit<E>(
     cfg: &CollocateConfig,
     points_for: &mut dyn FnMut(&[usize]) -> std::result::Result<PointCloud, E>,
     on_shot: &(dyn Fn() + Sync),
-) -> std::result::Result<(Vec<Option<SegmentSolution>>, Vec<Option<ShotSkip>>), E> {
+) -> std::result::Result<UnitResult, E> {
     let mut wanted: Vec<usize> = plans.iter().flat_map(|p| p.support.iter().copied()).collect();
     wanted.sort_unstable();
     wanted.dedup();
@@ -418,7 +421,8 @@ pub fn coarse_lag(shots: &[(&GridProfile, &SimulatedProfiles)], column: usize, d
     let ranges: Vec<(i64, i64)> = shots
         .iter()
         .filter_map(|(real, sim)| sim.overlap_lags(real, column))
-        .filter_map(|(a, b)| (a <= limit && b >= -limit).then(|| (a.max(-limit), b.min(limit))))
+        .filter(|&(a, b)| a <= limit && b >= -limit)
+        .map(|(a, b)| (a.max(-limit), b.min(limit)))
         .collect();
     let lo = ranges.iter().map(|r| r.0).min()?;
     let hi = ranges.iter().map(|r| r.1).max()?;

@@ -36,7 +36,7 @@ pub struct OffsetWaves {
 impl OffsetWaves {
     /// Number of rows (bins).
     pub fn rows(&self) -> usize {
-        if self.n_offsets == 0 { 0 } else { self.values.len() / self.n_offsets }
+        self.values.len().checked_div(self.n_offsets).unwrap_or(0)
     }
 
     /// The waveform of offset column `c`, bottom to top (row order).
@@ -143,7 +143,8 @@ pub fn offset_waves(
         let p = c as usize;
         let (ex, ey) = ((x[p] - x0).abs() - grid.max_offset(), (y[p] - y0).abs() - grid.max_offset());
         let (ex, ey) = (ex.max(0.0), ey.max(0.0));
-        if !(ex <= reach && ey <= reach && ex * ex + ey * ey <= r_cut_sq) || !z[p].is_finite() {
+        let reaches = ex <= reach && ey <= reach && ex * ex + ey * ey <= r_cut_sq;
+        if !reaches || !z[p].is_finite() {
             continue;
         }
         let b = absolute_bin(z[p], dz);

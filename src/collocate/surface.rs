@@ -73,11 +73,11 @@ impl Surface {
         let mut best_c = 0;
         let mut best = (0f64, f64::NEG_INFINITY, 0usize); // (refined lag index, r, node lag index)
         let mut per_offset = vec![f64::NEG_INFINITY; n * n];
-        for c in 0..n * n {
+        for (c, best_r) in per_offset.iter_mut().enumerate() {
             let curve: Vec<f64> = (0..nl).map(|li| self.mean(c, li)).collect();
             let li = argmax(&curve);
             let (pos, r) = parabolic_peak(&curve, li);
-            per_offset[c] = r;
+            *best_r = r;
             if r > best.1 {
                 best = (pos, r, li);
                 best_c = c;

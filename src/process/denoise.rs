@@ -130,8 +130,8 @@ pub fn denoise_leading_noise(wave: &[f32], spacing_m: f64, s: LeadingNoiseDenois
             while end + 1 < wave.len() && w(end + 1) > mean {
                 end += 1;
             }
-            for k in start..=end {
-                out[k] = (w(k) - mean).max(0.0);
+            for (k, o) in out.iter_mut().enumerate().take(end + 1).skip(start) {
+                *o = (w(k) - mean).max(0.0);
             }
         }
         i = end + 1;
