@@ -1,17 +1,21 @@
 //! Reading ALS points back from the dataset's `als/` table around footprints, touching only the
 //! row groups whose x/y statistics intersect a footprint's box (the table is clustered by cell).
 
+use std::collections::HashMap;
 use std::fs::File;
 use std::path::{Path, PathBuf};
 
 use arrow::array::{Array, AsArray};
 use arrow::datatypes::{Float32Type, Float64Type, UInt16Type, UInt8Type};
-use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+use parquet::arrow::arrow_reader::{ArrowReaderMetadata, ArrowReaderOptions, ParquetRecordBatchReaderBuilder};
+use parquet::arrow::ProjectionMask;
+use rayon::prelude::*;
 use parquet::file::metadata::ParquetMetaData;
 use parquet::file::statistics::Statistics;
 
 use crate::dataset::{self, tables, Dataset};
 use crate::error::{Error, Result};
+use crate::collocate::PointCloud;
 use crate::sim::AlsPoints;
 
 /// Axis-aligned box [xmin, ymin, xmax, ymax].
@@ -21,12 +25,23 @@ pub type BBox = [f64; 4];
 struct AlsFile {
     path: PathBuf,
     groups: Vec<BBox>,
+    meta: ArrowReaderMetadata,
 }
 
 /// The `als/` table's files and row-group extents, read once.
 pub struct AlsTable {
     files: Vec<AlsFile>,
+    /// (file, row group) of the extents meeting each [`COVER_CELL`] cell (extents grown by
+    /// [`COVER_TOLERANCE`]).
+    cover_index: HashMap<(i64, i64), Vec<(usize, usize)>>,
 }
+
+/// Cell of the coverage index (m): the ingest's cell size.
+const COVER_CELL: f64 = crate::ingest::als::CELL_SIZE_M;
+
+/// Gap (m) between the extents of neighbouring row groups still counted as covered: row-group
+/// extents are those of their points, so neighbouring cells leave gaps of the point spacing.
+const COVER_TOLERANCE: f64 = 1.0;
 
 /// How much a query read.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -43,13 +58,108 @@ impl AlsTable {
         let dir = ds.root().join(tables::ALS);
         let paths = dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no ALS table ({e}): run `gedisim ingest als`")))?;
         let mut files = Vec::new();
+        let mut cover_index: HashMap<(i64, i64), Vec<(usize, usize)>> = HashMap::new();
         for path in paths {
             let file = File::open(&path).map_err(|e| Error::file(&path, e))?;
-            let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| Error::table(&path, e))?;
-            let groups = row_group_boxes(builder.metadata(), &path)?;
-            files.push(AlsFile { path, groups });
+            let meta = ArrowReaderMetadata::load(&file, ArrowReaderOptions::new()).map_err(|e| Error::table(&path, e))?;
+            let groups = row_group_boxes(meta.metadata(), &path)?;
+            for (g, b) in groups.iter().enumerate() {
+                let cell = |v: f64| (v / COVER_CELL).floor() as i64;
+                let t = COVER_TOLERANCE;
+                for cx in cell(b[0] - t)..=cell(b[2] + t) {
+                    for cy in cell(b[1] - t)..=cell(b[3] + t) {
+                        cover_index.entry((cx, cy)).or_default().push((files.len(), g));
+                    }
+                }
+            }
+            files.push(AlsFile { path, groups, meta });
         }
-        Ok(AlsTable { files })
+        Ok(AlsTable { files, cover_index })
+    }
+
+    /// Whether the row groups' extents cover the disc of `radius` around (x, y): its centre and
+    /// eight points on its rim each lie in some extent (grown by 1 m). A quick test from the
+    /// footers that reads no point.
+    pub fn covers(&self, x: f64, y: f64, radius: f64) -> bool {
+        if !(x.is_finite() && y.is_finite()) {
+            return false;
+        }
+        let inside = |px: f64, py: f64| {
+            let key = ((px / COVER_CELL).floor() as i64, (py / COVER_CELL).floor() as i64);
+            let t = COVER_TOLERANCE;
+            self.cover_index.get(&key).is_some_and(|v| {
+                v.iter().any(|&(f, g)| {
+                    let b = self.files[f].groups[g];
+                    px >= b[0] - t && px <= b[2] + t && py >= b[1] - t && py <= b[3] + t
+                })
+            })
+        };
+        inside(x, y)
+            && (0..8).all(|k| {
+                let a = k as f64 * std::f64::consts::FRAC_PI_4;
+                inside(x + radius * a.cos(), y + radius * a.sin())
+            })
+    }
+
+    /// x, y, z of the points inside any of `boxes` (inclusive), reading only those three columns
+    /// of the row groups that meet a box, in parallel.
+    pub fn xyz_in_boxes(&self, boxes: &[BBox]) -> Result<(PointCloud, ReadStats)> {
+        let meets = |g: &BBox, b: &BBox| g[0] <= b[2] && g[2] >= b[0] && g[1] <= b[3] && g[3] >= b[1];
+        let mut jobs: Vec<(usize, usize, Vec<BBox>)> = Vec::new();
+        for (fi, f) in self.files.iter().enumerate() {
+            for (g, gb) in f.groups.iter().enumerate() {
+                let hit: Vec<BBox> = boxes.iter().filter(|b| meets(gb, b)).copied().collect();
+                if !hit.is_empty() {
+                    jobs.push((fi, g, hit));
+                }
+            }
+        }
+        let parts = jobs
+            .par_iter()
+            .map(|(fi, g, hit)| self.read_xyz(*fi, *g, hit))
+            .collect::<Result<Vec<PointCloud>>>()?;
+        let n = parts.iter().map(PointCloud::len).sum();
+        let mut out = PointCloud { x: Vec::with_capacity(n), y: Vec::with_capacity(n), z: Vec::with_capacity(n) };
+        for p in parts {
+            out.x.extend_from_slice(&p.x);
+            out.y.extend_from_slice(&p.y);
+            out.z.extend_from_slice(&p.z);
+        }
+        Ok((out, ReadStats { row_groups_read: jobs.len(), row_groups_total: self.row_groups() }))
+    }
+
+    /// x, y, z of row group `g` of file `fi`, kept when inside one of `boxes`.
+    fn read_xyz(&self, fi: usize, g: usize, boxes: &[BBox]) -> Result<PointCloud> {
+        let f = &self.files[fi];
+        let file = File::open(&f.path).map_err(|e| Error::file(&f.path, e))?;
+        let builder = ParquetRecordBatchReaderBuilder::new_with_metadata(file, f.meta.clone());
+        let mask = ProjectionMask::columns(builder.parquet_schema(), ["x", "y", "z"]);
+        let reader = builder
+            .with_projection(mask)
+            .with_row_groups(vec![g])
+            .with_batch_size(1 << 16)
+            .build()
+            .map_err(|e| Error::table(&f.path, e))?;
+        let mut out = PointCloud::default();
+        for batch in reader {
+            let batch = batch.map_err(|e| Error::table(&f.path, e))?;
+            let col = |name: &str| {
+                batch
+                    .column_by_name(name)
+                    .and_then(|c| c.as_primitive_opt::<Float64Type>())
+                    .ok_or_else(|| Error::field(&f.path, name, "missing or not float64 in the ALS table"))
+            };
+            let (x, y, z) = (col("x")?.values(), col("y")?.values(), col("z")?.values());
+            for i in 0..batch.num_rows() {
+                let (px, py) = (x[i], y[i]);
+                if boxes.iter().any(|b| px >= b[0] && px <= b[2] && py >= b[1] && py <= b[3]) {
+                    out.x.push(px);
+                    out.y.push(py);
+                    out.z.push(z[i]);
+                }
+            }
+        }
+        Ok(out)
     }
 
     /// Number of row groups in the table.

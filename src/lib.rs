@@ -5,6 +5,8 @@
 //! of files or Arrow; adapters (`ingest`, `dataset`, `sql`) convert between files, Arrow and kernels.
 
 pub mod als_table;
+pub mod collocate;
+pub mod collocation;
 pub mod dataset;
 pub mod error;
 pub mod gedi;

@@ -25,6 +25,8 @@ enum Command {
     Ingest(IngestCommand),
     /// Simulate GEDI waveforms from ALS: direct mode (--als, --footprints, --out) or dataset mode (--dataset).
     Simulate(SimulateArgs),
+    /// Geolocation offsets (dx, dy, dz) of the shots against the ALS → <dataset>/offsets/.
+    Collocate(CollocateArgs),
     /// GEDI L2A processing (algorithms a1–a6) of the waveforms of an L1B file.
     L2a(L2aArgs),
     /// Run SQL over a dataset's tables (with gedisim's functions).
@@ -146,6 +148,36 @@ struct SimulateArgs {
     /// Print wall time, waveforms/s and peak memory at the end.
     #[arg(long)]
     stats: bool,
+}
+
+#[derive(Args)]
+struct CollocateArgs {
+    /// Dataset directory with ingested shots (with L1B waveforms) and ALS.
+    #[arg(long)]
+    dataset: PathBuf,
+    /// beam: each beam cut into segments; track: all beams of a granule share an offset per
+    /// along-track segment; shot: one offset per shot from it and its neighbours.
+    #[arg(long, value_enum, default_value = "beam")]
+    level: LevelArg,
+    /// Longest segment: shots (beam level) or along-track shot steps (track level).
+    #[arg(long, default_value_t = 40)]
+    segment: usize,
+    /// Largest horizontal shift searched (m).
+    #[arg(long, default_value_t = 10.0)]
+    max_shift: f64,
+    /// Horizontal grid step (m).
+    #[arg(long, default_value_t = 1.0)]
+    step: f64,
+    /// Print wall time and peak memory at the end.
+    #[arg(long)]
+    stats: bool,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum LevelArg {
+    Beam,
+    Track,
+    Shot,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -280,6 +312,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Ingest(IngestCommand::Gedi(a)) => ingest_gedi(a),
         Command::Ingest(IngestCommand::Strata(a)) => ingest_strata(a),
         Command::Simulate(a) => simulate(a),
+        Command::Collocate(a) => collocate(a),
         Command::L2a(a) => l2a(a),
         Command::Sql(a) => sql(a),
         Command::Report(a) => report(a),
@@ -420,7 +453,7 @@ fn simulate(a: SimulateArgs) -> Result<()> {
                     Some(out) => out.clone(),
                     None => ds.table_file(gedisim::dataset::tables::SIM, stem)?,
                 };
-                (gedisim::ingest::footprints::read_footprints_csv(csv)?, dest)
+                (gedisim::ingest::footprints::read_footprints_csv(csv)?.into_iter().map(|f| (f, None)).collect(), dest)
             }
             None if a.out.is_some() => return Err(Error::Usage("--out in dataset mode needs --footprints".into())),
             None => (gedisim::simulate::shot_footprints(&ds)?, ds.table_file(gedisim::dataset::tables::SIM, "shots")?),
@@ -451,6 +484,43 @@ fn simulate(a: SimulateArgs) -> Result<()> {
             gedisim::sim::N_WEIGHTINGS,
             (ok + skipped) as f64 / s,
             peak_rss_mb()
+        );
+    }
+    Ok(())
+}
+
+fn collocate(a: CollocateArgs) -> Result<()> {
+    use gedisim::collocate::segments::Level;
+    use gedisim::collocation::{CollocateOptions, Collocation};
+    let start = Instant::now();
+    let level = match a.level {
+        LevelArg::Beam => Level::Beam,
+        LevelArg::Track => Level::Track,
+        LevelArg::Shot => Level::Shot,
+    };
+    let ds = Dataset::open(&a.dataset)?;
+    let opts = CollocateOptions { level, segment: a.segment, max_shift: a.max_shift, step: a.step };
+    let plan = Collocation::plan(&ds, &opts)?;
+    let bar = progress(plan.shots_to_process() as u64, "shots");
+    let result = plan.run(&|| bar.inc(1));
+    bar.finish_and_clear();
+    let report = result?;
+    for s in &report.short_runs {
+        eprintln!("too short, not collocated: {s}");
+    }
+    let skipped: Vec<String> = report.skipped.iter().map(|(k, v)| format!("{k} {v}")).collect();
+    if !skipped.is_empty() {
+        eprintln!("shots not used: {}", skipped.join(", "));
+    }
+    eprintln!("{} shots read, {} {} offsets → {}", report.shots, report.segments, level.name(), report.table.display());
+    if a.stats {
+        println!(
+            "collocate: {:.2} s, CPU {:.2} s, peak RSS {:.1} MB, {} ALS points kept from {} row groups",
+            start.elapsed().as_secs_f64(),
+            cpu_seconds(),
+            peak_rss_mb(),
+            report.als_points_read,
+            report.als_row_groups_read
         );
     }
     Ok(())
@@ -607,6 +677,20 @@ fn progress(total: u64, unit: &str) -> ProgressBar {
             .progress_chars("=> "),
     );
     bar
+}
+
+/// User + system CPU time of this process, all threads (s); 0 where /proc is unavailable.
+/// `/proc/self/stat` counts in USER_HZ, which Linux fixes at 100 for this interface.
+fn cpu_seconds() -> f64 {
+    std::fs::read_to_string("/proc/self/stat")
+        .ok()
+        .and_then(|s| {
+            // Fields after the parenthesised command name; utime and stime are fields 14 and 15.
+            let rest = s.rsplit_once(')')?.1;
+            let f: Vec<&str> = rest.split_whitespace().collect();
+            Some((f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?) / 100.0)
+        })
+        .unwrap_or(0.0)
 }
 
 /// Peak resident memory of this process (VmHWM), MB; 0 where /proc is unavailable.

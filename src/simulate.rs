@@ -11,6 +11,7 @@ use crate::dataset::{self, tables, AtomicParquet, Dataset};
 use crate::error::{Error, Result};
 use crate::ingest::als::{cell_key, DROPPED_CLASSES};
 use crate::sim::{self, AlsPoints, Footprint, Profile, SimConfig, Weighting};
+use crate::tables::offsets::{read_offsets, AppliedOffset};
 use crate::tables::sim::{sim_batch, sim_metadata, sim_schema};
 
 /// Side of the square blocks of footprints simulated together in dataset mode (m): a block's
@@ -30,13 +31,16 @@ pub fn drop_ingest_classes(p: &AlsPoints) -> AlsPoints {
 pub fn simulate_direct(points: &AlsPoints, footprints: &[Footprint], cfg: &SimConfig, profile: Profile, out: &Path) -> Result<(usize, usize)> {
     let results = sim::simulate(points, footprints, cfg)?;
     let ok = results.iter().filter(|r| r.is_ok()).count();
-    let batch = sim_batch(footprints, &results, &Weighting::ALL)?;
+    let batch = sim_batch(footprints, &results, &Weighting::ALL, &[])?;
     dataset::write_parquet(out, sim_schema(), &[batch], &sim_metadata(profile))?;
     Ok((ok, results.len() - ok))
 }
 
-/// The shots' ids and positions (`shot_number`, `x`, `y`) from the `shots/` table.
-pub fn shot_footprints(ds: &Dataset) -> Result<Vec<Footprint>> {
+/// The shots' ids and positions (`shot_number`, `x`, `y`) from the `shots/` table, each moved by
+/// its collocation offset when `<dataset>/offsets/` has one (position + (dx, dy)), with the
+/// offset applied.
+pub fn shot_footprints(ds: &Dataset) -> Result<Vec<(Footprint, Option<AppliedOffset>)>> {
+    let offsets = read_offsets(ds)?;
     let dir = ds.root().join(tables::SHOTS);
     let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi`")))?;
     let mut out = Vec::new();
@@ -54,26 +58,29 @@ pub fn shot_footprints(ds: &Dataset) -> Result<Vec<Footprint>> {
                 if x.is_null(i) || y.is_null(i) {
                     continue;
                 }
-                out.push(Footprint { id: sn.value(i).to_string(), x: x.value(i), y: y.value(i) });
+                let off = offsets.get(&sn.value(i)).cloned();
+                let (dx, dy) = off.as_ref().map_or((0.0, 0.0), |o| (o.dx, o.dy));
+                out.push((Footprint { id: sn.value(i).to_string(), x: x.value(i) + dx, y: y.value(i) + dy }, off));
             }
         }
     }
     Ok(out)
 }
 
-/// Dataset mode: simulate every shot of `<dataset>/shots/` on the `als/` table into
-/// `<dataset>/sim/shots.parquet`. `on_batch(n)` reports progress.
+/// Dataset mode: simulate every shot of `<dataset>/shots/` (moved by its collocation offset, if
+/// any) on the `als/` table into `<dataset>/sim/shots.parquet`. `on_batch(n)` reports progress.
 pub fn simulate_dataset(ds: &Dataset, cfg: &SimConfig, profile: Profile, on_batch: &dyn Fn(usize)) -> Result<(usize, usize)> {
     let shots = shot_footprints(ds)?;
     let dest = ds.table_file(tables::SIM, "shots")?;
     simulate_on_dataset(ds, shots, cfg, profile, &dest, on_batch)
 }
 
-/// Simulate `footprints` on the dataset's `als/` table into `dest` (atomically), block by block
-/// (see [`BlockSimulation`]). `on_batch(n)` reports progress.
+/// Simulate `footprints` (each with the collocation offset already applied to it, if any) on the
+/// dataset's `als/` table into `dest` (atomically), block by block (see [`BlockSimulation`]).
+/// `on_batch(n)` reports progress.
 pub fn simulate_on_dataset(
     ds: &Dataset,
-    footprints: Vec<Footprint>,
+    footprints: Vec<(Footprint, Option<AppliedOffset>)>,
     cfg: &SimConfig,
     profile: Profile,
     dest: &Path,
@@ -82,12 +89,12 @@ pub fn simulate_on_dataset(
     let mut writer = AtomicParquet::create(dest, sim_schema(), dataset::writer_properties(&sim_metadata(profile), 1 << 14))?;
     let (mut ok, mut skipped) = (0, 0);
     for block in BlockSimulation::new(ds, footprints, cfg.clone())? {
-        let (block, results) = block?;
-        let n_ok = results.iter().filter(|r| r.is_ok()).count();
+        let block = block?;
+        let n_ok = block.results.iter().filter(|r| r.is_ok()).count();
         ok += n_ok;
-        skipped += results.len() - n_ok;
-        writer.write(&sim_batch(&block, &results, &Weighting::ALL)?)?;
-        on_batch(block.len());
+        skipped += block.results.len() - n_ok;
+        writer.write(&block.batch()?)?;
+        on_batch(block.footprints.len());
     }
     writer.finish()?;
     Ok((ok, skipped))
@@ -101,16 +108,28 @@ pub struct BlockSimulation {
     als: AlsTable,
     cfg: SimConfig,
     half: f64,
-    blocks: std::vec::IntoIter<Vec<Footprint>>,
-    current: Option<(Vec<Footprint>, Result<AlsPoints>)>,
+    blocks: std::vec::IntoIter<Vec<(Footprint, Option<AppliedOffset>)>>,
+    current: Option<(Vec<(Footprint, Option<AppliedOffset>)>, Result<AlsPoints>)>,
 }
 
-/// One simulated block: its footprints and their outcomes, in the same order.
-pub type SimulatedBlock = (Vec<Footprint>, Vec<std::result::Result<sim::SimulatedFootprint, sim::SkipReason>>);
+/// One simulated block: its footprints, the offsets applied to them and their outcomes, in the
+/// same order.
+pub struct SimulatedBlock {
+    pub footprints: Vec<Footprint>,
+    pub applied: Vec<Option<AppliedOffset>>,
+    pub results: Vec<std::result::Result<sim::SimulatedFootprint, sim::SkipReason>>,
+}
+
+impl SimulatedBlock {
+    /// The block's `sim` rows.
+    pub fn batch(&self) -> Result<arrow::record_batch::RecordBatch> {
+        sim_batch(&self.footprints, &self.results, &Weighting::ALL, &self.applied)
+    }
+}
 
 impl BlockSimulation {
     /// Prepare the blocks of `footprints` (the first block is read now).
-    pub fn new(ds: &Dataset, footprints: Vec<Footprint>, cfg: SimConfig) -> Result<Self> {
+    pub fn new(ds: &Dataset, footprints: Vec<(Footprint, Option<AppliedOffset>)>, cfg: SimConfig) -> Result<Self> {
         let als = AlsTable::open(ds)?;
         let half = sim::footprint::gauss_sep(cfg.fsigma, sim::footprint::I_THRESH) as f64 + 1.0;
         let mut blocks = blocks(footprints).into_iter();
@@ -124,10 +143,10 @@ impl BlockSimulation {
     }
 
     /// The points within the footprint radius of `block`'s footprints.
-    fn read(&self, block: &[Footprint]) -> Result<AlsPoints> {
+    fn read(&self, block: &[(Footprint, Option<AppliedOffset>)]) -> Result<AlsPoints> {
         let h = self.half;
         let mut b: BBox = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
-        for f in block.iter().filter(|f| f.x.is_finite() && f.y.is_finite()) {
+        for (f, _) in block.iter().filter(|(f, _)| f.x.is_finite() && f.y.is_finite()) {
             b = [b[0].min(f.x - h), b[1].min(f.y - h), b[2].max(f.x + h), b[3].max(f.y + h)];
         }
         if b[0] > b[2] {
@@ -147,17 +166,18 @@ impl Iterator for BlockSimulation {
             Ok(p) => p,
             Err(e) => return Some(Err(e)),
         };
+        let (footprints, applied): (Vec<Footprint>, Vec<Option<AppliedOffset>>) = block.into_iter().unzip();
         let this = &*self;
         let (results, ahead) =
-            rayon::join(|| sim::simulate(&points, &block, &this.cfg), || next.as_ref().map(|b| this.read(b)));
+            rayon::join(|| sim::simulate(&points, &footprints, &this.cfg), || next.as_ref().map(|b| this.read(b)));
         self.current = next.zip(ahead);
-        Some(results.map(|r| (block, r)))
+        Some(results.map(|results| SimulatedBlock { footprints, applied, results }))
     }
 }
 
 /// Footprints grouped by [`BLOCK_M`] square, blocks in row-major order (footprints without a
 /// finite position form a block of their own, simulated as skipped).
-pub fn blocks(mut footprints: Vec<Footprint>) -> Vec<Vec<Footprint>> {
+fn blocks<T>(mut footprints: Vec<(Footprint, T)>) -> Vec<Vec<(Footprint, T)>> {
     let key = |f: &Footprint| {
         if f.x.is_finite() && f.y.is_finite() {
             Some(((f.y / BLOCK_M).floor() as i64, (f.x / BLOCK_M).floor() as i64))
@@ -165,16 +185,16 @@ pub fn blocks(mut footprints: Vec<Footprint>) -> Vec<Vec<Footprint>> {
             None
         }
     };
-    footprints.sort_by_key(|f| (key(f), cell_key(f.x, f.y)));
-    let mut out: Vec<Vec<Footprint>> = Vec::new();
+    footprints.sort_by_key(|(f, _)| (key(f), cell_key(f.x, f.y)));
+    let mut out: Vec<Vec<(Footprint, T)>> = Vec::new();
     let mut last = None;
-    for f in footprints {
+    for (f, t) in footprints {
         let k = key(&f);
         if out.is_empty() || k != last {
             out.push(Vec::new());
             last = k;
         }
-        out.last_mut().expect("a block").push(f);
+        out.last_mut().expect("a block").push((f, t));
     }
     out
 }

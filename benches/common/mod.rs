@@ -1,6 +1,9 @@
 //! Shared by the benchmarks: the 25 M-point scene and running the `gedisim` binary.
 #![allow(dead_code)]
 
+#[path = "../../tests/common/scene.rs"]
+mod scene;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
@@ -27,30 +30,8 @@ pub fn scene_25m(root: &Path) -> PathBuf {
         return path;
     }
     let start = Instant::now();
-    let src = root.join("tests/data/als/lidarforfuel_2_bas_lig.laz");
-    let mut reader = las::Reader::from_path(&src).unwrap();
-    let points: Vec<las::Point> = reader.read_all().unwrap().points().map(|p| p.unwrap()).collect();
-    let mut builder = las::Builder::from(reader.header().clone());
-    builder.point_format.is_compressed = true;
-    builder.evlrs.clear();
-    let header = builder.into_header().unwrap();
-    // The extension decides compression in `las::Writer::from_path`: keep `.laz` last.
-    let tmp = dir.join("scene25M.tmp.laz");
-    let mut writer = las::Writer::from_path(&tmp, header).unwrap();
-    for i in 0..10 {
-        for j in 0..10 {
-            for p in &points {
-                let mut q = p.clone();
-                q.x += 100.0 * i as f64;
-                q.y += 100.0 * j as f64;
-                writer.write_point(q).unwrap();
-            }
-        }
-    }
-    writer.close().unwrap();
-    drop(writer);
-    std::fs::rename(&tmp, &path).unwrap();
-    println!("generated {} ({} points) in {:.1} s", path.display(), points.len() * 100, start.elapsed().as_secs_f64());
+    let n = scene::replicated_tile(&root.join("tests/data/als/lidarforfuel_2_bas_lig.laz"), 10, 10, 100.0, &path);
+    println!("generated {} ({n} points) in {:.1} s", path.display(), start.elapsed().as_secs_f64());
     path
 }
 

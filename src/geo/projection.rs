@@ -114,6 +114,16 @@ mod tests {
     use super::*;
 
     #[test]
+    fn unproject_inverts_project() {
+        let p = Projector::new(2154).unwrap();
+        let (lon, lat) = p.unproject(368528.1, 6807456.8).unwrap();
+        let (x, y) = p.project(lon, lat).unwrap();
+        // The inverse Lambert projection iterates on latitude: the round trip is within 10 µm.
+        assert!((x - 368528.1).abs() < 1e-5 && (y - 6807456.8).abs() < 1e-5, "{x} {y}");
+        assert!((lon + 1.47).abs() < 0.01 && (lat - 48.28).abs() < 0.01, "{lon} {lat}");
+    }
+
+    #[test]
     fn lambert93_origin_is_exact() {
         let p = Projector::new(2154).unwrap();
         let (x, y) = p.project(3.0, 46.5).unwrap();
@@ -141,7 +151,7 @@ mod tests {
     }
 
     #[test]
-    fn unproject_inverts_project() {
+    fn unproject_round_trip_and_nan() {
         let p = Projector::new(2154).unwrap();
         let (x, y) = p.project(4.4991, 45.23664).unwrap();
         let (lon, lat) = p.unproject(x, y).unwrap();

@@ -167,11 +167,17 @@ pub struct CellGrid {
 impl CellGrid {
     /// Files every point with finite coordinates into cells of `size` m.
     pub fn build(points: &AlsPoints, size: f64) -> CellGrid {
+        CellGrid::from_xy(&points.x, &points.y, size)
+    }
+
+    /// Files every point (x[i], y[i]) with finite coordinates into cells of `size` m.
+    pub fn from_xy(x: &[f64], y: &[f64], size: f64) -> CellGrid {
         let abs = |v: f64| (v / size).floor() as i64;
-        let finite = |i: &usize| points.x[*i].is_finite() && points.y[*i].is_finite();
+        let n = x.len().min(y.len());
+        let finite = |i: &usize| x[*i].is_finite() && y[*i].is_finite();
         let (mut lo, mut hi) = ((i64::MAX, i64::MAX), (i64::MIN, i64::MIN));
-        for i in (0..points.len()).filter(finite) {
-            let (cx, cy) = (abs(points.x[i]), abs(points.y[i]));
+        for i in (0..n).filter(finite) {
+            let (cx, cy) = (abs(x[i]), abs(y[i]));
             lo = (lo.0.min(cx), lo.1.min(cy));
             hi = (hi.0.max(cx), hi.1.max(cy));
         }
@@ -179,10 +185,10 @@ impl CellGrid {
             return CellGrid { size, first: (0, 0), nx: 0, ny: 0, cells: Cells::build(0, &[]) };
         }
         let (nx, ny) = ((hi.0 - lo.0 + 1) as usize, (hi.1 - lo.1 + 1) as usize);
-        let filed: Vec<(u32, usize)> = (0..points.len())
+        let filed: Vec<(u32, usize)> = (0..n)
             .filter(finite)
             .map(|i| {
-                let (cx, cy) = ((abs(points.x[i]) - lo.0) as usize, (abs(points.y[i]) - lo.1) as usize);
+                let (cx, cy) = ((abs(x[i]) - lo.0) as usize, (abs(y[i]) - lo.1) as usize);
                 (i as u32, cy * nx + cx)
             })
             .collect();

@@ -411,25 +411,33 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
     let pulse = &cfg.pulse;
     let res32 = cfg.res as f32;
     let buff = WAVE_BUFFER + pulse.x.len() as f64 * pulse.res as f64 / 2.0;
-    let (top, dz, n_bins) = if q.batch_grid {
+    let (top, dz, n_bins, top_index) = if q.batch_grid {
         let dz = res32 as f64;
         let (top, bottom) = (z_hi + buff, z_lo - buff);
-        (top, dz, ((top - bottom) / dz) as usize)
+        (top, dz, ((top - bottom) / dz) as usize, None)
     } else {
         // Top edge on a multiple of dz, so neighbouring footprints share bin boundaries.
         let dz = cfg.res;
-        let top = ((z_hi + buff) / dz).ceil() * dz;
-        (top, dz, ((top - (z_lo - buff)) / dz).ceil() as usize)
+        let top_index = ((z_hi + buff) / dz).ceil();
+        let top = top_index * dz;
+        (top, dz, ((top - (z_lo - buff)) / dz).ceil() as usize, Some(top_index as i64))
     };
     if !(n_bins > 0 && n_bins < 10_000_000) {
         return Err(SkipReason::NoSignal);
     }
+    // With an absolute grid a return's bin is read from its own height alone (bin m of the
+    // absolute grid holds [m·dz, (m+1)·dz)), so every footprint — and the collocation raster,
+    // `crate::collocate` — bins a return identically, even one lying on a bin boundary.
+    let bin_of = |z: f64| match top_index {
+        Some(t) => t - 1 - absolute_bin(z, dz),
+        None => ((top - z) / dz).floor() as i64,
+    };
 
     let mut waves = WaveSet::<T>::zeros(n_bins);
     match cfg.pulse_timing {
         PulseTiming::AfterBinning => {
             for c in &contributions {
-                waves.add(((top - c.z) / dz).floor() as i64, c, 1.0);
+                waves.add(bin_of(c.z), c, 1.0);
             }
             waves.convolve(&tap_offsets(pulse, cfg), &pulse.y, q.divide_by_taps);
         }
@@ -515,10 +523,16 @@ fn weight_cut_off_sq(fsigma: f32) -> f64 {
     (r + 0.01) * (r + 0.01)
 }
 
+/// Index of the bin of the absolute vertical grid holding height `z`: bin m covers
+/// [m·dz, (m+1)·dz) (the `default` profile's grid).
+pub fn absolute_bin(z: f64, dz: f64) -> i64 {
+    (z / dz).floor() as i64
+}
+
 /// Bin offset of each pulse sample for the convolution after binning: the reference computes
 /// floor((centBin − j)·pRes/res) in f32 (some taps land one bin off, §1.7); the default profile
 /// rounds when the ratio is within 10⁻⁴ of an integer.
-fn tap_offsets(pulse: &Pulse, cfg: &SimConfig) -> Vec<i64> {
+pub fn tap_offsets(pulse: &Pulse, cfg: &SimConfig) -> Vec<i64> {
     let c = pulse.cent_bin as i64;
     (0..pulse.x.len() as i64)
         .map(|j| {

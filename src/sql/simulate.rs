@@ -1,6 +1,7 @@
 //! `gedi_simulate([profile])`: the simulation as a SQL table function. It streams the `sim`
 //! rows of every ingested shot, block by block ([`crate::simulate::BlockSimulation`]): each
-//! block reads only the ALS row groups its footprints touch, then the simulation kernel.
+//! block reads only the ALS row groups its footprints touch, then the simulation kernel. Shots are moved by
+//! their collocation offsets when the dataset has an `offsets/` table.
 
 use std::fmt;
 use std::sync::Arc;
@@ -17,9 +18,9 @@ use datafusion::physical_plan::streaming::{PartitionStream, StreamingTableExec};
 use datafusion::physical_plan::{ExecutionPlan, SendableRecordBatchStream};
 
 use crate::dataset::Dataset;
-use crate::sim::{Profile, SimConfig, Weighting};
+use crate::sim::{Profile, SimConfig};
 use crate::simulate::{shot_footprints, BlockSimulation};
-use crate::tables::sim::{sim_batch, sim_schema};
+use crate::tables::sim::sim_schema;
 
 /// The `gedi_simulate` table function of one dataset.
 #[derive(Debug)]
@@ -91,8 +92,7 @@ impl PartitionStream for SimulatedShots {
             let shots = shot_footprints(&this.dataset)?;
             let blocks = BlockSimulation::new(&this.dataset, shots, SimConfig::new(this.profile))?;
             Ok(Box::new(blocks.map(|block| {
-                let (block, results) = block.map_err(to_df)?;
-                sim_batch(&block, &results, &Weighting::ALL).map_err(to_df)
+                block.map_err(to_df)?.batch().map_err(to_df)
             })))
         };
         let iter: Box<dyn Iterator<Item = DfResult<arrow::record_batch::RecordBatch>> + Send> = match batches() {

@@ -2,6 +2,7 @@
 
 pub mod l2a;
 pub mod results;
+pub mod offsets;
 pub mod sim;
 
 use std::sync::Arc;

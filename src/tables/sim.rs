@@ -1,4 +1,5 @@
-//! The `sim` table: one row per footprint × weighting (the `simulate` contract, CONTRACTS.md).
+//! The `sim` table: one row per footprint × weighting (the `simulate` contract, CONTRACTS.md),
+//! with the collocation offset applied to the shot, if any.
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -9,6 +10,7 @@ use arrow::record_batch::RecordBatch;
 
 use super::{list_f32, list_f32_builder};
 use crate::error::{Error, Result};
+use super::offsets::AppliedOffset;
 use crate::sim::{Footprint, Profile, SimulatedFootprint, SkipReason, Weighting};
 
 /// Schema of the simulated-waveform table.
@@ -35,6 +37,10 @@ pub fn sim_schema() -> SchemaRef {
         f("mean_scan_angle_deg", DataType::Float32, true),
         f("covered_fraction", DataType::Float32, true),
         f("rh", list_f32(), true),
+        f("offset_segment_id", DataType::Utf8, true),
+        f("offset_dx", DataType::Float64, true),
+        f("offset_dy", DataType::Float64, true),
+        f("offset_dz", DataType::Float64, true),
     ]))
 }
 
@@ -61,11 +67,13 @@ pub fn status(r: &std::result::Result<SimulatedFootprint, SkipReason>) -> String
 }
 
 /// Rows for `footprints` and their results (same order): one per footprint × weighting; a skipped
-/// footprint keeps its rows with a `status` and null values.
+/// footprint keeps its rows with a `status` and null values. `applied` gives the collocation
+/// offset already added to each footprint's position (empty: none).
 pub fn sim_batch(
     footprints: &[Footprint],
     results: &[std::result::Result<SimulatedFootprint, SkipReason>],
     weightings: &[Weighting],
+    applied: &[Option<AppliedOffset>],
 ) -> Result<RecordBatch> {
     let n = footprints.len() * weightings.len();
     let mut id = Vec::with_capacity(n);
@@ -77,8 +85,14 @@ pub fn sim_batch(
         (list_f32_builder(n), list_f32_builder(n), list_f32_builder(n), list_f32_builder(n));
     let (mut g, mut top, mut slope, mut cover) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let (mut npts, mut pd, mut bd, mut scan, mut cov) = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    for (fp, r) in footprints.iter().zip(results) {
+    let (mut off_id, mut off_dx, mut off_dy, mut off_dz) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for (k, (fp, r)) in footprints.iter().zip(results).enumerate() {
+        let off = applied.get(k).and_then(|o| o.as_ref());
         for &w in weightings {
+            off_id.push(off.map(|o| o.segment_id.clone()));
+            off_dx.push(off.map(|o| o.dx));
+            off_dy.push(off.map(|o| o.dy));
+            off_dz.push(off.map(|o| o.dz));
             id.push(fp.id.clone());
             x.push(fp.x);
             y.push(fp.y);
@@ -150,6 +164,10 @@ pub fn sim_batch(
         Arc::new(Float32Array::from(scan)),
         Arc::new(Float32Array::from(cov)),
         Arc::new(rh.finish()),
+        Arc::new(StringArray::from(off_id)),
+        Arc::new(Float64Array::from(off_dx)),
+        Arc::new(Float64Array::from(off_dy)),
+        Arc::new(Float64Array::from(off_dz)),
     ];
     RecordBatch::try_new(sim_schema(), cols).map_err(|e| Error::Usage(format!("sim table: {e}")))
 }

@@ -49,3 +49,6 @@ pub fn files_with_suffix(dir: &Path, suffix: &str) -> Vec<PathBuf> {
 }
 
 pub mod nasa;
+
+pub mod planted;
+pub mod scene;

@@ -1,0 +1,187 @@
+//! The `offsets` table: one row per collocated segment (CONTRACTS.md, "Collocate"), and the
+//! per-shot lookup that `simulate` applies.
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::Arc;
+
+use arrow::array::{ArrayRef, AsArray, Float64Array, ListBuilder, StringArray, UInt32Array, UInt64Builder};
+use arrow::datatypes::{DataType, Field, Float64Type, Schema, SchemaRef, UInt64Type};
+use arrow::record_batch::RecordBatch;
+
+use crate::dataset::{self, tables, Dataset};
+use crate::error::{Error, Result};
+
+/// One solved segment.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OffsetRow {
+    /// `<granule>:<beam or ALL>:<first shot number>` (at the shot level, the shot itself).
+    pub segment_id: String,
+    pub granule: String,
+    /// Beam group name, or `ALL` at the track level.
+    pub beam: String,
+    /// `beam`, `track` or `shot`.
+    pub level: String,
+    /// The shots the offset applies to.
+    pub shot_numbers: Vec<u64>,
+    /// Waveforms correlated (at the shot level the shot and its neighbours).
+    pub n_shots: u32,
+    /// m, to add to the reported position.
+    pub dx: f64,
+    pub dy: f64,
+    /// m, GEDI height after subtracting the geoid offset minus ALS height of the same surface.
+    pub dz: f64,
+    /// m, mean geoid offset N used for the shots.
+    pub geoid_offset: f64,
+    /// Mean Pearson r at zero offset.
+    pub r_before: f64,
+    /// Mean Pearson r at the optimum.
+    pub r_after: f64,
+    pub dx_halfwidth: f64,
+    pub dy_halfwidth: f64,
+    pub dz_halfwidth: f64,
+}
+
+/// Schema of the offsets table.
+pub fn offsets_schema() -> SchemaRef {
+    let f = |n: &str, t: DataType| Field::new(n, t, false);
+    Arc::new(Schema::new(vec![
+        f("segment_id", DataType::Utf8),
+        f("granule", DataType::Utf8),
+        f("beam", DataType::Utf8),
+        f("level", DataType::Utf8),
+        f("shot_numbers", DataType::List(Arc::new(Field::new_list_field(DataType::UInt64, true)))),
+        f("n_shots", DataType::UInt32),
+        f("dx", DataType::Float64),
+        f("dy", DataType::Float64),
+        f("dz", DataType::Float64),
+        f("geoid_offset", DataType::Float64),
+        f("r_before", DataType::Float64),
+        f("r_after", DataType::Float64),
+        f("dx_halfwidth", DataType::Float64),
+        f("dy_halfwidth", DataType::Float64),
+        f("dz_halfwidth", DataType::Float64),
+    ]))
+}
+
+/// The rows as one record batch.
+pub fn offsets_batch(rows: &[OffsetRow]) -> Result<RecordBatch> {
+    let strings = |f: fn(&OffsetRow) -> &str| Arc::new(StringArray::from_iter_values(rows.iter().map(f))) as ArrayRef;
+    let floats = |f: fn(&OffsetRow) -> f64| Arc::new(Float64Array::from_iter_values(rows.iter().map(f))) as ArrayRef;
+    let mut shots = ListBuilder::new(UInt64Builder::new());
+    for r in rows {
+        shots.append_value(r.shot_numbers.iter().map(|&s| Some(s)));
+    }
+    let cols: Vec<ArrayRef> = vec![
+        strings(|r| &r.segment_id),
+        strings(|r| &r.granule),
+        strings(|r| &r.beam),
+        strings(|r| &r.level),
+        Arc::new(shots.finish()),
+        Arc::new(UInt32Array::from_iter_values(rows.iter().map(|r| r.n_shots))),
+        floats(|r| r.dx),
+        floats(|r| r.dy),
+        floats(|r| r.dz),
+        floats(|r| r.geoid_offset),
+        floats(|r| r.r_before),
+        floats(|r| r.r_after),
+        floats(|r| r.dx_halfwidth),
+        floats(|r| r.dy_halfwidth),
+        floats(|r| r.dz_halfwidth),
+    ];
+    RecordBatch::try_new(offsets_schema(), cols).map_err(|e| Error::Usage(format!("offsets table: {e}")))
+}
+
+/// The offset applied to one shot by `simulate`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AppliedOffset {
+    /// Segment the offset comes from.
+    pub segment_id: String,
+    pub dx: f64,
+    pub dy: f64,
+    pub dz: f64,
+}
+
+/// The offset of every shot listed in `<dataset>/offsets/`, by shot number; empty when the
+/// dataset has no offsets table. A shot listed twice is an error naming the file.
+pub fn read_offsets(ds: &Dataset) -> Result<HashMap<u64, AppliedOffset>> {
+    let dir = ds.root().join(tables::OFFSETS);
+    let mut out = HashMap::new();
+    if !dir.is_dir() {
+        return Ok(out);
+    }
+    let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, e))?;
+    for f in files {
+        read_file(&f, &mut out)?;
+    }
+    Ok(out)
+}
+
+fn read_file(path: &Path, out: &mut HashMap<u64, AppliedOffset>) -> Result<()> {
+    let file = std::fs::File::open(path).map_err(|e| Error::file(path, e))?;
+    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+        .and_then(|b| b.build())
+        .map_err(|e| Error::table(path, e))?;
+    for b in reader {
+        let b = b.map_err(|e| Error::table(path, e))?;
+        let col = |n: &str| b.column_by_name(n).ok_or_else(|| Error::field(path, n, "column missing from the offsets table"));
+        let f64s = |n: &str| -> Result<Float64Array> {
+            col(n)?.as_primitive_opt::<Float64Type>().cloned().ok_or_else(|| Error::field(path, n, "not float64"))
+        };
+        let ids = col("segment_id")?.as_string_opt::<i32>().cloned().ok_or_else(|| Error::field(path, "segment_id", "not a string"))?;
+        let shots = col("shot_numbers")?.as_list_opt::<i32>().cloned().ok_or_else(|| Error::field(path, "shot_numbers", "not a list"))?;
+        let (dx, dy, dz) = (f64s("dx")?, f64s("dy")?, f64s("dz")?);
+        for i in 0..b.num_rows() {
+            let list = shots.value(i);
+            let list = list.as_primitive_opt::<UInt64Type>().ok_or_else(|| Error::field(path, "shot_numbers", "not a list of uint64"))?;
+            for s in list.iter().flatten() {
+                let applied = AppliedOffset { segment_id: ids.value(i).to_string(), dx: dx.value(i), dy: dy.value(i), dz: dz.value(i) };
+                if !(applied.dx.is_finite() && applied.dy.is_finite()) {
+                    return Err(Error::field(path, "dx", format!("segment {}: not finite", applied.segment_id)));
+                }
+                if out.insert(s, applied).is_some() {
+                    return Err(Error::field(path, "shot_numbers", format!("shot {s} is in two segments")));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rows_round_trip_through_a_dataset() {
+        let tmp = tempfile::tempdir().unwrap();
+        let ds = Dataset::create(tmp.path()).unwrap();
+        assert!(read_offsets(&ds).unwrap().is_empty());
+        let row = OffsetRow {
+            segment_id: "g:BEAM0101:7".into(),
+            granule: "g".into(),
+            beam: "BEAM0101".into(),
+            level: "beam".into(),
+            shot_numbers: vec![7, 8, u64::MAX],
+            n_shots: 3,
+            dx: 4.0,
+            dy: -3.0,
+            dz: 47.5,
+            geoid_offset: 0.0,
+            r_before: 0.1,
+            r_after: 0.99,
+            dx_halfwidth: 1.0,
+            dy_halfwidth: 1.0,
+            dz_halfwidth: 0.1,
+        };
+        let dest = ds.table_file(tables::OFFSETS, "offsets").unwrap();
+        dataset::write_parquet(&dest, offsets_schema(), &[offsets_batch(std::slice::from_ref(&row)).unwrap()], &Default::default()).unwrap();
+        let got = read_offsets(&ds).unwrap();
+        assert_eq!(got.len(), 3);
+        assert_eq!(got[&u64::MAX], AppliedOffset { segment_id: row.segment_id.clone(), dx: 4.0, dy: -3.0, dz: 47.5 });
+        let twice = [row.clone(), row];
+        dataset::write_parquet(&dest, offsets_schema(), &[offsets_batch(&twice).unwrap()], &Default::default()).unwrap();
+        let err = read_offsets(&ds).unwrap_err().to_string();
+        assert!(err.contains("shot_numbers") && err.contains("offsets.parquet"), "{err}");
+    }
+}
