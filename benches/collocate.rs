@@ -12,16 +12,15 @@
 
 #[path = "../tests/common/planted.rs"]
 mod planted;
-#[path = "../tests/common/scene.rs"]
-mod scene;
+mod common;
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::Instant;
 
 use arrow::array::AsArray;
 use arrow::datatypes::{Float64Type, UInt32Type};
 use gedisim::dataset::Dataset;
+use common::{field, run, scene_25m};
 use planted::{write_planted_l1b, Plant, PlantedBeam};
 
 /// Scene extent (simulator-reference.md §6.3).
@@ -32,14 +31,8 @@ const REFERENCE_GB: f64 = 1.27;
 
 fn main() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let laz = scene_25m(root);
     let bench_data = root.join("target/bench-data");
-    std::fs::create_dir_all(&bench_data).unwrap();
-    let laz = bench_data.join("scene25M.laz");
-    if !laz.exists() {
-        let t = Instant::now();
-        let n = scene::replicated_tile(&root.join("tests/data/als/lidarforfuel_2_bas_lig.laz"), 10, 10, 100.0, &laz);
-        println!("generated {} ({n} points) in {:.1} s", laz.display(), t.elapsed().as_secs_f64());
-    }
     let als_dataset = bench_data.join("scene25M-dataset");
     if !als_dataset.join("tiles").is_dir() {
         let t = Instant::now();
@@ -67,11 +60,11 @@ fn main() {
     let t = Instant::now();
     let out = run(&["collocate", "--dataset", tmp.path().to_str().unwrap(), "--stats"]);
     let wall = t.elapsed().as_secs_f64();
-    let rss_mb = field(&out, " MB,").unwrap_or(f64::NAN);
+    let rss_mb = field(&out, " MB,");
     println!("collocate benchmark: 24,719,400 ALS points, 40 shots, ±10 m at 1 m (441 offsets), vertical solve included (2 cores)");
     println!("  gedisim collocate : {wall:.2} s wall (process), {}", out.trim());
     println!("  reference         : {REFERENCE_S} s, {REFERENCE_GB} GB (collocateWaves, simulator-reference.md §6.4)");
-    let cpu = field(&out, " s, peak").unwrap_or(f64::NAN);
+    let cpu = field(&out, " s, peak");
     println!(
         "  speed-up {:.0}× (wall), {:.0}× (CPU time against the reference's single-threaded user time 100.0 s); memory {:.1}× smaller",
         REFERENCE_S / wall,
@@ -79,19 +72,6 @@ fn main() {
         REFERENCE_GB * 1024.0 / rss_mb
     );
     print_offsets(tmp.path(), &plant);
-}
-
-/// Run the `gedisim` binary and return its stdout (stderr passed through).
-fn run(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_gedisim")).args(args).output().expect("run gedisim");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-/// The number printed just before `suffix`.
-fn field(line: &str, suffix: &str) -> Option<f64> {
-    let end = line.find(suffix)?;
-    line[..end].trim_end().rsplit(' ').next()?.parse().ok()
 }
 
 fn print_offsets(ds: &Path, plant: &Plant) {

@@ -133,12 +133,12 @@ impl BlockSimulation {
         let als = AlsTable::open(ds)?;
         let half = sim::footprint::gauss_sep(cfg.fsigma, sim::footprint::I_THRESH) as f64 + 1.0;
         let mut blocks = blocks(footprints).into_iter();
-        let mut this = BlockSimulation { als, cfg, half, blocks: std::vec::IntoIter::default(), current: None };
-        this.current = blocks.next().map(|b| {
+        let first = blocks.next();
+        let mut this = BlockSimulation { als, cfg, half, blocks, current: None };
+        this.current = first.map(|b| {
             let points = this.read(&b);
             (b, points)
         });
-        this.blocks = blocks;
         Ok(this)
     }
 

@@ -88,6 +88,26 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     std::fs::rename(&tmp, path).map_err(|e| Error::file(path, format!("cannot rename into place: {e}")))
 }
 
+/// The legend of a chart's labelled series, drawn the same way in every figure.
+fn draw_legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+    font_size: u32,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    chart
+        .configure_series_labels()
+        .position(position)
+        .label_font(font(font_size))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()?;
+    Ok(())
+}
+
+
 fn font(size: u32) -> TextStyle<'static> {
     (FAMILY, size).into_font().color(&BLACK)
 }
@@ -187,13 +207,7 @@ impl Figure for MsdBars {
                     .label(*label)
                     .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 14, y + 6)], color.filled()));
             }
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperLeft)
-                .label_font(font(14))
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw()?;
+            draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 14)?;
         }
         Ok(())
     }
@@ -266,17 +280,8 @@ impl Figure for LinePanels {
                     .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], color));
             }
             if !series.is_empty() {
-                chart
-                    .configure_series_labels()
-                    .position(if self.legend_lower {
-                        SeriesLabelPosition::LowerLeft
-                    } else {
-                        SeriesLabelPosition::UpperLeft
-                    })
-                    .label_font(font(13))
-                    .background_style(WHITE.mix(0.85))
-                    .border_style(BLACK)
-                    .draw()?;
+                let corner = if self.legend_lower { SeriesLabelPosition::LowerLeft } else { SeriesLabelPosition::UpperLeft };
+                draw_legend(&mut chart, corner, 13)?;
             }
         }
         Ok(())
@@ -340,13 +345,7 @@ impl Figure for PhenologyBands {
                     .label(label)
                     .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], color.stroke_width(2)));
             }
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperLeft)
-                .label_font(font(13))
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw()?;
+            draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 13)?;
         }
         Ok(())
     }
@@ -395,13 +394,7 @@ impl Figure for CollocationScatter {
             .draw_series(self.points.iter().map(|&(a, b)| Circle::new((a, b), 4, COLORS[0].mix(0.8).filled())))?
             .label(format!("{} segments", self.points.len()))
             .legend(|(x, y)| Circle::new((x + 7, y), 4, COLORS[0].filled()));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .label_font(font(13))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()?;
+        draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 13)?;
         Ok(())
     }
 }
@@ -452,13 +445,7 @@ impl Figure for Waveforms {
                     .label(label.as_str())
                     .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], color.stroke_width(2)));
             }
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .label_font(font(13))
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw()?;
+            draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 13)?;
         }
         Ok(())
     }
