@@ -8,6 +8,8 @@ pub mod als_table;
 pub mod collocate;
 pub mod collocation;
 pub mod dataset;
+pub mod diagnose;
+pub mod diagnosis;
 pub mod error;
 pub mod gedi;
 pub mod geo;
