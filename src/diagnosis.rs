@@ -432,7 +432,7 @@ fn to_json(d: &Diagnosis, r: &CaseReport) -> Value {
             "waveform_residual": {"height_m": w.waveform.height, "real": w.waveform.real, "simulated": w.waveform.simulated, "residual": w.waveform.residual, "n_shots": w.waveform.n_shots},
         },
         "shots": {"read": r.shots_read, "used": d.n_shots, "pairs_ground_mismatch": d.mismatched, "dropped": r.dropped.iter().map(|(k, n)| json!({"reason": k, "n": n})).collect::<Vec<_>>()},
-        "settings": {"min_shrink_lower": crate::diagnose::rank::MIN_SHRINK_LOWER, "bootstrap": crate::diagnose::rank::BOOTSTRAP, "folds": 2, "split": "by track (granule/beam)"},
+        "settings": {"min_shrink_lower": crate::diagnose::rank::MIN_SHRINK_LOWER, "min_gain_m": crate::diagnose::rank::MIN_GAIN_M, "bootstrap": crate::diagnose::rank::BOOTSTRAP, "folds": 2, "split": "by track (granule/beam)"},
     })
 }
 

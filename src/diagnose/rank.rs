@@ -15,6 +15,9 @@ use crate::scenario::rng::Stream;
 /// An effect is named only when the lower bound of its held-out shrink's 95 % interval reaches
 /// this: a gain that could be noise, or a few percent, leaves the gap `unexplained`.
 pub const MIN_SHRINK_LOWER: f64 = 0.10;
+/// …and the lower end of its gain's interval must reach this (m of systematic gap): a relative
+/// shrink of a gap that is already within a few centimetres of nothing names nothing either.
+pub const MIN_GAIN_M: f64 = 0.02;
 /// Bootstrap resamples of the tracks.
 pub const BOOTSTRAP: usize = 400;
 /// Most effects on the ladder.
@@ -151,9 +154,10 @@ pub struct Trial {
 }
 
 impl Trial {
-    /// The interval admits a real gain of at least [`MIN_SHRINK_LOWER`].
+    /// The intervals admit a real gain: shrink ≥ [`MIN_SHRINK_LOWER`] and gain ≥ [`MIN_GAIN_M`]
+    /// at their lower ends.
     pub fn explains(&self) -> bool {
-        self.held_out.ci95[0] >= MIN_SHRINK_LOWER
+        self.held_out.ci95[0] >= MIN_SHRINK_LOWER && self.held_out.gain_ci95[0] >= MIN_GAIN_M
     }
 }
 
