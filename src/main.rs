@@ -274,7 +274,7 @@ struct RunArgs {
     out: PathBuf,
     /// Keep shots at most this many days before the start or after the end of the ALS acquisition
     /// of their footprint (not applied where the tiles carry no date).
-    #[arg(long, default_value_t = gedisim::study::select::DEFAULT_MAX_DAYS_APART)]
+    #[arg(long, allow_hyphen_values = true, default_value_t = gedisim::study::select::DEFAULT_MAX_DAYS_APART)]
     max_days_apart: f64,
     /// Collocation level of new granules (see `collocate`).
     #[arg(long, value_enum, default_value = "beam")]
