@@ -769,7 +769,12 @@ fn print_run(r: &gedisim::run::RunReport) {
     }
     let simulated: Vec<&gedisim::run::GranuleRun> = r.granules.iter().filter(|g| g.simulated.is_some()).collect();
     if simulated.is_empty() {
-        eprintln!("simulation: up to date, nothing simulated");
+        let covered: usize = r.granules.iter().map(|g| g.covered).sum();
+        if covered == 0 {
+            eprintln!("simulation: no shot footprint is covered by the ALS, nothing simulated");
+        } else {
+            eprintln!("simulation: up to date, nothing simulated ({covered} covered shots)");
+        }
     } else {
         let (ok, skipped) = simulated.iter().filter_map(|g| g.simulated).fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
         eprintln!("simulation: {} shots of {} granules ({ok} simulated, {skipped} skipped by the simulator)", ok + skipped, simulated.len());
@@ -780,7 +785,7 @@ fn print_run(r: &gedisim::run::RunReport) {
         eprintln!("nothing new since the last run: no ingest, collocation or simulation; results unchanged");
     }
     let t = &r.totals;
-    println!("Filters, all {} granules (rows = shots × 3 weightings × 7 algorithms; a row counts at the first filter it fails):", r.granules.len());
+    println!("Filters over the {} granules of the dataset (rows = shots × 3 weightings × 7 algorithms; a row counts at the first filter it fails):", r.granules.len());
     println!("  {:>10}  candidate rows ({} shots)", t.candidates, t.shots);
     for f in Filter::ALL {
         let mut line = format!("− {:>10}  {}", t.removed_by(f), f.describe(&r.rules));

@@ -109,7 +109,7 @@ impl Step {
     /// What the step does, for people.
     pub fn label(self) -> &'static str {
         match self {
-            Step::Scenario => "scenario",
+            Step::Scenario => "building the world (scenario)",
             Step::IngestAls => "ingest ALS",
             Step::IngestGedi => "ingest GEDI",
             Step::Strata => "strata",
@@ -407,13 +407,15 @@ fn collocate(ds: &Dataset, opts: &RunOptions, granules: &[GranuleFile], progress
     let solved = plan.solve(&|| progress.advance(1));
     progress.finish();
     let (rows, collocation) = solved?;
-    // Keep the other granules' segments; replace those of the granules just collocated.
+    // Keep the other granules' segments; replace those of the granules just collocated, and drop
+    // those of granules no longer in `shots/` (a granule renamed when its L1B file arrived).
     let replaced: HashSet<&str> = needed.iter().map(|g| g.name.as_str()).collect();
+    let current: HashSet<&str> = granules.iter().map(|g| g.name.as_str()).collect();
     let mut batches = Vec::new();
     let mut kept_levels = HashSet::new();
     for b in existing {
         let g = granule_col(&b).ok_or_else(|| Error::field(&dest, "granule", "missing or not a string"))?;
-        let keep: BooleanArray = g.iter().map(|v| Some(!v.is_some_and(|v| replaced.contains(v)))).collect();
+        let keep: BooleanArray = g.iter().map(|v| Some(v.is_some_and(|v| current.contains(v) && !replaced.contains(v)))).collect();
         let b = arrow::compute::filter_record_batch(&b, &keep).map_err(|e| Error::table(&dest, e))?;
         if let Some(l) = b.column_by_name("level").and_then(|c| c.as_string_opt::<i32>().cloned()) {
             kept_levels.extend(l.iter().flatten().map(str::to_string));
@@ -448,13 +450,16 @@ struct StudyInputs {
     read_radius: f64,
     offsets: HashMap<u64, AppliedOffset>,
     r_after: HashMap<String, f64>,
-    tiles: Vec<(TileWindow, String)>,
+    /// Every tile's extent and acquisition window, and its content hash (same order).
+    tiles: Vec<TileWindow>,
+    tile_hashes: Vec<String>,
     strata: HashMap<u64, String>,
 }
 
 impl StudyInputs {
     fn read(ds: &Dataset) -> Result<Self> {
         let cfg = SimConfig::new(Profile::Default);
+        let (tiles, tile_hashes) = read_tiles(ds)?.into_iter().unzip();
         Ok(StudyInputs {
             als: AlsTable::open(ds)?,
             cover_radius: 2.0 * cfg.fsigma as f64,
@@ -462,7 +467,8 @@ impl StudyInputs {
             cfg,
             offsets: read_offsets(ds)?,
             r_after: read_r_after(ds)?,
-            tiles: read_tiles(ds)?,
+            tiles,
+            tile_hashes,
             strata: read_strata(ds)?,
         })
     }
@@ -623,6 +629,7 @@ fn plan_granule(ds: &Dataset, file: GranuleFile, inputs: &StudyInputs, rules: &S
     let mut tiles: Vec<&str> = inputs
         .tiles
         .iter()
+        .zip(&inputs.tile_hashes)
         .filter(|(t, _)| covered.iter().any(|c| c.footprint.x + r >= t.xmin && c.footprint.x - r <= t.xmax && c.footprint.y + r >= t.ymin && c.footprint.y - r <= t.ymax))
         .map(|(_, hash)| hash.as_str())
         .collect();
@@ -713,12 +720,11 @@ fn granule_results(p: &mut GranulePlan, inputs: &StudyInputs, rules: &StudyRules
     let mut counts = FilterCounts::default();
     counts.remove_shots((p.run.shots - p.covered.len()) as u64, Filter::AlsCoverage);
     let mut rows = Vec::new();
-    let tiles: Vec<TileWindow> = inputs.tiles.iter().map(|(t, _)| t.clone()).collect();
     for (c, shot) in p.covered.iter().zip(&shots) {
         let segment = c.offset.as_ref().map(|o| SegmentFacts { dz: o.dz, r_after: inputs.r_after.get(&o.segment_id).copied() });
         let ctx = ShotContext {
             sim: sims.get(&shot.shot_number),
-            window: als_window(&tiles, c.footprint.x, c.footprint.y),
+            window: als_window(&inputs.tiles, c.footprint.x, c.footprint.y),
             segment,
             forest_type: inputs.strata.get(&shot.shot_number).map(String::as_str),
         };
