@@ -111,20 +111,30 @@ const SHOT_UNIT: usize = 64;
 impl<'a> Collocation<'a> {
     /// Reads the shots' cheap columns and plans the segments (pass A).
     pub fn plan(ds: &'a Dataset, opts: &CollocateOptions) -> Result<Collocation<'a>> {
-        let dir = ds.root().join(tables::SHOTS);
-        let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi`")))?;
-        Self::plan_files(ds, opts, files)
+        Self::plan_some(ds, opts, None)
     }
 
     /// [`plan`](Self::plan) restricted to some files of `shots/` (one granule each): what `run`
     /// uses to collocate only the granules that arrived since the last run.
     pub fn plan_files(ds: &'a Dataset, opts: &CollocateOptions, files: Vec<PathBuf>) -> Result<Collocation<'a>> {
+        Self::plan_some(ds, opts, Some(files))
+    }
+
+    /// The given files of `shots/`, or all of them.
+    fn plan_some(ds: &'a Dataset, opts: &CollocateOptions, files: Option<Vec<PathBuf>>) -> Result<Collocation<'a>> {
         if opts.segment == 0 {
             return Err(Error::Usage("--segment must be at least 1".into()));
         }
         let cfg = CollocateConfig::new(opts.max_shift, opts.step)?;
         cfg.validate()?;
         let als = AlsTable::open(ds)?;
+        let files = match files {
+            Some(f) => f,
+            None => {
+                let dir = ds.root().join(tables::SHOTS);
+                dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi`")))?
+            }
+        };
         let mut report = CollocateReport { table: ds.root().join(tables::OFFSETS).join("offsets.parquet"), ..Default::default() };
         let mut granules = Vec::new();
         for path in files {
