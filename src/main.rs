@@ -543,14 +543,9 @@ fn simulate(a: SimulateArgs) -> Result<()> {
 }
 
 fn collocate(a: CollocateArgs) -> Result<()> {
-    use gedisim::collocate::segments::Level;
     use gedisim::collocation::{CollocateOptions, Collocation};
     let start = Instant::now();
-    let level = match a.level {
-        LevelArg::Beam => Level::Beam,
-        LevelArg::Track => Level::Track,
-        LevelArg::Shot => Level::Shot,
-    };
+    let level = collocate_level(a.level);
     let ds = Dataset::open(&a.dataset)?;
     let opts = CollocateOptions { level, segment: a.segment, max_shift: a.max_shift, step: a.step };
     let plan = Collocation::plan(&ds, &opts)?;
@@ -649,7 +644,7 @@ fn report(a: ReportArgs) -> Result<()> {
     Ok(())
 }
 
-fn level(l: LevelArg) -> gedisim::collocate::segments::Level {
+fn collocate_level(l: LevelArg) -> gedisim::collocate::segments::Level {
     use gedisim::collocate::segments::Level;
     match l {
         LevelArg::Beam => Level::Beam,
@@ -721,7 +716,7 @@ fn run_command(a: RunArgs) -> Result<()> {
         landcover: a.landcover,
         epsg: a.epsg,
         geoid_offset: a.geoid_offset,
-        collocate: CollocateOptions { level: level(a.level), segment: a.segment, ..CollocateOptions::default() },
+        collocate: CollocateOptions { level: collocate_level(a.level), segment: a.segment, ..CollocateOptions::default() },
         rules: gedisim::study::select::StudyRules { max_days_apart: a.max_days_apart, ..Default::default() },
         ..RunOptions::new(&a.out)
     };
