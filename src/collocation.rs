@@ -19,7 +19,7 @@ use parquet::arrow::ProjectionMask;
 
 use crate::als_table::{AlsTable, BBox};
 use crate::collocate::profile::{real_profile, ProfileError};
-use crate::collocate::segments::{plan, Level, SegmentPlan, Slot};
+use crate::collocate::segments::{plan, Level, SegmentPlan, Slot, MIN_SEGMENT};
 use crate::collocate::{collocate_unit, CollocateConfig, PointCloud, ShotInput};
 use crate::dataset::{self, tables, Dataset};
 use crate::error::{Error, Result};
@@ -36,11 +36,14 @@ pub struct CollocateOptions {
     pub max_shift: f64,
     /// Horizontal grid step (m).
     pub step: f64,
+    /// Fewest shots (beam) or steps (track) of a segment ([`MIN_SEGMENT`] by default); a
+    /// shorter run is reported and not solved. 1 solves every run, however short.
+    pub min_segment: usize,
 }
 
 impl Default for CollocateOptions {
     fn default() -> Self {
-        CollocateOptions { level: Level::Beam, segment: 40, max_shift: 10.0, step: 1.0 }
+        CollocateOptions { level: Level::Beam, segment: 40, max_shift: 10.0, step: 1.0, min_segment: MIN_SEGMENT }
     }
 }
 
@@ -324,7 +327,7 @@ fn plan_units(granule: &str, shots: &[ShotRecord], opts: &CollocateOptions, shor
     };
     let mut units = Vec::new();
     for (beam, idx, slots) in groups {
-        let (plans, runs) = plan(&slots, opts.level, opts.segment);
+        let (plans, runs) = plan(&slots, opts.level, opts.segment, opts.min_segment);
         for r in runs {
             let first = shots[idx[r.shots[0]]].shot_number;
             short.push(format!("{granule}:{beam}: {} usable shots from shot {first}", r.shots.len()));

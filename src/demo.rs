@@ -58,10 +58,10 @@ pub fn layout(out: &Path) -> (PathBuf, PathBuf) {
 }
 
 /// Collocation of the demo: the bundled tiles are 50–100 m wide, so each beam of a granule
-/// crosses a tile with 0–3 shots, too few for beam segments (≥ 20 shots); each shot is collocated
-/// with its neighbours along the beam instead.
+/// crosses a tile with 0–3 shots, fewer than a beam segment's default minimum (20): every run is
+/// solved (`min_segment` 1), one offset per beam of a granule.
 pub fn demo_collocation() -> CollocateOptions {
-    CollocateOptions { level: Level::Shot, ..CollocateOptions::default() }
+    CollocateOptions { level: Level::Beam, min_segment: 1, ..CollocateOptions::default() }
 }
 
 /// scenario → run → report on the bundled tiles. `on_report_step` follows the report's steps.

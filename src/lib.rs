@@ -9,6 +9,8 @@ pub mod collocate;
 pub mod collocation;
 pub mod dataset;
 pub mod demo;
+pub mod diagnose;
+pub mod diagnosis;
 pub mod error;
 pub mod gedi;
 pub mod geo;

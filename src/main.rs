@@ -45,6 +45,9 @@ enum Command {
     /// Build a test world: real ALS tiles + pseudo-real GEDI L1B/L2A granules with one withheld
     /// effect, and truth.json (docs/scenario.md).
     Scenario(ScenarioArgs),
+    /// Where the sim-to-real gap lies, which unmodelled effect causes it and how far it shrinks
+    /// once modelled (held-out tracks) → <out>/diagnosis.json, tables, figures (docs/diagnosis.md).
+    Diagnose(DiagnoseArgs),
     /// Measurements used by the benchmarks.
     #[command(subcommand, hide = true)]
     Bench(BenchCommand),
@@ -174,6 +177,9 @@ struct CollocateArgs {
     /// Horizontal grid step (m).
     #[arg(long, default_value_t = 1.0)]
     step: f64,
+    /// Fewest shots of a segment: shorter runs are reported and not solved (1: solve every run).
+    #[arg(long, default_value_t = gedisim::collocate::segments::MIN_SEGMENT)]
+    min_segment: usize,
     /// Print wall time and peak memory at the end.
     #[arg(long)]
     stats: bool,
@@ -282,6 +288,9 @@ struct RunArgs {
     /// Longest collocation segment (see `collocate`).
     #[arg(long, default_value_t = 40)]
     segment: usize,
+    /// Fewest shots of a collocation segment (see `collocate`; 1: solve every run).
+    #[arg(long, default_value_t = gedisim::collocate::segments::MIN_SEGMENT)]
+    min_segment: usize,
 }
 
 #[derive(Args)]
@@ -380,6 +389,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Run(a) => run_command(a),
         Command::Demo(a) => demo(a),
         Command::Scenario(a) => scenario(a),
+        Command::Diagnose(a) => diagnose(a),
         Command::Bench(BenchCommand::Decode { file }) => bench_decode(file),
     }
 }
@@ -547,7 +557,7 @@ fn collocate(a: CollocateArgs) -> Result<()> {
     let start = Instant::now();
     let level = collocate_level(a.level);
     let ds = Dataset::open(&a.dataset)?;
-    let opts = CollocateOptions { level, segment: a.segment, max_shift: a.max_shift, step: a.step };
+    let opts = CollocateOptions { level, segment: a.segment, max_shift: a.max_shift, step: a.step, min_segment: a.min_segment };
     let plan = Collocation::plan(&ds, &opts)?;
     let bar = progress(plan.shots_to_process() as u64, "shots");
     let result = plan.run(&|| bar.inc(1));
@@ -716,7 +726,12 @@ fn run_command(a: RunArgs) -> Result<()> {
         landcover: a.landcover,
         epsg: a.epsg,
         geoid_offset: a.geoid_offset,
-        collocate: CollocateOptions { level: collocate_level(a.level), segment: a.segment, ..CollocateOptions::default() },
+        collocate: CollocateOptions {
+            level: collocate_level(a.level),
+            segment: a.segment,
+            min_segment: a.min_segment,
+            ..CollocateOptions::default()
+        },
         rules: gedisim::study::select::StudyRules { max_days_apart: a.max_days_apart, ..Default::default() },
         ..RunOptions::new(&a.out)
     };
@@ -933,4 +948,76 @@ fn peak_rss_mb() -> f64 {
         .and_then(|s| s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok()))
         .map(|kb| kb / 1024.0)
         .unwrap_or(0.0)
+}
+
+#[derive(Args)]
+struct DiagnoseArgs {
+    /// A dataset after `gedisim run` (or at least `ingest als`, `ingest gedi`; collocated here if it has no offsets).
+    #[arg(long, conflicts_with_all = ["als", "l1b", "l2a"])]
+    dataset: Option<PathBuf>,
+    /// ALS tiles (files or folders): with --l1b and --l2a, the whole chain into <out>/dataset.
+    #[arg(long, num_args = 1.., requires_all = ["l1b", "l2a"])]
+    als: Vec<PathBuf>,
+    /// L1B granules (files or folders).
+    #[arg(long, num_args = 1..)]
+    l1b: Vec<PathBuf>,
+    /// L2A granules (files or folders).
+    #[arg(long, num_args = 1..)]
+    l2a: Vec<PathBuf>,
+    /// Land cover (CLC GeoTIFF in EPSG:3035, or CSV shot_number,forest_type) for the strata.
+    #[arg(long)]
+    landcover: Option<PathBuf>,
+    /// Projected CRS of the shots (default: the ALS CRS, else 2154).
+    #[arg(long)]
+    epsg: Option<u32>,
+    /// Geoid offset N (m) for every shot instead of the L1B geoid.
+    #[arg(long, allow_hyphen_values = true)]
+    geoid_offset: Option<f64>,
+    /// Output directory (diagnosis.json, tables, figures).
+    #[arg(long)]
+    out: PathBuf,
+    /// Try only these effects (comma-separated; default: every effect the diagnosis fits).
+    #[arg(long, value_delimiter = ',')]
+    effects: Vec<String>,
+}
+
+fn diagnose(a: DiagnoseArgs) -> Result<()> {
+    let start = Instant::now();
+    let root = match &a.dataset {
+        Some(d) => d.clone(),
+        None => {
+            if a.als.is_empty() {
+                return Err(Error::Usage("give --dataset, or --als with --l1b and --l2a".into()));
+            }
+            let ds = a.out.join("dataset");
+            ingest_als(IngestAlsArgs { inputs: a.als.clone(), out: ds.clone(), keep_all_classes: false, epsg: a.epsg, stats: false })?;
+            ingest_gedi(IngestGediArgs { l1b: a.l1b.clone(), l2a: a.l2a.clone(), out: ds.clone(), epsg: a.epsg, geoid_offset: a.geoid_offset, strict_join: false })?;
+            if let Some(lc) = &a.landcover {
+                ingest_strata(IngestStrataArgs { landcover: lc.clone(), dataset: ds.clone() })?;
+            }
+            ds
+        }
+    };
+    let ds = Dataset::open(&root)?;
+    if !ds.has_table(gedisim::dataset::tables::OFFSETS) {
+        eprintln!("no offsets table: collocating per track first (the baseline's horizontal collocation)");
+        collocate(CollocateArgs { dataset: root.clone(), level: LevelArg::Beam, segment: 40, max_shift: 10.0, step: 1.0, min_segment: 1, stats: false })?;
+    }
+    let bar = progress(0, "shots");
+    bar.set_message("simulating");
+    let shots = ProgressBar::new_spinner();
+    let out = gedisim::diagnosis::diagnose_dataset(&ds, &a.out, &a.effects, &|| bar.inc(1), &|step| {
+        bar.finish_and_clear();
+        shots.set_message(format!("fitting and scoring {step}"));
+        shots.tick();
+    });
+    bar.finish_and_clear();
+    shots.finish_and_clear();
+    let out = out?;
+    eprintln!("shots: {} read, {} used; dropped: {}", out.cases.shots_read, out.diagnosis.n_shots, gedisim::diagnosis::dropped_text(&out.cases));
+    for line in gedisim::diagnosis::summary_lines(&out.diagnosis) {
+        println!("{line}");
+    }
+    eprintln!("{} → {} ({:.1} s)", "diagnosis.json, tables, figures", a.out.display(), start.elapsed().as_secs_f64());
+    Ok(())
 }

@@ -194,7 +194,7 @@ impl Iterator for BlockSimulation {
 
 /// Footprints grouped by [`BLOCK_M`] square, blocks in row-major order (footprints without a
 /// finite position form a block of their own, simulated as skipped).
-fn blocks<T>(mut footprints: Vec<(Footprint, T)>) -> Vec<Vec<(Footprint, T)>> {
+pub fn blocks<T>(mut footprints: Vec<(Footprint, T)>) -> Vec<Vec<(Footprint, T)>> {
     let key = |f: &Footprint| {
         if f.x.is_finite() && f.y.is_finite() {
             Some(((f.y / BLOCK_M).floor() as i64, (f.x / BLOCK_M).floor() as i64))

@@ -48,7 +48,8 @@ fn options(world: &Path, ds: &Path, granules: &[PathBuf]) -> RunOptions {
         als: vec![world.join("als")],
         l1b: granules.iter().filter(|f| f.to_string_lossy().contains("GEDI01_B")).cloned().collect(),
         l2a: granules.iter().filter(|f| f.to_string_lossy().contains("GEDI02_A")).cloned().collect(),
-        collocate: CollocateOptions { level: Level::Shot, ..CollocateOptions::default() },
+        // The tile is 100 m wide: 0–3 shots per beam, each run solved.
+        collocate: CollocateOptions { level: Level::Beam, min_segment: 1, ..CollocateOptions::default() },
         ..RunOptions::new(ds)
     }
 }

@@ -63,10 +63,11 @@ pub struct ShortRun {
 /// Segments of `slots` (sorted by `step`, ties in any order) at `level`; `segment` is the
 /// maximal length (shots at the beam level, steps at the track level). A run is a maximal
 /// sequence of covered shots at consecutive steps. Runs shorter than
-/// min(`segment`, [`MIN_SEGMENT`]) are returned apart (beam and track levels).
-pub fn plan(slots: &[Slot], level: Level, segment: usize) -> (Vec<SegmentPlan>, Vec<ShortRun>) {
+/// min(`segment`, `min_segment`) (default [`MIN_SEGMENT`]) are returned apart (beam and track
+/// levels).
+pub fn plan(slots: &[Slot], level: Level, segment: usize, min_segment: usize) -> (Vec<SegmentPlan>, Vec<ShortRun>) {
     let segment = segment.max(1);
-    let min_len = segment.min(MIN_SEGMENT);
+    let min_len = segment.min(min_segment).max(1);
     let mut plans = Vec::new();
     let mut short = Vec::new();
     for run in runs(slots) {
@@ -166,13 +167,13 @@ mod tests {
         c.push(false);
         c.extend(vec![true; 12]);
         let slots = beam(&c);
-        let (plans, short) = plan(&slots, Level::Beam, 40);
+        let (plans, short) = plan(&slots, Level::Beam, 40, MIN_SEGMENT);
         let lens: Vec<usize> = plans.iter().map(|p| p.support.len()).collect();
         assert_eq!(lens, vec![40, 55]);
         assert_eq!(short.len(), 1);
         assert_eq!(short[0].shots, (96..108).collect::<Vec<_>>());
         // A run of 100 splits 40, 40, 20.
-        let (plans, _) = plan(&beam(&[true; 100]), Level::Beam, 40);
+        let (plans, _) = plan(&beam(&[true; 100]), Level::Beam, 40, MIN_SEGMENT);
         assert_eq!(plans.iter().map(|p| p.support.len()).collect::<Vec<_>>(), vec![40, 40, 20]);
     }
 
@@ -180,7 +181,7 @@ mod tests {
     fn unusable_shots_inside_a_run_are_left_out_without_ending_it() {
         let mut slots = beam(&[true; 30]);
         slots[10].usable = false;
-        let (plans, short) = plan(&slots, Level::Beam, 40);
+        let (plans, short) = plan(&slots, Level::Beam, 40, MIN_SEGMENT);
         assert!(short.is_empty());
         assert_eq!(plans.len(), 1);
         assert_eq!(plans[0].support.len(), 29);
@@ -196,7 +197,7 @@ mod tests {
             let b = !(20..25).contains(&step);
             slots.push(Slot { step, covered: b, usable: b });
         }
-        let (plans, short) = plan(&slots, Level::Track, 40);
+        let (plans, short) = plan(&slots, Level::Track, 40, MIN_SEGMENT);
         assert!(short.is_empty());
         assert_eq!(plans.len(), 1, "50 steps: 40 + a remainder of 10 joins");
         assert_eq!(plans[0].support.len(), 95);
@@ -204,14 +205,14 @@ mod tests {
         for s in slots.iter_mut().filter(|s| s.step == 30) {
             s.covered = false;
         }
-        let (plans, short) = plan(&slots, Level::Track, 40);
+        let (plans, short) = plan(&slots, Level::Track, 40, MIN_SEGMENT);
         assert_eq!(plans.len(), 1);
         assert_eq!(short.len(), 1, "the 19 steps after the gap are too short");
     }
 
     #[test]
     fn shot_level_windows_stay_in_the_run() {
-        let (plans, short) = plan(&beam(&[true; 6]), Level::Shot, 40);
+        let (plans, short) = plan(&beam(&[true; 6]), Level::Shot, 40, MIN_SEGMENT);
         assert!(short.is_empty());
         assert_eq!(plans.len(), 6);
         assert_eq!(plans[0].support, vec![0, 1, 2]);

@@ -157,14 +157,18 @@ pub fn plain_batch(b: &RecordBatch, schema: &SchemaRef) -> Result<RecordBatch> {
 /// Write a query's result as `<dir>/<name>.parquet` and `<dir>/<name>.csv` (list columns are
 /// written to the CSV as text `[a, b, …]`).
 pub fn write_table(dir: &Path, t: &TableOutput) -> Result<[PathBuf; 2]> {
-    let pq = dir.join(format!("{}.parquet", t.query.name));
-    dataset::write_parquet(&pq, t.schema.clone(), &t.batches, &Default::default())?;
-    let csv = dir.join(format!("{}.csv", t.query.name));
+    write_named_table(dir, t.query.name, &t.batch()?)
+}
+
+/// Write `batch` as `<dir>/<name>.parquet` and `<dir>/<name>.csv` (list columns as text).
+pub fn write_named_table(dir: &Path, name: &str, batch: &RecordBatch) -> Result<[PathBuf; 2]> {
+    let pq = dir.join(format!("{name}.parquet"));
+    dataset::write_parquet(&pq, batch.schema(), std::slice::from_ref(batch), &Default::default())?;
+    let csv = dir.join(format!("{name}.csv"));
     let mut bytes = Vec::new();
     {
         let mut w = arrow::csv::WriterBuilder::new().with_header(true).build(&mut bytes);
-        let batch = t.batch()?;
-        let batch = lists_as_text(&batch).map_err(|e| Error::table(&csv, e))?;
+        let batch = lists_as_text(batch).map_err(|e| Error::table(&csv, e))?;
         w.write(&batch).map_err(|e| Error::table(&csv, e))?;
     }
     figures::write_atomic(&csv, &bytes)?;

@@ -1,0 +1,127 @@
+//! What the diagnosis knows about one shot: the real side (its L1B record facts and L2A products,
+//! in the ALS vertical datum through the nominal geoid) and the simulated side (ground and canopy
+//! parts of the ALS waveform, without a pulse, for each footprint width and weighting tried).
+
+use crate::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
+use crate::process::l2a::Noise;
+use crate::sim::N_WEIGHTINGS;
+
+/// Footprint σ (m) at which every shot is simulated; other widths are interpolated between them.
+pub const FSIGMA_GRID: [f64; 6] = [3.5, 4.5, 5.5, 7.0, 8.5, 10.0];
+
+/// One L2A algorithm's stored products of a real shot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RealAlgorithm {
+    /// `elev_lowestmode_aN` − N: GEDI ground in the ALS datum through the nominal geoid (m).
+    pub ground: f64,
+    /// `rh_aN` as stored (m above GEDI's ground), 101 values.
+    pub rh: Vec<f32>,
+}
+
+/// The real side of one shot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RealShot {
+    pub shot_number: u64,
+    /// Track = one beam of one granule (`<granule>/<beam>`): the unit of calibration/held-out
+    /// splits and of the bootstrap.
+    pub track: String,
+    pub beam_type: BeamType,
+    /// Reported noise mean and σ (`noise_*_corrected`, DN).
+    pub noise: Noise,
+    /// Σ (sample − noise mean) over the record (DN): the twin's energy.
+    pub energy: f64,
+    /// Record length (samples).
+    pub sample_count: usize,
+    /// `elevation_bin0` − N and `elevation_lastbin` − N (m, ALS datum through the nominal geoid).
+    pub bin0: f64,
+    pub lastbin: f64,
+    /// The received waveform minus its noise mean (DN), for the waveform residual.
+    pub wave: Vec<f32>,
+    /// `selected_algorithm` (1..6).
+    pub selected: u8,
+    /// Products of a1..a6 that pass the study's filter (quality 1, degrade 0, sensitivity ≥ 0.9).
+    pub algorithms: [Option<RealAlgorithm>; N_ALGORITHMS],
+    /// Strata of the shot (labels of `study::classes`).
+    pub strata: Strata,
+}
+
+/// Strata labels of one shot for the "where" decomposition.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Strata {
+    pub forest_type: String,
+    pub phenology: String,
+    pub sensitivity_group: String,
+    pub beam_type: String,
+    pub slope_class: String,
+    pub cover_class: String,
+}
+
+impl Strata {
+    /// (stratum kind, label) pairs.
+    pub fn pairs(&self) -> [(&'static str, &str); 6] {
+        [
+            ("forest_type", &self.forest_type),
+            ("phenology", &self.phenology),
+            ("sensitivity_group", &self.sensitivity_group),
+            ("beam_type", &self.beam_type),
+            ("slope_class", &self.slope_class),
+            ("cover_class", &self.cover_class),
+        ]
+    }
+}
+
+/// Ground and canopy parts of one weighting, without pulse, on the shot's common bin grid.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Parts {
+    pub ground: Vec<f32>,
+    pub canopy: Vec<f32>,
+}
+
+/// One footprint width's simulation of a shot: the parts of every weighting.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct SimVariant {
+    pub weightings: [Parts; N_WEIGHTINGS],
+}
+
+/// The simulated side of one shot: every [`FSIGMA_GRID`] width on one bin grid
+/// (bin k at `z0 − k·dz`, ALS datum), with the ALS truths of the nominal simulation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimShot {
+    pub z0: f64,
+    pub dz: f64,
+    pub variants: Vec<SimVariant>,
+    /// ALS ground of the nominal (count, 5.5 m) simulation (m).
+    pub als_ground: f64,
+    /// Noise-free RH0..RH100 of the nominal physics (count, 15 ns pulse, 5.5 m) from the ALS
+    /// ground: the study's baseline simulated RH.
+    pub rh_nominal: Vec<f32>,
+}
+
+/// Everything the diagnosis needs about one shot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShotCase {
+    pub real: RealShot,
+    pub sim: SimShot,
+    /// Algorithms whose real ground disagrees grossly with the nominal chain's (a different
+    /// mode picked: [`crate::diagnose::flag_ground_mismatches`]); left out of every gap.
+    pub mismatch: [bool; N_ALGORITHMS],
+}
+
+impl ShotCase {
+    /// The selected algorithm's products, if they pass the filter.
+    pub fn selected(&self) -> Option<&RealAlgorithm> {
+        self.real.algorithms.get(usize::from(self.real.selected).wrapping_sub(1))?.as_ref()
+    }
+}
+
+/// Median `noise_stddev_corrected` of real GEDI shots of a beam type (DN), measured on the shared
+/// granule (docs/scenario.md): the noise σ of the nominal chain, against which the `noise`
+/// effect's factor is expressed.
+pub fn nominal_noise_stddev(beam_type: BeamType) -> f64 {
+    crate::scenario::real::record(beam_type).noise_stddev
+}
+
+/// Check the RH lists of a case (101 values each).
+pub fn rh_ok(rh: &[f32]) -> bool {
+    rh.len() == RH_LEN && rh.iter().all(|v| v.is_finite())
+}

@@ -1,0 +1,225 @@
+//! The forward model of one hypothesis: the nominal GEDI chain (ALS waveform → pulse → noise twin
+//! → L2A a1–a6) with a set of effects switched on, and the same effects undone on the real side.
+//!
+//! The nominal chain is what a scientist would simulate with the study's settings *and* process
+//! like GEDI: count weighting, 15 ns pulse, σ_f 5.5 m, noise of the median real GEDI shot of the
+//! beam type (`case::nominal_noise_stddev`), the shot's own energy and record window, our L2A. A
+//! world without any unmodelled effect then differs from it only by noise, so a control is
+//! `unexplained`; every effect is a departure from it, through the hooks of the effect registry
+//! (`scenario::effects`) shared with the world generator.
+
+use super::case::{nominal_noise_stddev, ShotCase, FSIGMA_GRID};
+use crate::gedi::{N_ALGORITHMS, RH_LEN};
+use crate::process::l2a::{AlgorithmSettings, L2aOutcome, L2aProcessor, Noise, WaveformGeolocation};
+use crate::process::noise_twin::{NoiseShape, ShotTwin};
+use crate::scenario::effects::{Effect, WaveParts, WeightMethod, NOMINAL_FSIGMA_M, NOMINAL_PULSE_SIGMA_M};
+use crate::scenario::EffectSet;
+use crate::sim::Weighting;
+
+/// A hypothesis: the effects added to the nominal chain (empty = the nominal chain).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Model {
+    pub effects: Vec<Effect>,
+}
+
+impl Model {
+    /// This model with `e` added.
+    pub fn with(&self, e: Effect) -> Model {
+        let mut effects = self.effects.clone();
+        effects.push(e);
+        Model { effects }
+    }
+
+    fn set(&self) -> EffectSet {
+        EffectSet { effects: self.effects.clone() }
+    }
+
+    /// Footprint σ (m).
+    pub fn fsigma(&self) -> f64 {
+        self.effects.iter().rev().find_map(|e| if let Effect::Footprint { fsigma_m } = e { Some(*fsigma_m) } else { None }).unwrap_or(NOMINAL_FSIGMA_M)
+    }
+
+    /// Effective pulse σ (m, range).
+    pub fn pulse_sigma(&self) -> f64 {
+        self.effects.iter().rev().find_map(|e| if let Effect::Pulse { pulse_sigma_m } = e { Some(*pulse_sigma_m) } else { None }).unwrap_or(NOMINAL_PULSE_SIGMA_M)
+    }
+
+    /// Weighting and ρg/ρv.
+    pub fn weighting(&self) -> (Weighting, f64) {
+        self.effects
+            .iter()
+            .rev()
+            .find_map(|e| match *e {
+                Effect::Weighting { method, rho_ground_over_veg } => Some((
+                    match method {
+                        WeightMethod::Count | WeightMethod::Ratio => Weighting::Count,
+                        WeightMethod::Frac => Weighting::Frac,
+                        WeightMethod::Int => Weighting::Int,
+                    },
+                    rho_ground_over_veg,
+                )),
+                _ => None,
+            })
+            .unwrap_or((Weighting::Count, 1.0))
+    }
+}
+
+/// One algorithm's products: a ground elevation (m, ALS datum) and RH0..RH100 (m).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Products {
+    pub ground: f64,
+    pub rh: [f32; RH_LEN],
+}
+
+/// Reusable buffers of one worker.
+#[derive(Debug, Default)]
+pub struct Scratch {
+    l2a: L2aProcessor,
+    outcomes: Vec<L2aOutcome>,
+    settings: Vec<AlgorithmSettings>,
+}
+
+impl Scratch {
+    pub fn new() -> Scratch {
+        Scratch { settings: AlgorithmSettings::all_gedi(), ..Default::default() }
+    }
+}
+
+/// Seed of a shot's noise draws: the same for every hypothesis, so that hypotheses are compared
+/// on the same noise (common random numbers).
+fn noise_seed(shot_number: u64) -> u64 {
+    shot_number.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0xD1A6_0000_5EED
+}
+
+/// The pulse-free parts of weighting `w` at footprint σ `fsigma`, interpolated linearly between
+/// the two nearest simulated widths.
+fn parts_at(case: &ShotCase, w: Weighting, fsigma: f64) -> (Vec<f64>, Vec<f64>) {
+    let grid = &FSIGMA_GRID;
+    let f = fsigma.clamp(grid[0], grid[grid.len() - 1]);
+    let i = grid.windows(2).position(|p| f <= p[1]).unwrap_or(grid.len() - 2);
+    let t = (f - grid[i]) / (grid[i + 1] - grid[i]);
+    let (a, b) = (&case.sim.variants[i].weightings[w as usize], &case.sim.variants[i + 1].weightings[w as usize]);
+    let mix = |x: &[f32], y: &[f32]| -> Vec<f64> { x.iter().zip(y).map(|(&p, &q)| (1.0 - t) * f64::from(p) + t * f64::from(q)).collect() };
+    (mix(&a.ground, &b.ground), mix(&a.canopy, &b.canopy))
+}
+
+/// Convolve with a unit-sum Gaussian of σ `sigma` (m) on bins of `dz` (same length, zero outside).
+pub fn gaussian_blur(x: &[f64], sigma: f64, dz: f64) -> Vec<f64> {
+    if !(sigma > 0.0) || x.is_empty() {
+        return x.to_vec();
+    }
+    let half = (4.0 * sigma / dz).ceil() as isize;
+    let mut kernel: Vec<f64> = (-half..=half).map(|i| (-0.5 * (i as f64 * dz / sigma).powi(2)).exp()).collect();
+    let sum: f64 = kernel.iter().sum();
+    kernel.iter_mut().for_each(|k| *k /= sum);
+    let n = x.len() as isize;
+    let mut out = vec![0.0; x.len()];
+    for (i, &v) in x.iter().enumerate() {
+        if v == 0.0 {
+            continue;
+        }
+        for (j, &k) in kernel.iter().enumerate() {
+            let o = i as isize + j as isize - half;
+            if o >= 0 && o < n {
+                out[o as usize] += v * k;
+            }
+        }
+    }
+    out
+}
+
+/// The noise-free simulated waveform of `case` under `model` (bins of the case's grid), with the
+/// canopy effects applied after the pulse as in the world generator.
+pub fn simulated_wave(case: &ShotCase, model: &Model) -> Vec<f64> {
+    let (w, rho) = model.weighting();
+    let (ground, canopy) = parts_at(case, w, model.fsigma());
+    let sigma = model.pulse_sigma();
+    let mut parts = WaveParts {
+        ground: gaussian_blur(&ground, sigma, case.sim.dz),
+        canopy: gaussian_blur(&canopy, sigma, case.sim.dz),
+        z0: case.sim.z0,
+        dz: case.sim.dz,
+        ground_z: case.sim.als_ground,
+    };
+    model.set().apply_waveform(&mut parts);
+    parts.compose(rho).into_iter().map(|v| v.max(0.0)).collect()
+}
+
+/// The GEDI-processed simulation of `case` under `model`: one entry per algorithm a1..a6
+/// (`None` where L2A finds no result or the twin cannot be made).
+pub fn predict(case: &ShotCase, model: &Model, scratch: &mut Scratch) -> [Option<Products>; N_ALGORITHMS] {
+    let none = || std::array::from_fn(|_| None);
+    let wave = simulated_wave(case, model);
+    let max = wave.iter().cloned().fold(0.0, f64::max);
+    if !(max > 0.0) {
+        return none();
+    }
+    let cut = max * 1e-9;
+    let (Some(first), Some(last)) = (wave.iter().position(|&v| v > cut), wave.iter().rposition(|&v| v > cut)) else {
+        return none();
+    };
+    let real = &case.real;
+    let z_first = case.sim.z0 - first as f64 * case.sim.dz;
+    let start = ((real.bin0 - z_first) / crate::process::noise_twin::GEDI_BIN_M).round() as isize;
+    let factor = model.set().noise_sigma_factor();
+    let twin = ShotTwin {
+        energy_total: real.energy,
+        noise: Noise { mean: real.noise.mean, stddev: nominal_noise_stddev(real.beam_type) * factor },
+        sample_count: real.sample_count,
+        tx_pulse: None,
+        quantum: 0.0,
+        noise_shape: NoiseShape::GEDI_V1,
+    };
+    let Ok(twin) = twin.apply(&wave[first..=last], case.sim.dz, start, noise_seed(real.shot_number)) else {
+        return none();
+    };
+    let geo = WaveformGeolocation::vertical(real.sample_count, real.bin0, real.lastbin);
+    let Scratch { l2a, outcomes, settings } = scratch;
+    l2a.process_all(&twin.wave, twin.noise, &geo, settings, outcomes);
+    std::array::from_fn(|a| match outcomes.get(a) {
+        Some(Ok(r)) if r.elev_lowestmode.is_finite() => Some(Products {
+            ground: r.elev_lowestmode,
+            rh: std::array::from_fn(|k| r.rh_cm[k] as f32 / 100.0),
+        }),
+        _ => None,
+    })
+}
+
+/// The real products of algorithm `alg` (1..6) of `case` with the model's real-side effects
+/// undone: the datum offset removed from the ground, the ground-detection offset removed from the
+/// ground and added back to RH.
+pub fn real_products(case: &ShotCase, model: &Model, alg: u8) -> Option<Products> {
+    let r = case.real.algorithms.get(usize::from(alg) - 1)?.as_ref()?;
+    let set = model.set();
+    let o = set.ground_offset_m(alg);
+    let ground = r.ground - set.vertical_offset_m() - o;
+    if r.rh.len() != RH_LEN {
+        return None;
+    }
+    Some(Products { ground, rh: std::array::from_fn(|k| (f64::from(r.rh[k]) + o) as f32) })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn blur_keeps_the_sum_and_the_centre() {
+        let mut x = vec![0.0; 101];
+        x[50] = 1.0;
+        let y = gaussian_blur(&x, 0.955, 0.15);
+        assert!((y.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        let mean: f64 = y.iter().enumerate().map(|(i, v)| i as f64 * v).sum();
+        assert!((mean - 50.0).abs() < 1e-9);
+        let var: f64 = y.iter().enumerate().map(|(i, v)| (i as f64 - 50.0).powi(2) * v).sum::<f64>() * 0.15 * 0.15;
+        assert!((var.sqrt() - 0.955).abs() < 0.01, "{}", var.sqrt());
+    }
+
+    #[test]
+    fn model_reads_its_effects() {
+        let m = Model::default().with(Effect::Footprint { fsigma_m: 7.0 }).with(Effect::Weighting { method: WeightMethod::Int, rho_ground_over_veg: 0.5 });
+        assert_eq!(m.fsigma(), 7.0);
+        assert_eq!(m.weighting(), (Weighting::Int, 0.5));
+        assert_eq!(m.pulse_sigma(), NOMINAL_PULSE_SIGMA_M);
+    }
+}

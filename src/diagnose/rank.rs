@@ -1,0 +1,270 @@
+//! Which effect: every effect fitted on calibration tracks and scored on held-out tracks (two-fold
+//! cross-fitting, split by track, never by shot), with bootstrap confidence intervals over tracks;
+//! a greedy ladder for combined causes; `unexplained` when even the best effect's interval
+//! admits no real gain.
+
+use std::collections::BTreeMap;
+
+use super::case::ShotCase;
+use super::chain::Model;
+use super::fit::{evaluate, fit, ShotGap};
+use super::gap::{GapMetrics, GapSums};
+use crate::scenario::effects::Effect;
+use crate::scenario::rng::Stream;
+
+/// An effect is named only when the lower bound of its held-out shrink's 95 % interval reaches
+/// this: a gain that could be noise, or a few percent, leaves the gap `unexplained`.
+pub const MIN_SHRINK_LOWER: f64 = 0.10;
+/// Bootstrap resamples of the tracks.
+pub const BOOTSTRAP: usize = 400;
+/// Most effects on the ladder.
+pub const MAX_LADDER: usize = 3;
+
+/// Fold (0 or 1) of a track: a stable hash of its name.
+pub fn fold_of(track: &str) -> usize {
+    (crate::scenario::rng::derive_seed(0x5EED, &["fold", track]) & 1) as usize
+}
+
+/// The cases split by the fold of their track.
+#[derive(Debug, Clone)]
+pub struct Folds<'a> {
+    pub cases: Vec<&'a ShotCase>,
+    pub fold: Vec<usize>,
+    /// Track index of every case (for the bootstrap).
+    pub track: Vec<usize>,
+    pub n_tracks: usize,
+}
+
+impl<'a> Folds<'a> {
+    pub fn new(cases: &'a [ShotCase]) -> Folds<'a> {
+        let mut ids: BTreeMap<&str, usize> = BTreeMap::new();
+        for c in cases {
+            let n = ids.len();
+            ids.entry(c.real.track.as_str()).or_insert(n);
+        }
+        Folds {
+            cases: cases.iter().collect(),
+            fold: cases.iter().map(|c| fold_of(&c.real.track)).collect(),
+            track: cases.iter().map(|c| ids[c.real.track.as_str()]).collect(),
+            n_tracks: ids.len(),
+        }
+    }
+
+    fn of(&self, f: usize) -> Vec<&'a ShotCase> {
+        self.cases.iter().zip(&self.fold).filter(|(_, &g)| g == f).map(|(c, _)| *c).collect()
+    }
+
+    /// Evaluate each fold's cases with its own model; gaps in case order.
+    pub fn held_out(&self, models: &[Model; 2]) -> Vec<ShotGap> {
+        let mut out: Vec<Option<ShotGap>> = vec![None; self.cases.len()];
+        for f in 0..2 {
+            let idx: Vec<usize> = (0..self.cases.len()).filter(|&i| self.fold[i] == f).collect();
+            let cases: Vec<&ShotCase> = idx.iter().map(|&i| self.cases[i]).collect();
+            for (i, g) in idx.into_iter().zip(evaluate(&cases, &models[f])) {
+                out[i] = Some(g);
+            }
+        }
+        out.into_iter().map(|g| g.unwrap_or_default()).collect()
+    }
+
+    fn per_track(&self, gaps: &[ShotGap]) -> Vec<GapSums> {
+        let mut t = vec![GapSums::default(); self.n_tracks];
+        for (g, &i) in gaps.iter().zip(&self.track) {
+            t[i].merge(&g.sums);
+        }
+        t
+    }
+}
+
+/// Held-out comparison of two gaps on the same shots.
+#[derive(Debug, Clone)]
+pub struct Comparison {
+    pub before: GapMetrics,
+    pub after: GapMetrics,
+    /// 1 − after/before of the systematic gap (`GapMetrics::systematic`).
+    pub shrink: f64,
+    /// 95 % bootstrap interval of the shrink (over tracks).
+    pub ci95: [f64; 2],
+    /// 95 % interval of before − after of the systematic gap (m).
+    pub gain_ci95: [f64; 2],
+    /// 1 − after/before of the raw `mean_abs_bias` (noise floor included).
+    pub shrink_mean_abs_bias: f64,
+}
+
+/// 1 − after/before of the systematic gap; 0 when there is no systematic gap before.
+fn shrink_of(before: &GapMetrics, after: &GapMetrics) -> f64 {
+    if before.systematic > 1e-9 && after.systematic.is_finite() {
+        1.0 - after.systematic / before.systematic
+    } else {
+        0.0
+    }
+}
+
+/// Compare held-out gaps with a bootstrap over tracks (seeded: reproducible).
+pub fn compare(folds: &Folds, before: &[ShotGap], after: &[ShotGap], seed_label: &str) -> Comparison {
+    let (tb, ta) = (folds.per_track(before), folds.per_track(after));
+    let sum = |t: &[GapSums], pick: &[usize]| {
+        let mut s = GapSums::default();
+        pick.iter().for_each(|&i| s.merge(&t[i]));
+        s
+    };
+    let all: Vec<usize> = (0..folds.n_tracks).collect();
+    let (b, a) = (sum(&tb, &all).metrics(), sum(&ta, &all).metrics());
+    let shrink = shrink_of(&b, &a);
+    let shrink_mean_abs_bias = 1.0 - a.mean_abs_bias / b.mean_abs_bias;
+    let mut rng = Stream::new(0xB007, &["bootstrap", seed_label]);
+    let mut shrinks = Vec::with_capacity(BOOTSTRAP);
+    let mut gains = Vec::with_capacity(BOOTSTRAP);
+    let n = folds.n_tracks;
+    if n > 1 {
+        for _ in 0..BOOTSTRAP {
+            let pick: Vec<usize> = (0..n).map(|_| ((rng.uniform() * n as f64) as usize).min(n - 1)).collect();
+            let (bb, aa) = (sum(&tb, &pick).metrics(), sum(&ta, &pick).metrics());
+            if bb.n_pairs > 0 && aa.n_pairs > 0 {
+                shrinks.push(shrink_of(&bb, &aa));
+                gains.push(bb.systematic - aa.systematic);
+            }
+        }
+    }
+    Comparison { before: b, after: a, shrink, ci95: interval(shrinks), gain_ci95: interval(gains), shrink_mean_abs_bias }
+}
+
+fn interval(mut v: Vec<f64>) -> [f64; 2] {
+    if v.is_empty() {
+        return [f64::NAN, f64::NAN];
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    let q = |p: f64| v[((p * (v.len() - 1) as f64).round() as usize).min(v.len() - 1)];
+    [q(0.025), q(0.975)]
+}
+
+/// One effect tried on top of a model.
+#[derive(Debug, Clone)]
+pub struct Trial {
+    /// Parameters fitted on all shots (what the diagnosis reports).
+    pub effect: Effect,
+    /// Parameters fitted on each fold's calibration set (the other fold).
+    pub fold_effects: [Option<Effect>; 2],
+    pub held_out: Comparison,
+    /// Held-out gaps per shot with the effect.
+    pub gaps: Vec<ShotGap>,
+}
+
+impl Trial {
+    /// The interval admits a real gain of at least [`MIN_SHRINK_LOWER`].
+    pub fn explains(&self) -> bool {
+        self.held_out.ci95[0] >= MIN_SHRINK_LOWER
+    }
+}
+
+/// A step of the ladder: the models of each fold and the held-out gaps they give.
+#[derive(Debug, Clone)]
+pub struct State {
+    pub full: Model,
+    pub folds: [Model; 2],
+    pub gaps: Vec<ShotGap>,
+}
+
+impl State {
+    pub fn nominal(folds: &Folds) -> State {
+        let m = Model::default();
+        let gaps = folds.held_out(&[m.clone(), m.clone()]);
+        State { full: m.clone(), folds: [m.clone(), m], gaps }
+    }
+}
+
+/// Fit `name` on top of `state` (per fold on the other fold's tracks; once on all for the
+/// reported parameters) and score it on the held-out tracks.
+pub fn try_effect(folds: &Folds, state: &State, name: &str) -> Option<Trial> {
+    let effect = fit(name, &state.full, &folds.cases)?;
+    // Fold f is scored with the parameters fitted on fold 1 − f.
+    let fitted: [Option<Effect>; 2] = std::array::from_fn(|f| fit(name, &state.folds[f], &folds.of(1 - f)));
+    let models: [Model; 2] = std::array::from_fn(|f| match &fitted[f] {
+        Some(e) => state.folds[f].with(e.clone()),
+        None => state.folds[f].clone(),
+    });
+    let gaps = folds.held_out(&models);
+    let held_out = compare(folds, &state.gaps, &gaps, name);
+    Some(Trial { effect, fold_effects: fitted, held_out, gaps })
+}
+
+/// The ranking and the ladder.
+#[derive(Debug, Clone)]
+pub struct Ranking {
+    /// Every effect tried on the nominal chain, best held-out shrink first.
+    pub effects: Vec<Trial>,
+    /// Effects added one after another while each explains part of what remains.
+    pub ladder: Vec<Trial>,
+    /// No effect's interval admits a real gain.
+    pub unexplained: bool,
+}
+
+/// Rank `names` on the nominal chain, then climb the ladder. `on_step` is told each effect tried.
+pub fn rank(folds: &Folds, names: &[&str], on_step: &dyn Fn(&str)) -> Ranking {
+    let nominal = State::nominal(folds);
+    let by_shrink = |a: &Trial, b: &Trial| b.held_out.shrink.total_cmp(&a.held_out.shrink);
+    let mut effects: Vec<Trial> = names
+        .iter()
+        .filter_map(|n| {
+            on_step(n);
+            try_effect(folds, &nominal, n)
+        })
+        .collect();
+    effects.sort_by(by_shrink);
+    let unexplained = !effects.first().is_some_and(Trial::explains);
+    let mut ladder: Vec<Trial> = Vec::new();
+    if !unexplained {
+        let first = effects[0].clone();
+        let mut state = advance(&nominal, &first);
+        ladder.push(first);
+        while ladder.len() < MAX_LADDER {
+            let used: Vec<&str> = ladder.iter().map(|t| t.effect.name()).collect();
+            let mut step: Vec<Trial> = names
+                .iter()
+                .filter(|n| !used.contains(n))
+                .filter_map(|n| {
+                    on_step(&format!("ladder step {}: {n}", ladder.len() + 1));
+                    try_effect(folds, &state, n)
+                })
+                .collect();
+            step.sort_by(by_shrink);
+            match step.into_iter().next() {
+                Some(t) if t.explains() => {
+                    state = advance(&state, &t);
+                    ladder.push(t);
+                }
+                _ => break,
+            }
+        }
+    }
+    Ranking { effects, ladder, unexplained }
+}
+
+fn advance(state: &State, t: &Trial) -> State {
+    State {
+        full: state.full.with(t.effect.clone()),
+        folds: std::array::from_fn(|f| match &t.fold_effects[f] {
+            Some(e) => state.folds[f].with(e.clone()),
+            None => state.folds[f].clone(),
+        }),
+        gaps: t.gaps.clone(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn folds_are_stable_and_both_used() {
+        let n0 = (0..200).filter(|i| fold_of(&format!("g{i}/BEAM0101")) == 0).count();
+        assert!(n0 > 70 && n0 < 130, "{n0}");
+        assert_eq!(fold_of("a/BEAM0000"), fold_of("a/BEAM0000"));
+    }
+
+    #[test]
+    fn interval_of_a_constant_is_the_constant() {
+        assert_eq!(interval(vec![0.3; 50]), [0.3, 0.3]);
+        assert!(interval(vec![]).iter().all(|v| v.is_nan()));
+    }
+}

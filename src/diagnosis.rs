@@ -1,0 +1,590 @@
+//! `gedisim diagnose`: reads a dataset's shots (and their per-track collocation offsets, strata)
+//! and ALS points into [`diagnose::ShotCase`]s, runs the kernels of [`crate::diagnose`], and writes
+//! `<out>/diagnosis.json`, its tables (Parquet + CSV) and figures (PNG + SVG). docs/diagnosis.md.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use arrow::array::{Array, AsArray, Float64Array, ListArray, RecordBatch, StringArray, UInt64Array};
+use arrow::datatypes::{Field, Float32Type, Float64Type, Schema, UInt64Type, UInt8Type};
+use serde_json::{json, Value};
+
+use crate::als_table::AlsTable;
+use crate::dataset::{self, tables, Dataset};
+use crate::diagnose::case::{Parts, RealAlgorithm, RealShot, SimShot, SimVariant, Strata, FSIGMA_GRID};
+use crate::diagnose::gap::{GapMetrics, N_PCT};
+use crate::diagnose::rank::Trial;
+use crate::diagnose::{self, Diagnosis, ShotCase};
+use crate::error::{Error, Result};
+use crate::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
+use crate::process::l2a::Noise;
+use crate::report::figures::{self, LinePanels};
+use crate::scenario::effects::{Effect, ParamValue};
+use crate::sim::{self, Footprint, Profile, SimConfig, Weighting};
+use crate::study::classes;
+
+/// Vertical margin added above and below the simulated waveforms (m): room for the widest pulse
+/// the diagnosis tries (σ 3.8 m, 4σ kernels).
+const PAD_M: f64 = 16.0;
+
+/// What [`read_cases`] kept and dropped.
+#[derive(Debug, Clone, Default)]
+pub struct CaseReport {
+    pub shots_read: usize,
+    /// (reason, count)
+    pub dropped: Vec<(String, usize)>,
+}
+
+fn drop(report: &mut CaseReport, reason: &str) {
+    match report.dropped.iter_mut().find(|(r, _)| r == reason) {
+        Some((_, n)) => *n += 1,
+        None => report.dropped.push((reason.to_string(), 1)),
+    }
+}
+
+/// A real shot waiting for its simulation.
+struct Pending {
+    real: RealShot,
+    footprint: Footprint,
+}
+
+/// Read every usable shot of the dataset with its simulations. `on_shot` is called per shot
+/// simulated.
+pub fn read_cases(ds: &Dataset, on_shot: &(dyn Fn() + Sync)) -> Result<(Vec<ShotCase>, CaseReport)> {
+    let mut report = CaseReport::default();
+    let offsets = crate::tables::offsets::read_offsets(ds)?;
+    let forest = read_forest_types(ds)?;
+    let dir = ds.root().join(tables::SHOTS);
+    let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi`")))?;
+    let mut pending = Vec::new();
+    for f in files {
+        let file = std::fs::File::open(&f).map_err(|e| Error::file(&f, e))?;
+        let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+            .and_then(|b| b.build())
+            .map_err(|e| Error::table(&f, e))?;
+        for b in reader {
+            let b = b.map_err(|e| Error::table(&f, e))?;
+            read_shots(&f, &b, &offsets, &forest, &mut pending, &mut report)?;
+        }
+    }
+    let cases = simulate_cases(ds, pending, &mut report, on_shot)?;
+    Ok((cases, report))
+}
+
+fn read_forest_types(ds: &Dataset) -> Result<HashMap<u64, String>> {
+    let mut out = HashMap::new();
+    if !ds.has_table(tables::STRATA) {
+        return Ok(out);
+    }
+    let dir = ds.root().join(tables::STRATA);
+    for f in dataset::table_files(&dir).map_err(|e| Error::file(&dir, e))? {
+        let file = std::fs::File::open(&f).map_err(|e| Error::file(&f, e))?;
+        let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+            .and_then(|b| b.build())
+            .map_err(|e| Error::table(&f, e))?;
+        for b in reader {
+            let b = b.map_err(|e| Error::table(&f, e))?;
+            let sn = column(&f, &b, "shot_number")?.as_primitive_opt::<UInt64Type>().cloned().ok_or_else(|| Error::field(&f, "shot_number", "not uint64"))?;
+            let ft = column(&f, &b, "forest_type")?.as_string_opt::<i32>().cloned().ok_or_else(|| Error::field(&f, "forest_type", "not a string"))?;
+            for i in 0..b.num_rows() {
+                out.insert(sn.value(i), ft.value(i).to_string());
+            }
+        }
+    }
+    Ok(out)
+}
+
+fn column<'a>(path: &Path, b: &'a RecordBatch, name: &str) -> Result<&'a Arc<dyn Array>> {
+    b.column_by_name(name).ok_or_else(|| Error::field(path, name, "column missing from the table"))
+}
+
+fn f64s(path: &Path, b: &RecordBatch, name: &str) -> Result<Float64Array> {
+    column(path, b, name)?.as_primitive_opt::<Float64Type>().cloned().ok_or_else(|| Error::field(path, name, "not float64"))
+}
+
+fn u8s(path: &Path, b: &RecordBatch, name: &str) -> Result<arrow::array::UInt8Array> {
+    column(path, b, name)?.as_primitive_opt::<UInt8Type>().cloned().ok_or_else(|| Error::field(path, name, "not uint8"))
+}
+
+fn lists(path: &Path, b: &RecordBatch, name: &str) -> Result<ListArray> {
+    column(path, b, name)?.as_list_opt::<i32>().cloned().ok_or_else(|| Error::field(path, name, "not a list"))
+}
+
+fn list_f32(l: &ListArray, i: usize) -> Option<Vec<f32>> {
+    if l.is_null(i) {
+        return None;
+    }
+    let v = l.value(i);
+    let v = v.as_primitive_opt::<Float32Type>()?;
+    Some(v.values().to_vec())
+}
+
+fn opt<P: arrow::datatypes::ArrowPrimitiveType>(a: &arrow::array::PrimitiveArray<P>, i: usize) -> Option<P::Native> {
+    (!a.is_null(i)).then(|| a.value(i))
+}
+
+fn read_shots(
+    path: &Path,
+    b: &RecordBatch,
+    offsets: &HashMap<u64, crate::tables::offsets::AppliedOffset>,
+    forest: &HashMap<u64, String>,
+    out: &mut Vec<Pending>,
+    report: &mut CaseReport,
+) -> Result<()> {
+    let s = |n: &str| -> Result<StringArray> {
+        column(path, b, n)?.as_string_opt::<i32>().cloned().ok_or_else(|| Error::field(path, n, "not a string"))
+    };
+    let (granule, beam, beam_type) = (s("granule")?, s("beam")?, s("beam_type")?);
+    let sn: UInt64Array = column(path, b, "shot_number")?.as_primitive_opt::<UInt64Type>().cloned().ok_or_else(|| Error::field(path, "shot_number", "not uint64"))?;
+    let (x, y) = (f64s(path, b, "x")?, f64s(path, b, "y")?);
+    let (bin0, lastbin) = (f64s(path, b, "elevation_bin0")?, f64s(path, b, "elevation_lastbin")?);
+    let (nmean, nsd) = (f64s(path, b, "noise_mean_corrected")?, f64s(path, b, "noise_stddev_corrected")?);
+    let (geoid, geoid_used) = (f64s(path, b, "geoid")?, f64s(path, b, "geoid_offset_used")?);
+    let rx = lists(path, b, "rx_waveform")?;
+    let degrade = u8s(path, b, "degrade_flag")?;
+    let selected = u8s(path, b, "selected_algorithm")?;
+    let leaf_off = u8s(path, b, "leaf_off_flag")?;
+    let mut alg_cols = Vec::new();
+    for a in 1..=N_ALGORITHMS {
+        alg_cols.push((
+            f64s(path, b, &format!("elev_lowestmode_a{a}"))?,
+            lists(path, b, &format!("rh_a{a}"))?,
+            f64s(path, b, &format!("sensitivity_a{a}"))?,
+            u8s(path, b, &format!("quality_flag_a{a}"))?,
+        ));
+    }
+    for i in 0..b.num_rows() {
+        report.shots_read += 1;
+        let (Some(px), Some(py)) = (opt(&x, i), opt(&y, i)) else {
+            drop(report, "no position");
+            continue;
+        };
+        let Some(wave) = list_f32(&rx, i).filter(|w| w.len() > 1) else {
+            drop(report, "no L1B waveform");
+            continue;
+        };
+        let (Some(e0), Some(e1), Some(mean), Some(sd)) = (opt(&bin0, i), opt(&lastbin, i), opt(&nmean, i), opt(&nsd, i)) else {
+            drop(report, "no record geolocation or noise");
+            continue;
+        };
+        let Some(n_geoid) = opt(&geoid_used, i).or(opt(&geoid, i)) else {
+            drop(report, "no geoid");
+            continue;
+        };
+        let Some(bt) = BeamType::from_name(beam.value(i)).or(match beam_type.value(i) {
+            "coverage" => Some(BeamType::Coverage),
+            "full_power" => Some(BeamType::FullPower),
+            _ => None,
+        }) else {
+            drop(report, "unknown beam type");
+            continue;
+        };
+        let shot = sn.value(i);
+        let algorithms: [Option<RealAlgorithm>; N_ALGORITHMS] = std::array::from_fn(|a| {
+            let (elev, rh, sens, q) = &alg_cols[a];
+            if !classes::passes_quality(opt(q, i), opt(&degrade, i), opt(sens, i)) {
+                return None;
+            }
+            let ground = opt(elev, i)?;
+            let rh = list_f32(rh, i).filter(|r| r.len() == RH_LEN)?;
+            ground.is_finite().then(|| RealAlgorithm { ground: ground - n_geoid, rh })
+        });
+        if algorithms.iter().all(Option::is_none) {
+            drop(report, "no algorithm passes quality (quality_flag, degrade_flag, sensitivity ≥ 0.9)");
+            continue;
+        }
+        let sel = opt(&selected, i).filter(|s| (1..=N_ALGORITHMS as u8).contains(s)).unwrap_or(1);
+        let sens_sel = opt(&alg_cols[usize::from(sel) - 1].2, i).unwrap_or(f64::NAN);
+        let energy: f64 = wave.iter().map(|&v| f64::from(v) - mean).sum();
+        let (dx, dy) = offsets.get(&shot).map_or((0.0, 0.0), |o| (o.dx, o.dy));
+        let real = RealShot {
+            shot_number: shot,
+            track: format!("{}/{}", granule.value(i), beam.value(i)),
+            beam_type: bt,
+            noise: Noise { mean, stddev: sd },
+            energy,
+            sample_count: wave.len(),
+            bin0: e0 - n_geoid,
+            lastbin: e1 - n_geoid,
+            wave: wave.iter().map(|&v| (f64::from(v) - mean) as f32).collect(),
+            selected: sel,
+            algorithms,
+            strata: Strata {
+                forest_type: forest.get(&shot).cloned().unwrap_or_else(|| classes::UNKNOWN.to_string()),
+                phenology: classes::phenology(opt(&leaf_off, i)).to_string(),
+                sensitivity_group: classes::sensitivity_group(sens_sel).unwrap_or(classes::UNKNOWN).to_string(),
+                beam_type: beam_type.value(i).to_string(),
+                ..Default::default()
+            },
+        };
+        out.push(Pending { real, footprint: Footprint { id: shot.to_string(), x: px + dx, y: py + dy } });
+    }
+    Ok(())
+}
+
+/// The simulator settings of the diagnosis: the study's nominal one (15 ns pulse, σ_f 5.5 m,
+/// default profile) and, for every width of [`FSIGMA_GRID`], the same without pulse (the chain
+/// convolves its own) and without the coverage skip (the nominal run decides coverage).
+fn configs() -> (SimConfig, Vec<SimConfig>) {
+    let nominal = SimConfig::new(Profile::Default);
+    let variants = FSIGMA_GRID
+        .iter()
+        .map(|&f| SimConfig { fsigma: f as f32, pulse: sim::Pulse::dirac(), min_covered_fraction: None, ..nominal.clone() })
+        .collect();
+    (nominal, variants)
+}
+
+fn simulate_cases(ds: &Dataset, pending: Vec<Pending>, report: &mut CaseReport, on_shot: &(dyn Fn() + Sync)) -> Result<Vec<ShotCase>> {
+    if pending.is_empty() {
+        return Ok(Vec::new());
+    }
+    let als = AlsTable::open(ds)?;
+    let (nominal, variants) = configs();
+    let fmax = FSIGMA_GRID[FSIGMA_GRID.len() - 1] as f32;
+    let half = sim::footprint::gauss_sep(fmax, sim::footprint::I_THRESH) as f64 + 1.0;
+    let items: Vec<(Footprint, RealShot)> = pending.into_iter().map(|p| (p.footprint, p.real)).collect();
+    let mut cases = Vec::new();
+    for block in crate::simulate::blocks(items) {
+        let mut bb = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        for (f, _) in &block {
+            bb = [bb[0].min(f.x - half), bb[1].min(f.y - half), bb[2].max(f.x + half), bb[3].max(f.y + half)];
+        }
+        let (points, _) = als.points_in(bb)?;
+        let (fps, reals): (Vec<Footprint>, Vec<RealShot>) = block.into_iter().unzip();
+        let nom = sim::simulate(&points, &fps, &nominal)?;
+        let vars = variants.iter().map(|cfg| sim::simulate(&points, &fps, cfg)).collect::<Result<Vec<_>>>()?;
+        for (j, mut real) in reals.into_iter().enumerate() {
+            on_shot();
+            let Ok(n) = &nom[j] else {
+                drop(report, "footprint not simulated (no ALS points or partly covered)");
+                continue;
+            };
+            let count = n.get(Weighting::Count);
+            let (Some(ground), Some(rh)) = (count.truth.als_ground, count.rh) else {
+                drop(report, "simulated footprint has no ground");
+                continue;
+            };
+            let vs: Vec<&sim::SimulatedFootprint> = vars.iter().filter_map(|v| v[j].as_ref().ok()).collect();
+            if vs.len() != FSIGMA_GRID.len() {
+                drop(report, "footprint not simulated at every footprint width");
+                continue;
+            }
+            real.strata.slope_class = classes::slope_class(count.truth.slope_deg.map(f64::from)).to_string();
+            let cover = f64::from(count.truth.als_cover);
+            real.strata.cover_class = classes::cover_class((cover >= 0.0).then_some(cover)).to_string();
+            cases.push(ShotCase { real, sim: common_grid(&vs, ground, rh.to_vec()), mismatch: [false; N_ALGORITHMS] });
+        }
+    }
+    Ok(cases)
+}
+
+/// Put every width's parts on one bin grid with [`PAD_M`] of empty bins above and below. The
+/// default profile's bins lie on one absolute lattice, so the grids differ by whole bins.
+fn common_grid(vs: &[&sim::SimulatedFootprint], als_ground: f64, rh_nominal: Vec<f32>) -> SimShot {
+    let dz = vs[0].dz;
+    let top = vs.iter().map(|v| v.z0).fold(f64::NEG_INFINITY, f64::max) + PAD_M;
+    let bottom = vs.iter().map(|v| v.z0 - (v.n_bins() as f64 - 1.0) * dz).fold(f64::INFINITY, f64::min) - PAD_M;
+    let n = ((top - bottom) / dz).round() as usize + 1;
+    let place = |src: &[f32], z0: f64| {
+        let mut out = vec![0f32; n];
+        let off = ((top - z0) / dz).round() as usize;
+        for (k, &v) in src.iter().enumerate() {
+            if let Some(o) = out.get_mut(off + k) {
+                *o = v;
+            }
+        }
+        out
+    };
+    let variants = vs
+        .iter()
+        .map(|v| SimVariant {
+            weightings: Weighting::ALL.map(|w| {
+                let p = v.get(w);
+                Parts { ground: place(&p.ground, v.z0), canopy: place(&p.canopy, v.z0) }
+            }),
+        })
+        .collect();
+    SimShot { z0: top, dz, variants, als_ground, rh_nominal }
+}
+
+/// What `diagnose` wrote.
+#[derive(Debug, Clone)]
+pub struct DiagnosisOutput {
+    pub diagnosis: Diagnosis,
+    pub json: Value,
+    pub files: Vec<PathBuf>,
+    pub cases: CaseReport,
+}
+
+/// Diagnose the dataset into `out`.
+/// `effects`: the effects tried (names of `diagnose::fit::FITTED_EFFECTS`; empty = all).
+pub fn diagnose_dataset(ds: &Dataset, out: &Path, effects: &[String], on_shot: &(dyn Fn() + Sync), on_step: &dyn Fn(&str)) -> Result<DiagnosisOutput> {
+    let names: Vec<&str> = if effects.is_empty() {
+        diagnose::fit::FITTED_EFFECTS.to_vec()
+    } else {
+        effects
+            .iter()
+            .map(|e| {
+                diagnose::fit::FITTED_EFFECTS.iter().copied().find(|n| n == e).ok_or_else(|| {
+                    Error::Usage(format!("--effects: '{e}' is not an effect the diagnosis fits (known: {})", diagnose::fit::FITTED_EFFECTS.join(", ")))
+                })
+            })
+            .collect::<Result<_>>()?
+    };
+    let (cases, report) = read_cases(ds, on_shot)?;
+    if cases.len() < 4 {
+        return Err(Error::file(
+            ds.root().join(tables::SHOTS),
+            format!("only {} usable shot(s) for the diagnosis (need ≥ 4): {}", cases.len(), dropped_text(&report)),
+        ));
+    }
+    let d = diagnose::diagnose(cases, &names, on_step);
+    std::fs::create_dir_all(out).map_err(|e| Error::file(out, e))?;
+    let json = to_json(&d, &report);
+    let mut files = write_tables(&d, out)?;
+    files.extend(write_figures(&d, out)?);
+    let path = out.join("diagnosis.json");
+    let text = serde_json::to_string_pretty(&json).map_err(|e| Error::file(&path, e))?;
+    figures::write_atomic(&path, text.as_bytes())?;
+    files.push(path);
+    Ok(DiagnosisOutput { diagnosis: d, json, files, cases: report })
+}
+
+/// "reason (n), …"
+pub fn dropped_text(r: &CaseReport) -> String {
+    if r.dropped.is_empty() {
+        return "none dropped".into();
+    }
+    r.dropped.iter().map(|(k, n)| format!("{k} ({n})")).collect::<Vec<_>>().join(", ")
+}
+
+fn param_json(v: &ParamValue) -> Value {
+    match v {
+        ParamValue::Number(x) => json!(x),
+        other => json!(other.to_string()),
+    }
+}
+
+/// The effect's parameters as a JSON object (contract names).
+pub fn params_json(e: &Effect) -> Value {
+    Value::Object(e.params().into_iter().map(|(k, v)| (k.to_string(), param_json(&v))).collect())
+}
+
+fn finite(x: f64) -> Value {
+    if x.is_finite() { json!(x) } else { Value::Null }
+}
+
+fn gap_json(m: &GapMetrics) -> Value {
+    json!({
+        "mean_abs_bias_rh1_99": finite(m.mean_abs_bias),
+        "mean_abs_bias_rh_frame": finite(m.mean_abs_bias_rh),
+        "mean_abs_bias_als_frame": finite(m.mean_abs_bias_als),
+        "systematic_gap": finite(m.systematic),
+        "msd": finite(m.msd), "sb": finite(m.sb), "sdsd": finite(m.sdsd), "lcs": finite(m.lcs),
+        "ground_bias_m": finite(m.ground_bias), "n_pairs": m.n_pairs,
+    })
+}
+
+fn trial_json(t: &Trial) -> Value {
+    let h = &t.held_out;
+    json!({
+        "name": t.effect.name(),
+        "params": params_json(&t.effect),
+        "held_out": {
+            "mean_abs_bias_rh1_99_before": finite(h.before.mean_abs_bias),
+            "mean_abs_bias_rh1_99_after": finite(h.after.mean_abs_bias),
+            "shrink": finite(h.shrink),
+            "ci95": [finite(h.ci95[0]), finite(h.ci95[1])],
+            "systematic_gap_before": finite(h.before.systematic),
+            "systematic_gap_after": finite(h.after.systematic),
+            "gain_m_ci95": [finite(h.gain_ci95[0]), finite(h.gain_ci95[1])],
+            "shrink_mean_abs_bias": finite(h.shrink_mean_abs_bias),
+            "msd_before": finite(h.before.msd), "msd_after": finite(h.after.msd),
+            "before": gap_json(&h.before), "after": gap_json(&h.after),
+        },
+        "fold_params": t.fold_effects.iter().map(|e| e.as_ref().map_or(Value::Null, params_json)).collect::<Vec<_>>(),
+    })
+}
+
+fn to_json(d: &Diagnosis, r: &CaseReport) -> Value {
+    let w = &d.where_;
+    json!({
+        "baseline": {
+            "description": "study baseline: real RH of the selected algorithm as stored vs noise-free simulated RH (count, 15 ns, σf 5.5 m) from the ALS ground, per-track collocated, nominal geoid",
+            "mean_abs_bias_rh1_99": finite(w.overall.mean_abs_bias_rh),
+            "msd": finite(w.percentiles.iter().map(|p| p.sb + p.sdsd + p.lcs).sum::<f64>() / N_PCT as f64),
+            "sb": finite(w.percentiles.iter().map(|p| p.sb).sum::<f64>() / N_PCT as f64),
+            "sdsd": finite(w.percentiles.iter().map(|p| p.sdsd).sum::<f64>() / N_PCT as f64),
+            "lcs": finite(w.percentiles.iter().map(|p| p.lcs).sum::<f64>() / N_PCT as f64),
+            "mean_abs_bias_als_frame": finite(w.overall.mean_abs_bias_als),
+            "ground_bias_m": finite(w.overall.ground_bias),
+            "n_shots": d.n_shots,
+            "n_tracks": d.n_tracks,
+        },
+        "nominal_chain": gap_json(&d.nominal),
+        "effects": d.ranking.effects.iter().map(trial_json).collect::<Vec<_>>(),
+        "ladder": d.ranking.ladder.iter().map(trial_json).collect::<Vec<_>>(),
+        "unexplained": d.ranking.unexplained,
+        "where": {
+            "percentiles": w.percentiles.iter().map(|p| json!({"rh": p.k, "bias": p.bias, "bias_als_frame": p.bias_als_frame, "rmse": p.rmse, "sb": p.sb, "sdsd": p.sdsd, "lcs": p.lcs})).collect::<Vec<_>>(),
+            "strata": w.strata.iter().map(|s| json!({"kind": s.kind, "label": s.label, "n_shots": s.n_shots, "mean_abs_bias_rh1_99": finite(s.metrics.mean_abs_bias_rh), "msd": finite(s.metrics.msd), "sb": finite(s.metrics.sb), "sdsd": finite(s.metrics.sdsd), "lcs": finite(s.metrics.lcs), "ground_bias_m": finite(s.metrics.ground_bias), "share_of_squared_error": s.share_of_squared_error})).collect::<Vec<_>>(),
+            "waveform_residual": {"height_m": w.waveform.height, "real": w.waveform.real, "simulated": w.waveform.simulated, "residual": w.waveform.residual, "n_shots": w.waveform.n_shots},
+        },
+        "shots": {"read": r.shots_read, "used": d.n_shots, "pairs_ground_mismatch": d.mismatched, "dropped": r.dropped.iter().map(|(k, n)| json!({"reason": k, "n": n})).collect::<Vec<_>>()},
+        "settings": {"min_shrink_lower": crate::diagnose::rank::MIN_SHRINK_LOWER, "bootstrap": crate::diagnose::rank::BOOTSTRAP, "folds": 2, "split": "by track (granule/beam)"},
+    })
+}
+
+fn batch(fields: Vec<(&str, Arc<dyn Array>)>) -> Result<RecordBatch> {
+    let schema = Schema::new(fields.iter().map(|(n, a)| Field::new(*n, a.data_type().clone(), true)).collect::<Vec<_>>());
+    RecordBatch::try_new(Arc::new(schema), fields.into_iter().map(|(_, a)| a).collect()).map_err(|e| Error::table("diagnosis", e))
+}
+
+fn floats(v: impl IntoIterator<Item = f64>) -> Arc<dyn Array> {
+    Arc::new(Float64Array::from_iter_values(v))
+}
+
+fn texts<S: AsRef<str>>(v: impl IntoIterator<Item = S>) -> Arc<dyn Array> {
+    Arc::new(StringArray::from_iter_values(v))
+}
+
+fn write_tables(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
+    let w = &d.where_;
+    let mut files = Vec::new();
+    let p = &w.percentiles;
+    files.extend(crate::report::write_named_table(out, "where_percentiles", &batch(vec![
+        ("rh", floats(p.iter().map(|p| p.k as f64))),
+        ("bias", floats(p.iter().map(|p| p.bias))),
+        ("bias_als_frame", floats(p.iter().map(|p| p.bias_als_frame))),
+        ("rmse", floats(p.iter().map(|p| p.rmse))),
+        ("sb", floats(p.iter().map(|p| p.sb))),
+        ("sdsd", floats(p.iter().map(|p| p.sdsd))),
+        ("lcs", floats(p.iter().map(|p| p.lcs))),
+    ])?)?);
+    let s = &w.strata;
+    files.extend(crate::report::write_named_table(out, "where_strata", &batch(vec![
+        ("kind", texts(s.iter().map(|s| s.kind.as_str()))),
+        ("label", texts(s.iter().map(|s| s.label.as_str()))),
+        ("n_shots", floats(s.iter().map(|s| s.n_shots as f64))),
+        ("mean_abs_bias_rh1_99", floats(s.iter().map(|s| s.metrics.mean_abs_bias_rh))),
+        ("msd", floats(s.iter().map(|s| s.metrics.msd))),
+        ("sb", floats(s.iter().map(|s| s.metrics.sb))),
+        ("sdsd", floats(s.iter().map(|s| s.metrics.sdsd))),
+        ("lcs", floats(s.iter().map(|s| s.metrics.lcs))),
+        ("ground_bias_m", floats(s.iter().map(|s| s.metrics.ground_bias))),
+        ("share_of_squared_error", floats(s.iter().map(|s| s.share_of_squared_error))),
+    ])?)?);
+    let r = &w.waveform;
+    files.extend(crate::report::write_named_table(out, "waveform_residual", &batch(vec![
+        ("height_m", floats(r.height.iter().copied())),
+        ("real", floats(r.real.iter().copied())),
+        ("simulated", floats(r.simulated.iter().copied())),
+        ("residual", floats(r.residual.iter().copied())),
+    ])?)?);
+    for (name, trials) in [("effects", &d.ranking.effects), ("ladder", &d.ranking.ladder)] {
+        files.extend(crate::report::write_named_table(out, name, &batch(vec![
+            ("step", floats((0..trials.len()).map(|i| i as f64 + 1.0))),
+            ("effect", texts(trials.iter().map(|t| t.effect.name()))),
+            ("params", texts(trials.iter().map(|t| params_json(&t.effect).to_string()))),
+            ("mean_abs_bias_before", floats(trials.iter().map(|t| t.held_out.before.mean_abs_bias))),
+            ("mean_abs_bias_after", floats(trials.iter().map(|t| t.held_out.after.mean_abs_bias))),
+            ("shrink", floats(trials.iter().map(|t| t.held_out.shrink))),
+            ("shrink_ci95_lo", floats(trials.iter().map(|t| t.held_out.ci95[0]))),
+            ("shrink_ci95_hi", floats(trials.iter().map(|t| t.held_out.ci95[1]))),
+            ("msd_before", floats(trials.iter().map(|t| t.held_out.before.msd))),
+            ("msd_after", floats(trials.iter().map(|t| t.held_out.after.msd))),
+        ])?)?);
+    }
+    Ok(files)
+}
+
+fn write_figures(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    let profile = |label: &str, b: &[f64; N_PCT]| (label.to_string(), (0..N_PCT).map(|k| ((k + 1) as f64, b[k])).collect::<Vec<_>>());
+    let mut rh = vec![profile("baseline (noise-free)", &d.where_.overall.bias_rh), profile("nominal chain", &d.nominal.bias_rh)];
+    let mut als = vec![profile("baseline (noise-free)", &d.where_.overall.bias_als), profile("nominal chain", &d.nominal.bias_als)];
+    let mut names = Vec::new();
+    for t in &d.ranking.ladder {
+        names.push(t.effect.name());
+        let label = format!("+ {}", names.join(" + "));
+        rh.push(profile(&label, &t.held_out.after.bias_rh));
+        als.push(profile(&label, &t.held_out.after.bias_als));
+    }
+    if d.ranking.ladder.is_empty() {
+        if let Some(t) = d.ranking.effects.first() {
+            let label = format!("+ {} (not significant)", t.effect.name());
+            rh.push(profile(&label, &t.held_out.after.bias_rh));
+            als.push(profile(&label, &t.held_out.after.bias_als));
+        }
+    }
+    let fig = LinePanels {
+        title: "Held-out bias (real − simulated) before and after the diagnosed effects".into(),
+        x_desc: "RH percentile".into(),
+        y_desc: "bias (m)".into(),
+        panels: vec![("RH frame (own grounds)".into(), rh), ("ALS frame (heights above the ALS ground)".into(), als)],
+        zero_line: true,
+        legend_lower: false,
+    };
+    files.extend(figures::render(&fig, out, "bias_profile_before_after")?);
+    let r = &d.where_.waveform;
+    let series = |label: &str, v: &[f64]| (label.to_string(), r.height.iter().zip(v).map(|(&h, &y)| (h, y)).collect::<Vec<_>>());
+    let fig = LinePanels {
+        title: format!("Mean normalised waveform by height above the ALS ground ({} shots)", r.n_shots),
+        x_desc: "height above ALS ground (m)".into(),
+        y_desc: "energy fraction per 0.5 m".into(),
+        panels: vec![
+            ("real and simulated (baseline)".into(), vec![series("real", &r.real), series("simulated", &r.simulated)]),
+            ("residual real − simulated".into(), vec![series("residual", &r.residual)]),
+        ],
+        zero_line: true,
+        legend_lower: false,
+    };
+    files.extend(figures::render(&fig, out, "waveform_residual")?);
+    Ok(files)
+}
+
+/// The diagnosis in a few lines a scientist can read.
+pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
+    let mut lines = Vec::new();
+    let w = &d.where_;
+    lines.push(format!(
+        "{} shots on {} tracks. Baseline gap: mean |bias| over RH1–RH99 {:.2} m, ground bias (GEDI − ALS) {:+.2} m.",
+        d.n_shots, d.n_tracks, w.overall.mean_abs_bias_rh, w.overall.ground_bias
+    ));
+    if let Some(worst) = w.strata.iter().filter(|s| s.kind != "beam_type").max_by(|a, b| a.share_of_squared_error.total_cmp(&b.share_of_squared_error)) {
+        lines.push(format!(
+            "Where: {} = {} holds {:.0} % of the squared error ({} shots).",
+            worst.kind, worst.label, 100.0 * worst.share_of_squared_error, worst.n_shots
+        ));
+    }
+    if d.ranking.unexplained {
+        let best = d.ranking.effects.first();
+        lines.push(match best {
+            Some(t) => format!(
+                "Which: unexplained — the best candidate, {}, shrinks the held-out gap by {:.0} % (95 % CI {:.0} to {:.0} %), not enough to name it.",
+                t.effect.name(),
+                100.0 * t.held_out.shrink,
+                100.0 * t.held_out.ci95[0],
+                100.0 * t.held_out.ci95[1]
+            ),
+            None => "Which: unexplained — no effect could be fitted.".into(),
+        });
+    } else {
+        for (i, t) in d.ranking.ladder.iter().enumerate() {
+            let params: Vec<String> = t.effect.params().iter().map(|(k, v)| format!("{k} = {v}")).collect();
+            lines.push(format!(
+                "{} {} ({}): held-out gap {:.2} → {:.2} m, shrink {:.0} % (95 % CI {:.0}–{:.0} %).",
+                if i == 0 { "Which:" } else { "  then" },
+                t.effect.name(),
+                params.join(", "),
+                t.held_out.before.mean_abs_bias,
+                t.held_out.after.mean_abs_bias,
+                100.0 * t.held_out.shrink,
+                100.0 * t.held_out.ci95[0],
+                100.0 * t.held_out.ci95[1]
+            ));
+        }
+    }
+    lines
+}
