@@ -114,14 +114,30 @@ const SHOT_UNIT: usize = 64;
 impl<'a> Collocation<'a> {
     /// Reads the shots' cheap columns and plans the segments (pass A).
     pub fn plan(ds: &'a Dataset, opts: &CollocateOptions) -> Result<Collocation<'a>> {
+        Self::plan_some(ds, opts, None)
+    }
+
+    /// [`plan`](Self::plan) restricted to some files of `shots/` (one granule each): what `run`
+    /// uses to collocate only the granules that arrived since the last run.
+    pub fn plan_files(ds: &'a Dataset, opts: &CollocateOptions, files: Vec<PathBuf>) -> Result<Collocation<'a>> {
+        Self::plan_some(ds, opts, Some(files))
+    }
+
+    /// The given files of `shots/`, or all of them.
+    fn plan_some(ds: &'a Dataset, opts: &CollocateOptions, files: Option<Vec<PathBuf>>) -> Result<Collocation<'a>> {
         if opts.segment == 0 {
             return Err(Error::Usage("--segment must be at least 1".into()));
         }
         let cfg = CollocateConfig::new(opts.max_shift, opts.step)?;
         cfg.validate()?;
         let als = AlsTable::open(ds)?;
-        let dir = ds.root().join(tables::SHOTS);
-        let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi`")))?;
+        let files = match files {
+            Some(f) => f,
+            None => {
+                let dir = ds.root().join(tables::SHOTS);
+                dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi`")))?
+            }
+        };
         let mut report = CollocateReport { table: ds.root().join(tables::OFFSETS).join("offsets.parquet"), ..Default::default() };
         let mut granules = Vec::new();
         for path in files {
@@ -147,8 +163,26 @@ impl<'a> Collocation<'a> {
         self.granules.iter().flat_map(|g| &g.units).map(|u| support_of(&u.plans).len()).sum()
     }
 
-    /// Solves every unit (pass B) and writes the offsets table; `on_shot` is called per shot.
-    pub fn run(mut self, on_shot: &(dyn Fn() + Sync)) -> Result<CollocateReport> {
+    /// Solves every unit (pass B) and writes the offsets table (replacing it); `on_shot` is
+    /// called per shot.
+    pub fn run(self, on_shot: &(dyn Fn() + Sync)) -> Result<CollocateReport> {
+        let level = self.opts.level;
+        let (max_shift, step) = (self.opts.max_shift, self.opts.step);
+        let ds = self.ds;
+        let (rows, mut report) = self.solve(on_shot)?;
+        let dest = ds.table_file(tables::OFFSETS, "offsets")?;
+        let mut metadata = std::collections::HashMap::new();
+        metadata.insert("gedisim:collocate_level".to_string(), level.name().to_string());
+        metadata.insert("gedisim:max_shift_m".to_string(), max_shift.to_string());
+        metadata.insert("gedisim:step_m".to_string(), step.to_string());
+        dataset::write_parquet(&dest, offsets_schema(), &[offsets_batch(&rows)?], &metadata)?;
+        report.table = dest;
+        Ok(report)
+    }
+
+    /// Solves every unit (pass B) without writing: the rows and the report (whose `table` is
+    /// where [`run`](Self::run) would write them).
+    pub fn solve(mut self, on_shot: &(dyn Fn() + Sync)) -> Result<(Vec<OffsetRow>, CollocateReport)> {
         let mut rows = Vec::new();
         let mut skipped = std::mem::take(&mut self.report.skipped);
         let mut read = (0u64, 0u64);
@@ -159,15 +193,8 @@ impl<'a> Collocation<'a> {
         }
         self.report.skipped = skipped;
         (self.report.als_points_read, self.report.als_row_groups_read) = read;
-        let dest = self.ds.table_file(tables::OFFSETS, "offsets")?;
-        let mut metadata = std::collections::HashMap::new();
-        metadata.insert("gedisim:collocate_level".to_string(), self.opts.level.name().to_string());
-        metadata.insert("gedisim:max_shift_m".to_string(), self.opts.max_shift.to_string());
-        metadata.insert("gedisim:step_m".to_string(), self.opts.step.to_string());
-        dataset::write_parquet(&dest, offsets_schema(), &[offsets_batch(&rows)?], &metadata)?;
         self.report.segments = rows.len();
-        self.report.table = dest;
-        Ok(self.report)
+        Ok((rows, self.report))
     }
 
     fn solve_unit(

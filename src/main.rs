@@ -36,6 +36,12 @@ enum Command {
     /// Hand a table off in another format.
     #[command(subcommand)]
     Export(ExportCommand),
+    /// The study end to end: ingest → collocate → simulate → filters → <dataset>/results/
+    /// (only new granules are processed on a re-run).
+    Run(RunArgs),
+    /// The whole study on the bundled LiDAR HD tiles with generated GEDI granules: scenario,
+    /// run, report; prints the headline tables and the path of report.html.
+    Demo(DemoArgs),
     /// Build a test world: real ALS tiles + pseudo-real GEDI L1B/L2A granules with one withheld
     /// effect, and truth.json (docs/scenario.md).
     Scenario(ScenarioArgs),
@@ -250,6 +256,63 @@ struct ExportGeoArgs {
 }
 
 #[derive(Args)]
+struct RunArgs {
+    /// LAS/LAZ tiles or folders (may be left out once the dataset holds the tiles).
+    #[arg(long, num_args = 1..)]
+    als: Vec<PathBuf>,
+    /// GEDI L1B files or folders.
+    #[arg(long, num_args = 1..)]
+    l1b: Vec<PathBuf>,
+    /// GEDI L2A files or folders.
+    #[arg(long, num_args = 1..)]
+    l2a: Vec<PathBuf>,
+    /// Corine Land Cover GeoTIFF (EPSG:3035) or CSV shot_number,forest_type: forest type of every shot.
+    #[arg(long)]
+    landcover: Option<PathBuf>,
+    /// Projected CRS (default: the dataset's ALS CRS, else 2154).
+    #[arg(long)]
+    epsg: Option<u32>,
+    /// Geoid offset N (m, ellipsoid − orthometric) for every shot, instead of each shot's L1B geoid.
+    #[arg(long, allow_hyphen_values = true)]
+    geoid_offset: Option<f64>,
+    /// Dataset directory (created if needed).
+    #[arg(long)]
+    out: PathBuf,
+    /// Keep shots at most this many days before the start or after the end of the ALS acquisition
+    /// of their footprint (not applied where the tiles carry no date).
+    #[arg(long, allow_hyphen_values = true, default_value_t = gedisim::study::select::DEFAULT_MAX_DAYS_APART)]
+    max_days_apart: f64,
+    /// Collocation level of new granules (see `collocate`).
+    #[arg(long, value_enum, default_value = "beam")]
+    level: LevelArg,
+    /// Longest collocation segment (see `collocate`).
+    #[arg(long, default_value_t = 40)]
+    segment: usize,
+    /// Fewest shots of a collocation segment (see `collocate`; 1: solve every run).
+    #[arg(long, default_value_t = gedisim::collocate::segments::MIN_SEGMENT)]
+    min_segment: usize,
+}
+
+#[derive(Args)]
+struct DemoArgs {
+    /// Output folder: world/ (tiles, granules, truth.json) and dataset/ (tables, report/).
+    #[arg(long, default_value = "gedisim-demo")]
+    out: PathBuf,
+    /// Effect withheld from the simulation and planted in the generated granules (see `scenario`).
+    #[arg(long, default_value = "ground_detection")]
+    effect: String,
+    /// Seed of the generated granules.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Granules (passes) crossing each tile.
+    #[arg(long, default_value_t = 8)]
+    passes: usize,
+    /// Replace a demo of another effect or seed in --out.
+    #[arg(long)]
+    force: bool,
+}
+
+#[derive(Args)]
 struct ScenarioArgs {
     /// Withheld effect: none, geolocation, datum, weighting, pulse, footprint, noise,
     /// canopy_change, occlusion, ground_detection, or a pair such as datum+pulse.
@@ -323,6 +386,8 @@ fn run(cli: Cli) -> Result<()> {
         Command::Sql(a) => sql(a),
         Command::Report(a) => report(a),
         Command::Export(ExportCommand::Geoparquet(a)) => export_geoparquet(a),
+        Command::Run(a) => run_command(a),
+        Command::Demo(a) => demo(a),
         Command::Scenario(a) => scenario(a),
         Command::Diagnose(a) => diagnose(a),
         Command::Bench(BenchCommand::Decode { file }) => bench_decode(file),
@@ -372,8 +437,8 @@ fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
     if a.l1b.is_empty() && a.l2a.is_empty() {
         return Err(Error::Usage("give --l1b and/or --l2a files".into()));
     }
-    let l1b = expand_h5(&a.l1b, "GEDI01_B")?;
-    let l2a = expand_h5(&a.l2a, "GEDI02_A")?;
+    let l1b = gedi::expand_granule_inputs(&a.l1b, "GEDI01_B")?;
+    let l2a = gedi::expand_granule_inputs(&a.l2a, "GEDI02_A")?;
     let ds = Dataset::create(&a.out)?;
     let epsg = match a.epsg {
         Some(e) => e,
@@ -417,15 +482,6 @@ fn ingest_strata(a: IngestStrataArgs) -> Result<()> {
         eprintln!("warning: {} CSV rows name shots that are not in the dataset's shots table", report.not_in_dataset);
     }
     Ok(())
-}
-
-/// Files as given; folders expanded to the `.h5` files they hold whose name starts with
-/// `product` (GEDI's naming: `GEDI01_B…` for L1B, `GEDI02_A…` for L2A).
-fn expand_h5(inputs: &[PathBuf], product: &str) -> Result<Vec<PathBuf>> {
-    gedisim::ingest::expand_inputs(inputs, |f| {
-        gedisim::ingest::has_extension(f, "h5")
-            && f.file_name().and_then(|n| n.to_str()).map(|n| n.starts_with(product)).unwrap_or(false)
-    })
 }
 
 fn simulate(a: SimulateArgs) -> Result<()> {
@@ -497,14 +553,9 @@ fn simulate(a: SimulateArgs) -> Result<()> {
 }
 
 fn collocate(a: CollocateArgs) -> Result<()> {
-    use gedisim::collocate::segments::Level;
     use gedisim::collocation::{CollocateOptions, Collocation};
     let start = Instant::now();
-    let level = match a.level {
-        LevelArg::Beam => Level::Beam,
-        LevelArg::Track => Level::Track,
-        LevelArg::Shot => Level::Shot,
-    };
+    let level = collocate_level(a.level);
     let ds = Dataset::open(&a.dataset)?;
     let opts = CollocateOptions { level, segment: a.segment, max_shift: a.max_shift, step: a.step, min_segment: a.min_segment };
     let plan = Collocation::plan(&ds, &opts)?;
@@ -600,6 +651,196 @@ fn report(a: ReportArgs) -> Result<()> {
         s.geoparquet.len(),
         s.html.display()
     );
+    Ok(())
+}
+
+fn collocate_level(l: LevelArg) -> gedisim::collocate::segments::Level {
+    use gedisim::collocate::segments::Level;
+    match l {
+        LevelArg::Beam => Level::Beam,
+        LevelArg::Track => Level::Track,
+        LevelArg::Shot => Level::Shot,
+    }
+}
+
+/// Progress of `run` and `demo`: one indicatif bar per step.
+struct Bars(std::sync::Mutex<Option<ProgressBar>>);
+
+impl Bars {
+    fn new() -> Self {
+        Bars(std::sync::Mutex::new(None))
+    }
+}
+
+impl gedisim::run::Progress for Bars {
+    fn start(&self, step: gedisim::run::Step, total: u64) {
+        let bar = if step.unit().is_empty() {
+            let b = ProgressBar::new_spinner();
+            b.set_message(step.label());
+            b.enable_steady_tick(std::time::Duration::from_millis(200));
+            b
+        } else {
+            let b = ProgressBar::new(total);
+            b.set_style(
+                ProgressStyle::with_template(&format!(
+                    "{{prefix:>11}} {{elapsed_precise}} [{{bar:40}}] {{human_pos}}/{{human_len}} {} ({{per_sec}}, eta {{eta}})",
+                    step.unit()
+                ))
+                .expect("valid template")
+                .progress_chars("=> "),
+            );
+            b.set_prefix(step.label());
+            b
+        };
+        if let Some(old) = self.0.lock().expect("progress lock").replace(bar) {
+            old.finish_and_clear();
+        }
+    }
+
+    fn set_total(&self, total: u64) {
+        if let Some(b) = self.0.lock().expect("progress lock").as_ref() {
+            b.set_length(total);
+        }
+    }
+
+    fn advance(&self, n: u64) {
+        if let Some(b) = self.0.lock().expect("progress lock").as_ref() {
+            b.inc(n);
+        }
+    }
+
+    fn finish(&self) {
+        if let Some(b) = self.0.lock().expect("progress lock").take() {
+            b.finish_and_clear();
+        }
+    }
+}
+
+fn run_command(a: RunArgs) -> Result<()> {
+    use gedisim::collocation::CollocateOptions;
+    use gedisim::run::RunOptions;
+    let opts = RunOptions {
+        als: a.als,
+        l1b: a.l1b,
+        l2a: a.l2a,
+        landcover: a.landcover,
+        epsg: a.epsg,
+        geoid_offset: a.geoid_offset,
+        collocate: CollocateOptions {
+            level: collocate_level(a.level),
+            segment: a.segment,
+            min_segment: a.min_segment,
+            ..CollocateOptions::default()
+        },
+        rules: gedisim::study::select::StudyRules { max_days_apart: a.max_days_apart, ..Default::default() },
+        ..RunOptions::new(&a.out)
+    };
+    let report = gedisim::run::run_study(&opts, &Bars::new())?;
+    print_run(&report);
+    Ok(())
+}
+
+/// What a run did (stderr), then the filters and the results (stdout).
+fn print_run(r: &gedisim::run::RunReport) {
+    use gedisim::ingest::als::TileOutcome;
+    use gedisim::ingest::gedi::GranuleOutcome;
+    use gedisim::study::select::Filter;
+    if !r.tiles.is_empty() {
+        let new: Vec<u64> = r.tiles.iter().filter_map(|t| if let TileOutcome::Ingested { points, .. } = t { Some(*points) } else { None }).collect();
+        eprintln!("ALS: {} tiles ingested ({} points), {} already ingested", new.len(), new.iter().sum::<u64>(), r.tiles.len() - new.len());
+    }
+    if !r.ingested.is_empty() {
+        let new: Vec<usize> = r.ingested.iter().filter_map(|g| if let GranuleOutcome::Ingested { shots, .. } = g { Some(*shots) } else { None }).collect();
+        eprintln!("GEDI: {} granules ingested ({} shots), {} already ingested", new.len(), new.iter().sum::<usize>(), r.ingested.len() - new.len());
+    }
+    for w in &r.warnings {
+        eprintln!("warning: {w}");
+    }
+    if let Some(s) = &r.strata {
+        let mut counts: Vec<_> = s.counts.iter().collect();
+        counts.sort();
+        let counts: Vec<String> = counts.iter().map(|(k, v)| format!("{k} {v}")).collect();
+        eprintln!("strata: {} shots ({})", s.rows, counts.join(", "));
+    }
+    match &r.collocation {
+        Some(c) => {
+            let skipped: Vec<String> = c.skipped.iter().map(|(k, v)| format!("{k} {v}")).collect();
+            let skipped = if skipped.is_empty() { String::new() } else { format!("; shots not used: {}", skipped.join(", ")) };
+            eprintln!(
+                "collocation: {} granules, {} shots read, {} segments solved, {} runs too short{skipped} → {}",
+                r.collocated.len(),
+                c.shots,
+                c.segments,
+                c.short_runs.len(),
+                c.table.display()
+            );
+        }
+        None => eprintln!("collocation: every granule already collocated"),
+    }
+    let simulated: Vec<&gedisim::run::GranuleRun> = r.granules.iter().filter(|g| g.simulated.is_some()).collect();
+    if simulated.is_empty() {
+        let covered: usize = r.granules.iter().map(|g| g.covered).sum();
+        if covered == 0 {
+            eprintln!("simulation: no shot footprint is covered by the ALS, nothing simulated");
+        } else {
+            eprintln!("simulation: up to date, nothing simulated ({covered} covered shots)");
+        }
+    } else {
+        let (ok, skipped) = simulated.iter().filter_map(|g| g.simulated).fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        eprintln!("simulation: {} shots of {} granules ({ok} simulated, {skipped} skipped by the simulator)", ok + skipped, simulated.len());
+    }
+    let written = r.granules_processed();
+    eprintln!("results: {written} granules written, {} up to date", r.granules.len() - written);
+    if r.nothing_new() {
+        eprintln!("nothing new since the last run: no ingest, collocation or simulation; results unchanged");
+    }
+    let t = &r.totals;
+    println!("Filters over the {} granules of the dataset (rows = shots × 3 weightings × 7 algorithms; a row counts at the first filter it fails):", r.granules.len());
+    println!("  {:>10}  candidate rows ({} shots)", t.candidates, t.shots);
+    for f in Filter::ALL {
+        let mut line = format!("− {:>10}  {}", t.removed_by(f), f.describe(&r.rules));
+        if f == Filter::AcquisitionWindow && t.window_unknown > 0 {
+            line += &format!(" (not applied to {} rows: no ALS date or shot date)", t.window_unknown);
+        }
+        println!("{line}");
+    }
+    println!("= {:>10}  rows kept ({} shots) → {}", t.kept, t.shots_kept, r.dataset.join("results").display());
+}
+
+fn demo(a: DemoArgs) -> Result<()> {
+    let start = Instant::now();
+    let opts = gedisim::demo::DemoOptions { out: a.out, effect: a.effect, seed: a.seed, passes: a.passes, force: a.force };
+    let bars = Bars::new();
+    let spinner = std::sync::Mutex::new(None::<ProgressBar>);
+    let d = gedisim::demo::run_demo(&opts, &bars, &|step| {
+        let mut s = spinner.lock().expect("spinner lock");
+        let b = s.get_or_insert_with(|| {
+            let b = ProgressBar::new_spinner();
+            b.enable_steady_tick(std::time::Duration::from_millis(200));
+            b
+        });
+        b.set_message(format!("report: {step}"));
+    });
+    if let Some(b) = spinner.lock().expect("spinner lock").take() {
+        b.finish_and_clear();
+    }
+    let d = d?;
+    match &d.world {
+        Some(w) => eprintln!("world: {} tiles, {} granules, {} shots, effect {} → {}", w.tiles, w.granules, w.shots, opts.effect, d.world_dir.display()),
+        None => eprintln!("world: reusing {} (effect {}, seed {})", d.world_dir.display(), opts.effect, opts.seed),
+    }
+    print_run(&d.run);
+    for (name, missing) in &d.report.skipped {
+        eprintln!("report: {name} skipped (no {} table)", missing.join(", "));
+    }
+    println!();
+    print!("{}", d.headline.ground_table());
+    println!();
+    print!("{}", d.headline.msd_table());
+    println!();
+    println!("report: {}", d.report.html.display());
+    eprintln!("demo finished in {:.0} s", start.elapsed().as_secs_f64());
+    // ── diagnosis: the lead wires `gedisim diagnose` on d.run.dataset here, after the report ──
     Ok(())
 }
 

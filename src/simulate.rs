@@ -1,6 +1,7 @@
 //! `simulate`: the simulation kernels driven from files — direct mode (one LAS/LAZ file and a
 //! footprint CSV) and dataset mode (every ingested shot against the `als/` table).
 
+use std::collections::HashMap;
 use std::path::Path;
 
 use arrow::array::{Array, AsArray};
@@ -86,7 +87,23 @@ pub fn simulate_on_dataset(
     dest: &Path,
     on_batch: &dyn Fn(usize),
 ) -> Result<(usize, usize)> {
-    let mut writer = AtomicParquet::create(dest, sim_schema(), dataset::writer_properties(&sim_metadata(profile), 1 << 14))?;
+    simulate_on_dataset_with(ds, footprints, cfg, profile, dest, &HashMap::new(), on_batch)
+}
+
+/// [`simulate_on_dataset`] with `extra` key-value metadata in the written file (beside the
+/// profile and bin-label keys): `run` records there what the file was made from.
+pub fn simulate_on_dataset_with(
+    ds: &Dataset,
+    footprints: Vec<(Footprint, Option<AppliedOffset>)>,
+    cfg: &SimConfig,
+    profile: Profile,
+    dest: &Path,
+    extra: &HashMap<String, String>,
+    on_batch: &dyn Fn(usize),
+) -> Result<(usize, usize)> {
+    let mut metadata = sim_metadata(profile);
+    metadata.extend(extra.iter().map(|(k, v)| (k.clone(), v.clone())));
+    let mut writer = AtomicParquet::create(dest, sim_schema(), dataset::writer_properties(&metadata, 1 << 14))?;
     let (mut ok, mut skipped) = (0, 0);
     for block in BlockSimulation::new(ds, footprints, cfg.clone())? {
         let block = block?;

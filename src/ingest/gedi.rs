@@ -292,6 +292,14 @@ pub fn granule_key(path: &Path) -> String {
     stem
 }
 
+/// Files as given; folders expanded to the `.h5` files they hold whose name starts with
+/// `product` (GEDI's naming: `GEDI01_B…` for L1B, `GEDI02_A…` for L2A).
+pub fn expand_granule_inputs(inputs: &[PathBuf], product: &str) -> Result<Vec<PathBuf>> {
+    super::expand_inputs(inputs, |f| {
+        super::has_extension(f, "h5") && f.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with(product))
+    })
+}
+
 /// Pair L1B and L2A files by [`granule_key`]; a file without a partner becomes a one-sided pair.
 ///
 /// Returns the pairs (in the order the files were given, L1B first) and one note per file left
@@ -1154,8 +1162,9 @@ pub fn ingest_into_dataset(
     Ok((outcomes, report))
 }
 
-/// The (L1B, L2A) content hashes recorded by an earlier ingest of a granule, if any.
-fn previous_hashes(record: &Path) -> Result<Option<(Option<String>, Option<String>)>> {
+/// The (L1B, L2A) content hashes recorded by an earlier ingest of a granule (its
+/// `granules/<key>.parquet` record), if any.
+pub fn previous_hashes(record: &Path) -> Result<Option<(Option<String>, Option<String>)>> {
     use arrow::array::{Array, AsArray};
     if !record.exists() {
         return Ok(None);

@@ -8,6 +8,7 @@
 
 pub mod figures;
 pub mod geoparquet;
+pub mod headline;
 pub mod html;
 
 use std::path::{Path, PathBuf};

@@ -117,6 +117,31 @@ pub fn read_offsets(ds: &Dataset) -> Result<HashMap<u64, AppliedOffset>> {
     Ok(out)
 }
 
+/// `r_after` of every segment of `<dataset>/offsets/`, by `segment_id`; empty without the table.
+pub fn read_r_after(ds: &Dataset) -> Result<HashMap<String, f64>> {
+    let dir = ds.root().join(tables::OFFSETS);
+    let mut out = HashMap::new();
+    if !dir.is_dir() {
+        return Ok(out);
+    }
+    for path in dataset::table_files(&dir).map_err(|e| Error::file(&dir, e))? {
+        let file = std::fs::File::open(&path).map_err(|e| Error::file(&path, e))?;
+        let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| Error::table(&path, e))?;
+        let mask = parquet::arrow::ProjectionMask::columns(builder.parquet_schema(), ["segment_id", "r_after"]);
+        for b in builder.with_projection(mask).build().map_err(|e| Error::table(&path, e))? {
+            let b = b.map_err(|e| Error::table(&path, e))?;
+            let ids = b.column_by_name("segment_id").and_then(|c| c.as_string_opt::<i32>().cloned());
+            let ids = ids.ok_or_else(|| Error::field(&path, "segment_id", "missing or not a string"))?;
+            let r = b.column_by_name("r_after").and_then(|c| c.as_primitive_opt::<Float64Type>().cloned());
+            let r = r.ok_or_else(|| Error::field(&path, "r_after", "missing or not float64"))?;
+            for i in 0..b.num_rows() {
+                out.insert(ids.value(i).to_string(), r.value(i));
+            }
+        }
+    }
+    Ok(out)
+}
+
 fn read_file(path: &Path, out: &mut HashMap<u64, AppliedOffset>) -> Result<()> {
     let file = std::fs::File::open(path).map_err(|e| Error::file(path, e))?;
     let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
@@ -179,6 +204,7 @@ mod tests {
         let got = read_offsets(&ds).unwrap();
         assert_eq!(got.len(), 3);
         assert_eq!(got[&u64::MAX], AppliedOffset { segment_id: row.segment_id.clone(), dx: 4.0, dy: -3.0, dz: 47.5 });
+        assert_eq!(read_r_after(&ds).unwrap()[&row.segment_id], 0.99);
         let twice = [row.clone(), row];
         dataset::write_parquet(&dest, offsets_schema(), &[offsets_batch(&twice).unwrap()], &Default::default()).unwrap();
         let err = read_offsets(&ds).unwrap_err().to_string();
