@@ -552,12 +552,26 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
         "{} shots on {} tracks. Baseline gap: mean |bias| over RH1–RH99 {:.2} m, ground bias (GEDI − ALS) {:+.2} m.",
         d.n_shots, d.n_tracks, w.overall.mean_abs_bias_rh, w.overall.ground_bias
     ));
-    if let Some(worst) = w.strata.iter().filter(|s| s.kind != "beam_type").max_by(|a, b| a.share_of_squared_error.total_cmp(&b.share_of_squared_error)) {
-        lines.push(format!(
-            "Where: {} = {} holds {:.0} % of the squared error ({} shots).",
-            worst.kind, worst.label, 100.0 * worst.share_of_squared_error, worst.n_shots
-        ));
+    let (k, b) = w.overall.bias_rh.iter().enumerate().max_by(|a, b| a.1.abs().total_cmp(&b.1.abs())).map_or((0, 0.0), |(k, b)| (k + 1, *b));
+    let mut place = format!("Where: the largest bias is at RH{k} ({b:+.2} m)");
+    // Among strata of kinds with at least two labels: the one holding most of the squared error
+    // relative to its share of the shots.
+    let labels = |kind: &str| w.strata.iter().filter(|s| s.kind == kind).count();
+    let worst = w
+        .strata
+        .iter()
+        .filter(|s| labels(&s.kind) >= 2 && s.n_shots >= 5)
+        .max_by(|a, b| (a.share_of_squared_error / a.n_shots as f64).total_cmp(&(b.share_of_squared_error / b.n_shots as f64)));
+    if let Some(s) = worst {
+        place += &format!(
+            "; {} = {} holds {:.0} % of the squared error with {:.0} % of the shots",
+            s.kind,
+            s.label,
+            100.0 * s.share_of_squared_error,
+            100.0 * s.n_shots as f64 / d.n_shots.max(1) as f64
+        );
     }
+    lines.push(place + ".");
     if d.ranking.unexplained {
         let best = d.ranking.effects.first();
         lines.push(match best {
@@ -572,7 +586,15 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
         });
     } else {
         for (i, t) in d.ranking.ladder.iter().enumerate() {
-            let params: Vec<String> = t.effect.params().iter().map(|(k, v)| format!("{k} = {v}")).collect();
+            let params: Vec<String> = t
+                .effect
+                .params()
+                .iter()
+                .map(|(k, v)| match v {
+                    ParamValue::Number(x) => format!("{k} = {x:.3}"),
+                    other => format!("{k} = {other}"),
+                })
+                .collect();
             lines.push(format!(
                 "{} {} ({}): held-out gap {:.2} → {:.2} m, shrink {:.0} % (95 % CI {:.0}–{:.0} %).",
                 if i == 0 { "Which:" } else { "  then" },

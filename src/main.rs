@@ -809,7 +809,7 @@ fn print_run(r: &gedisim::run::RunReport) {
 
 fn demo(a: DemoArgs) -> Result<()> {
     let start = Instant::now();
-    let opts = gedisim::demo::DemoOptions { out: a.out, effect: a.effect, seed: a.seed, passes: a.passes, force: a.force };
+    let opts = gedisim::demo::DemoOptions { out: a.out.clone(), effect: a.effect, seed: a.seed, passes: a.passes, force: a.force };
     let bars = Bars::new();
     let spinner = std::sync::Mutex::new(None::<ProgressBar>);
     let d = gedisim::demo::run_demo(&opts, &bars, &|step| {
@@ -839,8 +839,26 @@ fn demo(a: DemoArgs) -> Result<()> {
     print!("{}", d.headline.msd_table());
     println!();
     println!("report: {}", d.report.html.display());
+    // The diagnosis of the world, told nothing about the withheld effect.
+    let ds = Dataset::open(&d.run.dataset)?;
+    let dir = a.out.join("diagnosis");
+    let bar = progress(0, "shots");
+    let fitting = ProgressBar::new_spinner();
+    let diagnosis = gedisim::diagnosis::diagnose_dataset(&ds, &dir, &[], &|| bar.inc(1), &|step| {
+        bar.finish_and_clear();
+        fitting.set_message(format!("diagnosis: fitting and scoring {step}"));
+        fitting.tick();
+    });
+    bar.finish_and_clear();
+    fitting.finish_and_clear();
+    let diagnosis = diagnosis?;
+    println!();
+    println!("Diagnosis (the withheld effect is not told; truth: {}):", d.world_dir.join("truth.json").display());
+    for line in gedisim::diagnosis::summary_lines(&diagnosis.diagnosis) {
+        println!("  {line}");
+    }
+    println!("diagnosis: {}", dir.join("diagnosis.json").display());
     eprintln!("demo finished in {:.0} s", start.elapsed().as_secs_f64());
-    // ── diagnosis: the lead wires `gedisim diagnose` on d.run.dataset here, after the report ──
     Ok(())
 }
 

@@ -81,15 +81,16 @@ fn datum_world_names_datum_and_recovers_dz() {
 }
 
 #[test]
-fn canopy_change_world_names_canopy_change() {
+fn ground_detection_world_names_ground_detection() {
     let tmp = tempfile::tempdir().unwrap();
-    let d = diagnose_world(tmp.path(), "canopy_change", &["--seed", "12"]);
+    let d = diagnose_world(tmp.path(), "ground_detection", &["--seed", "12"]);
     check_contract(&d);
-    assert_eq!(first(&d)["name"], "canopy_change", "{:#}", d["effects"]);
+    assert_eq!(first(&d)["name"], "ground_detection", "{:#}", d["effects"]);
     assert_eq!(d["unexplained"], false);
     assert!(num(&first(&d)["held_out"]["shrink"]) >= 0.5, "{:#}", first(&d));
-    let fraction = num(&first(&d)["params"]["fraction"]);
-    assert!((fraction - 0.3).abs() <= 0.06, "fraction {fraction} (planted 0.3)");
+    assert_eq!(first(&d)["params"]["algorithm"], "all");
+    let offset = num(&first(&d)["params"]["offset_m"]);
+    assert!((offset - 0.5).abs() <= 0.1, "offset_m {offset} (planted 0.5)");
 }
 
 #[test]
