@@ -198,6 +198,7 @@ fn read_shots(
         let sens_sel = opt(&alg_cols[usize::from(sel) - 1].2, i).unwrap_or(f64::NAN);
         let energy: f64 = wave.iter().map(|&v| f64::from(v) - mean).sum();
         let (dx, dy) = offsets.get(&shot).map_or((0.0, 0.0), |o| (o.dx, o.dy));
+        let collocation_dz = offsets.get(&shot).map(|o| o.dz).filter(|dz| dz.is_finite());
         let real = RealShot {
             shot_number: shot,
             track: format!("{}/{}", granule.value(i), beam.value(i)),
@@ -210,6 +211,7 @@ fn read_shots(
             wave: wave.iter().map(|&v| (f64::from(v) - mean) as f32).collect(),
             selected: sel,
             algorithms,
+            collocation_dz,
             strata: Strata {
                 forest_type: forest.get(&shot).cloned().unwrap_or_else(|| classes::UNKNOWN.to_string()),
                 phenology: classes::phenology(opt(&leaf_off, i)).to_string(),
@@ -525,20 +527,23 @@ fn write_figures(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
         panels: vec![("RH frame (own grounds)".into(), rh), ("ALS frame (heights above the ALS ground)".into(), als)],
         zero_line: true,
         legend_lower: false,
+        own_y: false,
     };
     files.extend(figures::render(&fig, out, "bias_profile_before_after")?);
     let r = &d.where_.waveform;
-    let series = |label: &str, v: &[f64]| (label.to_string(), r.height.iter().zip(v).map(|(&h, &y)| (h, y)).collect::<Vec<_>>());
+    // In % of the waveform energy, so that the residual's ticks stay readable.
+    let series = |label: &str, v: &[f64]| (label.to_string(), r.height.iter().zip(v).map(|(&h, &y)| (h, 100.0 * y)).collect::<Vec<_>>());
     let fig = LinePanels {
         title: format!("Mean normalised waveform by height above the ALS ground ({} shots)", r.n_shots),
         x_desc: "height above ALS ground (m)".into(),
-        y_desc: "energy fraction per 0.5 m".into(),
+        y_desc: "% of the waveform energy per 0.5 m".into(),
         panels: vec![
             ("real and simulated (baseline)".into(), vec![series("real", &r.real), series("simulated", &r.simulated)]),
             ("residual real − simulated".into(), vec![series("residual", &r.residual)]),
         ],
         zero_line: true,
         legend_lower: false,
+        own_y: true,
     };
     files.extend(figures::render(&fig, out, "waveform_residual")?);
     Ok(files)

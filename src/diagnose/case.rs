@@ -43,6 +43,9 @@ pub struct RealShot {
     pub algorithms: [Option<RealAlgorithm>; N_ALGORITHMS],
     /// Strata of the shot (labels of `study::classes`).
     pub strata: Strata,
+    /// Vertical offset of the shot's collocation segment (`offsets.dz`: GEDI − N − ALS, m, from
+    /// the cross-correlation of whole waveforms), when collocated.
+    pub collocation_dz: Option<f64>,
 }
 
 /// Strata labels of one shot for the "where" decomposition.

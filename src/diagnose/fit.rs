@@ -128,6 +128,12 @@ pub fn fit(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
     let obj = |e: Effect| objective(cases, &base.with(e));
     match name {
         "datum" => {
+            // The collocation's vertical offsets come from whole waveforms, so a GEDI ground
+            // found elsewhere than the ALS one does not bias them: preferred when present.
+            let dz: Vec<f64> = cases.iter().filter_map(|c| c.real.collocation_dz).collect();
+            if dz.len() >= 5 {
+                return Some(Effect::Datum { dz_m: median(dz)? });
+            }
             let gaps = evaluate(cases, base);
             let all: Vec<f64> = gaps.iter().flat_map(|g| g.ground.iter().flatten().copied()).collect();
             Some(Effect::Datum { dz_m: trimmed_mean(all)? })

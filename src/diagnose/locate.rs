@@ -123,25 +123,29 @@ pub fn residual(cases: &[ShotCase]) -> WaveResidual {
     let mut real = vec![0.0; RESIDUAL_BINS];
     let mut sim = vec![0.0; RESIDUAL_BINS];
     let mut n = 0;
-    let bin = |h: f64| {
-        let i = ((h - RESIDUAL_MIN_M) / RESIDUAL_BIN_M).floor();
-        (i >= 0.0 && (i as usize) < RESIDUAL_BINS).then_some(i as usize)
+    // Each sample is shared between the two nearest bin centres (linear weights): 1 ns samples
+    // (0.15 m) do not tile 0.5 m bins, and nearest-bin counting would show a saw-tooth.
+    let add = |acc: &mut [f64], h: f64, v: f64| {
+        let p = (h - RESIDUAL_MIN_M) / RESIDUAL_BIN_M - 0.5;
+        let i = p.floor();
+        let w = p - i;
+        for (j, f) in [(i, 1.0 - w), (i + 1.0, w)] {
+            if j >= 0.0 && (j as usize) < RESIDUAL_BINS {
+                acc[j as usize] += v * f;
+            }
+        }
     };
     let nominal = Model::default();
     for c in cases.iter().filter(|c| c.selected().is_some()) {
         let g = c.sim.als_ground;
         let mut r = vec![0.0; RESIDUAL_BINS];
         for (s, &v) in c.real.wave.iter().enumerate() {
-            if let Some(i) = bin(c.real.bin0 - s as f64 * GEDI_BIN_M - g) {
-                r[i] += f64::from(v);
-            }
+            add(&mut r, c.real.bin0 - s as f64 * GEDI_BIN_M - g, f64::from(v));
         }
         let w = simulated_wave(c, &nominal);
         let mut m = vec![0.0; RESIDUAL_BINS];
         for (k, &v) in w.iter().enumerate() {
-            if let Some(i) = bin(c.sim.z0 - k as f64 * c.sim.dz - g) {
-                m[i] += v;
-            }
+            add(&mut m, c.sim.z0 - k as f64 * c.sim.dz - g, v);
         }
         let (sr, sm): (f64, f64) = (r.iter().sum(), m.iter().sum());
         if !(sr > 0.0 && sm > 0.0) {

@@ -232,6 +232,8 @@ pub struct LinePanels {
     pub zero_line: bool,
     /// Where the legend goes.
     pub legend_lower: bool,
+    /// Each panel scales its own y axis (default: one range for all, so panels compare).
+    pub own_y: bool,
 }
 
 impl Figure for LinePanels {
@@ -250,6 +252,7 @@ impl Figure for LinePanels {
         let yr = padded_range(all().map(|p| p.1), self.zero_line);
         let areas = root.split_evenly((1, self.panels.len().max(1)));
         for ((title, series), area) in self.panels.iter().zip(&areas) {
+            let yr = if self.own_y { padded_range(series.iter().flat_map(|s| s.1.iter()).map(|p| p.1), self.zero_line) } else { yr.clone() };
             let mut chart = ChartBuilder::on(area)
                 .caption(title, font(16))
                 .margin(10)

@@ -438,6 +438,7 @@ pub fn figure_data(ran: &[TableOutput]) -> Result<FigureData> {
                     panels,
                     zero_line: true,
                     legend_lower: true,
+                    own_y: false,
                 }),
             ));
         }
