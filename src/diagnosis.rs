@@ -36,7 +36,7 @@ pub struct CaseReport {
     pub dropped: Vec<(String, usize)>,
 }
 
-fn drop(report: &mut CaseReport, reason: &str) {
+fn count_dropped(report: &mut CaseReport, reason: &str) {
     match report.dropped.iter_mut().find(|(r, _)| r == reason) {
         Some((_, n)) => *n += 1,
         None => report.dropped.push((reason.to_string(), 1)),
@@ -58,16 +58,7 @@ pub fn read_cases(ds: &Dataset, on_shot: &(dyn Fn() + Sync)) -> Result<(Vec<Shot
     let dir = ds.root().join(tables::SHOTS);
     let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi`")))?;
     let mut pending = Vec::new();
-    for f in files {
-        let file = std::fs::File::open(&f).map_err(|e| Error::file(&f, e))?;
-        let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-            .and_then(|b| b.build())
-            .map_err(|e| Error::table(&f, e))?;
-        for b in reader {
-            let b = b.map_err(|e| Error::table(&f, e))?;
-            read_shots(&f, &b, &offsets, &forest, &mut pending, &mut report)?;
-        }
-    }
+    for_each_batch(files, |f, b| read_shots(f, b, &offsets, &forest, &mut pending, &mut report))?;
     let cases = simulate_cases(ds, pending, &mut report, on_shot)?;
     Ok((cases, report))
 }
@@ -78,21 +69,30 @@ fn read_forest_types(ds: &Dataset) -> Result<HashMap<u64, String>> {
         return Ok(out);
     }
     let dir = ds.root().join(tables::STRATA);
-    for f in dataset::table_files(&dir).map_err(|e| Error::file(&dir, e))? {
-        let file = std::fs::File::open(&f).map_err(|e| Error::file(&f, e))?;
+    let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, e))?;
+    for_each_batch(files, |f, b| {
+        let sn = column(f, b, "shot_number")?.as_primitive_opt::<UInt64Type>().cloned().ok_or_else(|| Error::field(f, "shot_number", "not uint64"))?;
+        let ft = column(f, b, "forest_type")?.as_string_opt::<i32>().cloned().ok_or_else(|| Error::field(f, "forest_type", "not a string"))?;
+        for i in 0..b.num_rows() {
+            out.insert(sn.value(i), ft.value(i).to_string());
+        }
+        Ok(())
+    })?;
+    Ok(out)
+}
+
+/// Call `f` on every batch of every file of `files` (Parquet).
+fn for_each_batch(files: Vec<PathBuf>, mut f: impl FnMut(&Path, &RecordBatch) -> Result<()>) -> Result<()> {
+    for path in files {
+        let file = std::fs::File::open(&path).map_err(|e| Error::file(&path, e))?;
         let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
             .and_then(|b| b.build())
-            .map_err(|e| Error::table(&f, e))?;
+            .map_err(|e| Error::table(&path, e))?;
         for b in reader {
-            let b = b.map_err(|e| Error::table(&f, e))?;
-            let sn = column(&f, &b, "shot_number")?.as_primitive_opt::<UInt64Type>().cloned().ok_or_else(|| Error::field(&f, "shot_number", "not uint64"))?;
-            let ft = column(&f, &b, "forest_type")?.as_string_opt::<i32>().cloned().ok_or_else(|| Error::field(&f, "forest_type", "not a string"))?;
-            for i in 0..b.num_rows() {
-                out.insert(sn.value(i), ft.value(i).to_string());
-            }
+            f(&path, &b.map_err(|e| Error::table(&path, e))?)?;
         }
     }
-    Ok(out)
+    Ok(())
 }
 
 fn column<'a>(path: &Path, b: &'a RecordBatch, name: &str) -> Result<&'a Arc<dyn Array>> {
@@ -157,19 +157,19 @@ fn read_shots(
     for i in 0..b.num_rows() {
         report.shots_read += 1;
         let (Some(px), Some(py)) = (opt(&x, i), opt(&y, i)) else {
-            drop(report, "no position");
+            count_dropped(report, "no position");
             continue;
         };
         let Some(wave) = list_f32(&rx, i).filter(|w| w.len() > 1) else {
-            drop(report, "no L1B waveform");
+            count_dropped(report, "no L1B waveform");
             continue;
         };
         let (Some(e0), Some(e1), Some(mean), Some(sd)) = (opt(&bin0, i), opt(&lastbin, i), opt(&nmean, i), opt(&nsd, i)) else {
-            drop(report, "no record geolocation or noise");
+            count_dropped(report, "no record geolocation or noise");
             continue;
         };
         let Some(n_geoid) = opt(&geoid_used, i).or(opt(&geoid, i)) else {
-            drop(report, "no geoid");
+            count_dropped(report, "no geoid");
             continue;
         };
         let Some(bt) = BeamType::from_name(beam.value(i)).or(match beam_type.value(i) {
@@ -177,7 +177,7 @@ fn read_shots(
             "full_power" => Some(BeamType::FullPower),
             _ => None,
         }) else {
-            drop(report, "unknown beam type");
+            count_dropped(report, "unknown beam type");
             continue;
         };
         let shot = sn.value(i);
@@ -191,7 +191,7 @@ fn read_shots(
             ground.is_finite().then(|| RealAlgorithm { ground: ground - n_geoid, rh })
         });
         if algorithms.iter().all(Option::is_none) {
-            drop(report, "no algorithm passes quality (quality_flag, degrade_flag, sensitivity ≥ 0.9)");
+            count_dropped(report, "no algorithm passes quality (quality_flag, degrade_flag, sensitivity ≥ 0.9)");
             continue;
         }
         let sel = opt(&selected, i).filter(|s| (1..=N_ALGORITHMS as u8).contains(s)).unwrap_or(1);
@@ -259,17 +259,17 @@ fn simulate_cases(ds: &Dataset, pending: Vec<Pending>, report: &mut CaseReport, 
         for (j, mut real) in reals.into_iter().enumerate() {
             on_shot();
             let Ok(n) = &nom[j] else {
-                drop(report, "footprint not simulated (no ALS points or partly covered)");
+                count_dropped(report, "footprint not simulated (no ALS points or partly covered)");
                 continue;
             };
             let count = n.get(Weighting::Count);
             let (Some(ground), Some(rh)) = (count.truth.als_ground, count.rh) else {
-                drop(report, "simulated footprint has no ground");
+                count_dropped(report, "simulated footprint has no ground");
                 continue;
             };
             let vs: Vec<&sim::SimulatedFootprint> = vars.iter().filter_map(|v| v[j].as_ref().ok()).collect();
             if vs.len() != FSIGMA_GRID.len() {
-                drop(report, "footprint not simulated at every footprint width");
+                count_dropped(report, "footprint not simulated at every footprint width");
                 continue;
             }
             real.strata.slope_class = classes::slope_class(count.truth.slope_deg.map(f64::from)).to_string();
