@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 
 use arrow::array::{Array, AsArray};
 use arrow::datatypes::{Float64Type, UInt32Type, UInt64Type, UInt8Type};
-use parquet::arrow::arrow_reader::{ParquetRecordBatchReaderBuilder, RowSelection};
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use parquet::arrow::ProjectionMask;
 
 use crate::als_table::{AlsTable, BBox};
@@ -456,14 +456,7 @@ fn read_waveforms(path: &Path, rows: impl Iterator<Item = usize>) -> Result<Vec<
     let file = std::fs::File::open(path).map_err(|e| Error::file(path, e))?;
     let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| Error::table(path, e))?;
     let total = builder.metadata().file_metadata().num_rows() as usize;
-    let mut ranges: Vec<std::ops::Range<usize>> = Vec::new();
-    for &r in &rows {
-        match ranges.last_mut() {
-            Some(last) if last.end == r => last.end = r + 1,
-            _ => ranges.push(r..r + 1),
-        }
-    }
-    let selection = RowSelection::from_consecutive_ranges(ranges.into_iter(), total);
+    let selection = crate::dataset::row_selection(&rows, total);
     let mask = ProjectionMask::columns(builder.parquet_schema(), ["rx_waveform"]);
     let reader = builder.with_projection(mask).with_row_selection(selection).with_batch_size(1024).build().map_err(|e| Error::table(path, e))?;
     let mut out = Vec::with_capacity(rows.len());

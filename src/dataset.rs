@@ -263,3 +263,16 @@ pub fn write_result(out: &Path, batches: &[RecordBatch]) -> Result<()> {
     drop(w);
     std::fs::rename(&tmp, out).map_err(|e| Error::file(out, format!("cannot rename into place: {e}")))
 }
+
+/// A Parquet row selection of the sorted row indices `rows` of a file of `total` rows
+/// (consecutive rows merged into one range).
+pub fn row_selection(rows: &[usize], total: usize) -> parquet::arrow::arrow_reader::RowSelection {
+    let mut ranges: Vec<std::ops::Range<usize>> = Vec::new();
+    for &r in rows {
+        match ranges.last_mut() {
+            Some(last) if last.end == r => last.end = r + 1,
+            _ => ranges.push(r..r + 1),
+        }
+    }
+    parquet::arrow::arrow_reader::RowSelection::from_consecutive_ranges(ranges.into_iter(), total)
+}

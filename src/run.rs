@@ -23,7 +23,7 @@ use std::path::{Path, PathBuf};
 
 use arrow::array::{Array, ArrayRef, AsArray, BooleanArray, RecordBatch};
 use arrow::datatypes::{Float32Type, Float64Type, TimestampMicrosecondType, UInt64Type, UInt8Type};
-use parquet::arrow::arrow_reader::{ParquetRecordBatchReaderBuilder, RowSelection};
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use parquet::arrow::ProjectionMask;
 use parquet::file::reader::FileReader;
 use sha2::{Digest, Sha256};
@@ -748,13 +748,6 @@ fn read_shot_facts(path: &Path, rows: impl Iterator<Item = usize>) -> Result<Vec
     }
     let builder = reader_builder(path)?;
     let total = builder.metadata().file_metadata().num_rows() as usize;
-    let mut ranges: Vec<std::ops::Range<usize>> = Vec::new();
-    for &r in &rows {
-        match ranges.last_mut() {
-            Some(last) if last.end == r => last.end = r + 1,
-            _ => ranges.push(r..r + 1),
-        }
-    }
     let mut names: Vec<String> = [
         "shot_number",
         "granule",
@@ -780,7 +773,7 @@ fn read_shot_facts(path: &Path, rows: impl Iterator<Item = usize>) -> Result<Vec
         return Err(Error::field(path, missing.as_str(), "column missing from the shots table"));
     }
     let mask = ProjectionMask::columns(builder.parquet_schema(), names.iter().map(String::as_str));
-    let selection = RowSelection::from_consecutive_ranges(ranges.into_iter(), total);
+    let selection = crate::dataset::row_selection(&rows, total);
     let reader = builder.with_projection(mask).with_row_selection(selection).build().map_err(|e| Error::table(path, e))?;
     let mut out = Vec::with_capacity(rows.len());
     for b in reader {
