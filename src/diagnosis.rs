@@ -12,7 +12,7 @@ use serde_json::{json, Value};
 
 use crate::als_table::AlsTable;
 use crate::dataset::{self, tables, Dataset};
-use crate::diagnose::case::{Parts, RealAlgorithm, RealShot, SimShot, SimVariant, Strata, FSIGMA_GRID};
+use crate::diagnose::case::{nominal_noise_stddev, Parts, RealAlgorithm, RealShot, SimShot, SimVariant, Strata, FSIGMA_GRID};
 use crate::diagnose::gap::{GapMetrics, N_PCT};
 use crate::diagnose::rank::Trial;
 use crate::diagnose::{self, Diagnosis, ShotCase};
@@ -204,6 +204,7 @@ fn read_shots(
             track: format!("{}/{}", granule.value(i), beam.value(i)),
             beam_type: bt,
             noise: Noise { mean, stddev: sd },
+            nominal_noise_stddev: nominal_noise_stddev(bt),
             energy,
             sample_count: wave.len(),
             bin0: e0 - n_geoid,
@@ -403,6 +404,9 @@ fn trial_json(t: &Trial) -> Value {
             "gain_m_ci95": [finite(h.gain_ci95[0]), finite(h.gain_ci95[1])],
             "shrink_mean_abs_bias": finite(h.shrink_mean_abs_bias),
             "msd_before": finite(h.before.msd), "msd_after": finite(h.after.msd),
+            "waveform_chi2_before": finite(h.profile_chi2[0]), "waveform_chi2_after": finite(h.profile_chi2[1]),
+            "waveform_shrink": h.profile_shrink().map_or(Value::Null, finite),
+            "score": finite(h.score()),
             "before": gap_json(&h.before), "after": gap_json(&h.after),
         },
         "fold_params": t.fold_effects.iter().map(|e| e.as_ref().map_or(Value::Null, params_json)).collect::<Vec<_>>(),
@@ -496,6 +500,8 @@ fn write_tables(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
             ("shrink_ci95_hi", floats(trials.iter().map(|t| t.held_out.ci95[1]))),
             ("msd_before", floats(trials.iter().map(|t| t.held_out.before.msd))),
             ("msd_after", floats(trials.iter().map(|t| t.held_out.after.msd))),
+            ("waveform_shrink", Arc::new(Float64Array::from(trials.iter().map(|t| t.held_out.profile_shrink()).collect::<Vec<_>>()))),
+            ("score", floats(trials.iter().map(|t| t.held_out.score()))),
         ])?)?);
     }
     Ok(files)

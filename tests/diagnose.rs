@@ -55,8 +55,12 @@ fn check_contract(d: &Value) {
     assert!(!d["where"]["strata"].as_array().unwrap().is_empty());
     let effects = d["effects"].as_array().unwrap();
     assert_eq!(effects.len(), 8, "every fitted effect is ranked");
-    let shrinks: Vec<f64> = effects.iter().map(|e| num(&e["held_out"]["shrink"])).collect();
-    assert!(shrinks.windows(2).all(|w| w[0] >= w[1]), "best first: {shrinks:?}");
+    // Best first: the effects that explain (shrink and gain intervals above their bars), then
+    // the rest, each group by its score (mean of the RH and waveform shrinks).
+    let explains = |h: &Value| num(&h["ci95"][0]) >= 0.10 && num(&h["gain_m_ci95"][0]) >= 0.02;
+    let keys: Vec<(bool, f64)> = effects.iter().map(|e| (explains(&e["held_out"]), num(&e["held_out"]["score"]))).collect();
+    assert!(keys.windows(2).all(|w| w[0].0 > w[1].0 || (w[0].0 == w[1].0 && w[0].1 >= w[1].1)), "best first: {keys:?}");
+    assert_eq!(d["unexplained"], !keys[0].0);
     for e in effects {
         let h = &e["held_out"];
         for k in ["mean_abs_bias_rh1_99_before", "mean_abs_bias_rh1_99_after", "shrink"] {
@@ -91,6 +95,20 @@ fn ground_detection_world_names_ground_detection() {
     assert_eq!(first(&d)["params"]["algorithm"], "all");
     let offset = num(&first(&d)["params"]["offset_m"]);
     assert!((offset - 0.5).abs() <= 0.1, "offset_m {offset} (planted 0.5)");
+}
+
+#[test]
+fn canopy_change_world_names_canopy_change() {
+    // A waveform-shape effect: weighting and occlusion move the RH profile alike, the waveform
+    // shape tells them apart.
+    let tmp = tempfile::tempdir().unwrap();
+    let d = diagnose_world(tmp.path(), "canopy_change", &["--magnitude", "2", "--seed", "14"]);
+    check_contract(&d);
+    assert_eq!(first(&d)["name"], "canopy_change", "{:#}", d["effects"]);
+    assert_eq!(d["unexplained"], false);
+    assert!(num(&first(&d)["held_out"]["shrink"]) >= 0.5, "{:#}", first(&d));
+    let height = num(&first(&d)["params"]["height_m"]);
+    assert!((height - 10.0).abs() <= 2.0, "height_m {height} (planted 10)");
 }
 
 #[test]

@@ -28,6 +28,8 @@ pub struct RealShot {
     pub beam_type: BeamType,
     /// Reported noise mean and σ (`noise_*_corrected`, DN).
     pub noise: Noise,
+    /// Noise σ of this shot in the nominal chain (DN): set by [`set_nominal_noise`].
+    pub nominal_noise_stddev: f64,
     /// Σ (sample − noise mean) over the record (DN): the twin's energy.
     pub energy: f64,
     /// Record length (samples).
@@ -122,6 +124,25 @@ impl ShotCase {
 /// effect's factor is expressed.
 pub fn nominal_noise_stddev(beam_type: BeamType) -> f64 {
     crate::scenario::real::record(beam_type).noise_stddev
+}
+
+/// Give every shot its noise σ in the nominal chain: its reported σ rescaled so that the median
+/// of its beam type is [`nominal_noise_stddev`]. The spread of noise levels between shots is kept
+/// — L2A's ground and RH errors grow faster than linearly with the noise, so a twin at one median
+/// σ for all shots would be biased against the real ones wherever the signal is weak (a wide
+/// pulse, sparse canopy) — while the level stays nominal, so that a departure from it is the
+/// `noise` effect's to explain. Without usable reported σ a shot gets the nominal σ.
+pub fn set_nominal_noise(cases: &mut [ShotCase]) {
+    for bt in [BeamType::Coverage, BeamType::FullPower] {
+        let mut sd: Vec<f64> = cases.iter().filter(|c| c.real.beam_type == bt).map(|c| c.real.noise.stddev).filter(|v| v.is_finite() && *v > 0.0).collect();
+        sd.sort_by(|a, b| a.total_cmp(b));
+        let nominal = nominal_noise_stddev(bt);
+        let scale = if sd.is_empty() { f64::NAN } else { nominal / sd[sd.len() / 2] };
+        for c in cases.iter_mut().filter(|c| c.real.beam_type == bt) {
+            let v = c.real.noise.stddev * scale;
+            c.real.nominal_noise_stddev = if v.is_finite() && v > 0.0 { v } else { nominal };
+        }
+    }
 }
 
 /// Check the RH lists of a case (101 values each).

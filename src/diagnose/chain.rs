@@ -2,13 +2,14 @@
 //! → L2A a1–a6) with a set of effects switched on, and the same effects undone on the real side.
 //!
 //! The nominal chain is what a scientist would simulate with the study's settings *and* process
-//! like GEDI: count weighting, 15 ns pulse, σ_f 5.5 m, noise of the median real GEDI shot of the
-//! beam type (`case::nominal_noise_stddev`), the shot's own energy and record window, our L2A. A
+//! like GEDI: count weighting, 15 ns pulse, σ_f 5.5 m, noise at the level of the median real GEDI
+//! shot of the beam type with the shots' own spread (`case::set_nominal_noise`), the shot's own
+//! energy and record window, our L2A. A
 //! world without any unmodelled effect then differs from it only by noise, so a control is
 //! `unexplained`; every effect is a departure from it, through the hooks of the effect registry
 //! (`scenario::effects`) shared with the world generator.
 
-use super::case::{nominal_noise_stddev, ShotCase, FSIGMA_GRID};
+use super::case::{ShotCase, FSIGMA_GRID};
 use crate::gedi::{N_ALGORITHMS, RH_LEN};
 use crate::process::l2a::{AlgorithmSettings, L2aOutcome, L2aProcessor, Noise, WaveformGeolocation};
 use crate::process::noise_twin::{NoiseShape, ShotTwin};
@@ -32,6 +33,11 @@ impl Model {
 
     fn set(&self) -> EffectSet {
         EffectSet { effects: self.effects.clone() }
+    }
+
+    /// GEDI − ALS vertical offset (m) of the model's effects.
+    pub fn vertical_offset_m(&self) -> f64 {
+        self.set().vertical_offset_m()
     }
 
     /// Footprint σ (m).
@@ -164,7 +170,7 @@ pub fn predict(case: &ShotCase, model: &Model, scratch: &mut Scratch) -> [Option
     let factor = model.set().noise_sigma_factor();
     let twin = ShotTwin {
         energy_total: real.energy,
-        noise: Noise { mean: real.noise.mean, stddev: nominal_noise_stddev(real.beam_type) * factor },
+        noise: Noise { mean: real.noise.mean, stddev: real.nominal_noise_stddev * factor },
         sample_count: real.sample_count,
         tx_pulse: None,
         quantum: 0.0,

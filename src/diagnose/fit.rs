@@ -1,12 +1,15 @@
-//! Evaluating a hypothesis on a set of shots, and fitting each effect's parameters to the gap of a
-//! calibration set: closed forms where the effect has one (datum, ground detection, noise), a
-//! coarse grid refined by golden-section search elsewhere (minimising the gap's `mean_abs_bias`).
+//! Evaluating a hypothesis on a set of shots, and fitting each effect's parameters to a
+//! calibration set: closed forms where the effect has one (datum, ground detection, noise); for
+//! the effects that reshape the waveform (weighting, pulse, footprint, canopy_change, occlusion)
+//! a coarse grid refined by golden-section search minimising the waveform-level gap
+//! ([`profile::chi2`]), which sees the shape of the waveform that RH percentiles blur.
 
 use rayon::prelude::*;
 
-use super::case::{nominal_noise_stddev, ShotCase, FSIGMA_GRID};
+use super::case::{ShotCase, FSIGMA_GRID};
 use super::chain::{predict, real_products, Model, Scratch};
 use super::gap::GapSums;
+use super::profile::{self, ShotProfile};
 use crate::gedi::N_ALGORITHMS;
 use crate::scenario::effects::{Effect, WeightMethod, NOMINAL_PULSE_SIGMA_M};
 
@@ -21,6 +24,8 @@ pub struct ShotGap {
     pub sums: GapSums,
     /// ground_real − ground_sim of a1..a6 (m), where both exist.
     pub ground: [Option<f64>; N_ALGORITHMS],
+    /// The shot's waveform-level difference (real − simulated).
+    pub profile: Option<ShotProfile>,
 }
 
 /// Evaluate `model` on every case (in parallel), in case order.
@@ -29,7 +34,7 @@ pub fn evaluate(cases: &[&ShotCase], model: &Model) -> Vec<ShotGap> {
         .par_iter()
         .map_init(Scratch::new, |scratch, case| {
             let pred = predict(case, model, scratch);
-            let mut out = ShotGap::default();
+            let mut out = ShotGap { profile: profile::shot_profile(case, model), ..Default::default() };
             out.sums.n_shots = 1.0;
             for a in 1..=N_ALGORITHMS as u8 {
                 if case.mismatch[usize::from(a) - 1] {
@@ -50,16 +55,6 @@ pub fn total(gaps: &[ShotGap]) -> GapSums {
     let mut s = GapSums::default();
     gaps.iter().for_each(|g| s.merge(&g.sums));
     s
-}
-
-/// The gap (`mean_abs_bias`) of `model` on `cases`.
-pub fn objective(cases: &[&ShotCase], model: &Model) -> f64 {
-    let m = total(&evaluate(cases, model)).metrics();
-    if m.mean_abs_bias.is_finite() {
-        m.mean_abs_bias
-    } else {
-        f64::INFINITY
-    }
 }
 
 /// Mean of the central 80 % (robust to mis-detected grounds, and unlike the median not stuck on
@@ -125,7 +120,7 @@ pub fn fit(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
     if cases.is_empty() {
         return None;
     }
-    let obj = |e: Effect| objective(cases, &base.with(e));
+    let obj = |e: Effect| profile::chi2(cases, &base.with(e));
     match name {
         "datum" => {
             // The collocation's vertical offsets come from whole waveforms, so a GEDI ground
@@ -162,7 +157,7 @@ pub fn fit(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
             })
         }
         "noise" => {
-            let ratios: Vec<f64> = cases.iter().map(|c| c.real.noise.stddev / nominal_noise_stddev(c.real.beam_type)).collect();
+            let ratios: Vec<f64> = cases.iter().map(|c| c.real.noise.stddev / c.real.nominal_noise_stddev).collect();
             Some(Effect::Noise { noise_sigma_factor: median(ratios)? })
         }
         "pulse" => {

@@ -6,14 +6,9 @@
 use std::collections::BTreeMap;
 
 use super::case::ShotCase;
-use super::chain::{simulated_wave, Model};
+use super::chain::Model;
 use super::gap::{GapMetrics, GapSums, N_PCT};
-use crate::process::noise_twin::GEDI_BIN_M;
-
-/// Height grid of the waveform residual: bins of this size (m) from [`RESIDUAL_MIN_M`].
-pub const RESIDUAL_BIN_M: f64 = 0.5;
-pub const RESIDUAL_MIN_M: f64 = -10.0;
-pub const RESIDUAL_BINS: usize = 140;
+use super::profile::{heights, real_profile, simulated_profile, PROFILE_BINS};
 
 /// One percentile of the baseline gap (RH frame, m / m²).
 #[derive(Debug, Clone, PartialEq)]
@@ -118,49 +113,26 @@ pub fn locate(cases: &[ShotCase]) -> Where {
     Where { overall, percentiles, strata, waveform: residual(cases) }
 }
 
-/// Mean of the real and simulated waveforms (each normalised to unit energy) on the height grid.
+/// Mean of the real and simulated waveforms (each normalised to unit energy) on the height grid
+/// of [`profile`](super::profile), the nominal chain's simulation against the real waveform at
+/// the nominal geoid.
 pub fn residual(cases: &[ShotCase]) -> WaveResidual {
-    let mut real = vec![0.0; RESIDUAL_BINS];
-    let mut sim = vec![0.0; RESIDUAL_BINS];
+    let mut real = vec![0.0; PROFILE_BINS];
+    let mut sim = vec![0.0; PROFILE_BINS];
     let mut n = 0;
-    // Each sample is shared between the two nearest bin centres (linear weights): 1 ns samples
-    // (0.15 m) do not tile 0.5 m bins, and nearest-bin counting would show a saw-tooth.
-    let add = |acc: &mut [f64], h: f64, v: f64| {
-        let p = (h - RESIDUAL_MIN_M) / RESIDUAL_BIN_M - 0.5;
-        let i = p.floor();
-        let w = p - i;
-        for (j, f) in [(i, 1.0 - w), (i + 1.0, w)] {
-            if j >= 0.0 && (j as usize) < RESIDUAL_BINS {
-                acc[j as usize] += v * f;
-            }
-        }
-    };
     let nominal = Model::default();
     for c in cases.iter().filter(|c| c.selected().is_some()) {
-        let g = c.sim.als_ground;
-        let mut r = vec![0.0; RESIDUAL_BINS];
-        for (s, &v) in c.real.wave.iter().enumerate() {
-            add(&mut r, c.real.bin0 - s as f64 * GEDI_BIN_M - g, f64::from(v));
-        }
-        let w = simulated_wave(c, &nominal);
-        let mut m = vec![0.0; RESIDUAL_BINS];
-        for (k, &v) in w.iter().enumerate() {
-            add(&mut m, c.sim.z0 - k as f64 * c.sim.dz - g, v);
-        }
-        let (sr, sm): (f64, f64) = (r.iter().sum(), m.iter().sum());
-        if !(sr > 0.0 && sm > 0.0) {
+        let (Some(r), Some(m)) = (real_profile(c, 0.0), simulated_profile(c, &nominal)) else {
             continue;
-        }
+        };
         n += 1;
-        for i in 0..RESIDUAL_BINS {
-            real[i] += r[i] / sr;
-            sim[i] += m[i] / sm;
-        }
+        real.iter_mut().zip(&r).for_each(|(a, b)| *a += b);
+        sim.iter_mut().zip(&m).for_each(|(a, b)| *a += b);
     }
     let scale = if n > 0 { 1.0 / n as f64 } else { 0.0 };
     real.iter_mut().chain(sim.iter_mut()).for_each(|v| *v *= scale);
     WaveResidual {
-        height: (0..RESIDUAL_BINS).map(|i| RESIDUAL_MIN_M + (i as f64 + 0.5) * RESIDUAL_BIN_M).collect(),
+        height: heights(),
         residual: real.iter().zip(&sim).map(|(a, b)| a - b).collect(),
         real,
         simulated: sim,

@@ -6,6 +6,7 @@
 //! - [`chain`]: the forward model of a hypothesis — the nominal GEDI chain (ALS waveform, pulse,
 //!   noise twin, L2A a1–a6) with effects from the shared registry (`scenario::effects`).
 //! - [`gap`]: the gap of a set of shots in the RH frame and the ALS frame, as additive sums.
+//! - [`profile`]: the waveform-level gap (mean normalised waveforms by height, as a χ²).
 //! - [`fit`]: each effect's parameters fitted to a calibration set.
 //! - [`rank`]: **which** and **how far** — cross-fitted on tracks, held-out shrink with bootstrap
 //!   intervals, the greedy ladder, `unexplained`.
@@ -15,6 +16,7 @@ pub mod chain;
 pub mod fit;
 pub mod gap;
 pub mod locate;
+pub mod profile;
 pub mod rank;
 
 pub use case::ShotCase;
@@ -36,6 +38,7 @@ pub struct Diagnosis {
 /// each effect tried.
 pub fn diagnose(mut cases: Vec<ShotCase>, names: &[&str], on_step: &dyn Fn(&str)) -> Diagnosis {
     let where_ = locate::locate(&cases);
+    case::set_nominal_noise(&mut cases);
     let mismatched = flag_ground_mismatches(&mut cases);
     let cases = &cases;
     let folds = rank::Folds::new(cases);

@@ -2,6 +2,13 @@
 //! cross-fitting, split by track, never by shot), with bootstrap confidence intervals over tracks;
 //! a greedy ladder for combined causes; `unexplained` when even the best effect's interval
 //! admits no real gain.
+//!
+//! The sim-to-real gap is observed twice: in the RH metrics and in the waveforms themselves
+//! ([`super::profile`]). Effects that reshape the waveform can move the RH percentiles alike —
+//! a weighting change, a canopy change and an occlusion all shift energy between ground and
+//! canopy — while only one of them reproduces the waveform's shape. Effects are therefore ranked
+//! by their held-out reduction of both gaps ([`Comparison::score`]); whether an effect explains
+//! anything is decided on the RH gap alone, the contract's measure.
 
 use std::collections::BTreeMap;
 
@@ -9,6 +16,7 @@ use super::case::ShotCase;
 use super::chain::Model;
 use super::fit::{evaluate, fit, ShotGap};
 use super::gap::{GapMetrics, GapSums};
+use super::profile::ProfileSums;
 use crate::scenario::effects::Effect;
 use crate::scenario::rng::Stream;
 
@@ -77,6 +85,30 @@ impl<'a> Folds<'a> {
         }
         t
     }
+
+    /// Track indices of `BOOTSTRAP` resamples (seeded by `label`: reproducible).
+    fn resamples(&self, label: &str) -> Vec<Vec<usize>> {
+        let n = self.n_tracks;
+        if n < 2 {
+            return Vec::new();
+        }
+        let mut rng = Stream::new(0xB007, &["bootstrap", label]);
+        (0..BOOTSTRAP).map(|_| (0..n).map(|_| ((rng.uniform() * n as f64) as usize).min(n - 1)).collect()).collect()
+    }
+}
+
+/// Sum of the per-track sums of the tracks `pick`.
+fn sum_of(t: &[GapSums], pick: &[usize]) -> GapSums {
+    let mut s = GapSums::default();
+    pick.iter().for_each(|&i| s.merge(&t[i]));
+    s
+}
+
+/// The waveform-level sums of a set of shot gaps.
+fn profile_sums(gaps: &[ShotGap]) -> ProfileSums {
+    let mut s = ProfileSums::default();
+    gaps.iter().filter_map(|g| g.profile.as_ref()).for_each(|p| s.add(p));
+    s
 }
 
 /// Held-out comparison of two gaps on the same shots.
@@ -92,6 +124,27 @@ pub struct Comparison {
     pub gain_ci95: [f64; 2],
     /// 1 − after/before of the raw `mean_abs_bias` (noise floor included).
     pub shrink_mean_abs_bias: f64,
+    /// Waveform-level gap (`profile::ProfileSums::chi2`) before and after.
+    pub profile_chi2: [f64; 2],
+}
+
+impl Comparison {
+    /// 1 − after/before of the waveform-level gap; `None` when the effect leaves it unchanged
+    /// (it acts on L2A's noise or products only: noise, ground detection).
+    pub fn profile_shrink(&self) -> Option<f64> {
+        let [b, a] = self.profile_chi2;
+        (b > 0.0 && (a - b).abs() > 1e-9 * b).then(|| 1.0 - a / b)
+    }
+
+    /// The held-out gap reduction effects are ranked by: the mean of the RH shrink and the
+    /// waveform-level shrink, or the RH shrink alone for an effect that leaves the waveforms
+    /// unchanged.
+    pub fn score(&self) -> f64 {
+        match self.profile_shrink() {
+            Some(p) => 0.5 * (self.shrink + p),
+            None => self.shrink,
+        }
+    }
 }
 
 /// 1 − after/before of the systematic gap; 0 when there is no systematic gap before.
@@ -106,30 +159,27 @@ fn shrink_of(before: &GapMetrics, after: &GapMetrics) -> f64 {
 /// Compare held-out gaps with a bootstrap over tracks (seeded: reproducible).
 pub fn compare(folds: &Folds, before: &[ShotGap], after: &[ShotGap], seed_label: &str) -> Comparison {
     let (tb, ta) = (folds.per_track(before), folds.per_track(after));
-    let sum = |t: &[GapSums], pick: &[usize]| {
-        let mut s = GapSums::default();
-        pick.iter().for_each(|&i| s.merge(&t[i]));
-        s
-    };
     let all: Vec<usize> = (0..folds.n_tracks).collect();
-    let (b, a) = (sum(&tb, &all).metrics(), sum(&ta, &all).metrics());
+    let (b, a) = (sum_of(&tb, &all).metrics(), sum_of(&ta, &all).metrics());
     let shrink = shrink_of(&b, &a);
     let shrink_mean_abs_bias = 1.0 - a.mean_abs_bias / b.mean_abs_bias;
-    let mut rng = Stream::new(0xB007, &["bootstrap", seed_label]);
     let mut shrinks = Vec::with_capacity(BOOTSTRAP);
     let mut gains = Vec::with_capacity(BOOTSTRAP);
-    let n = folds.n_tracks;
-    if n > 1 {
-        for _ in 0..BOOTSTRAP {
-            let pick: Vec<usize> = (0..n).map(|_| ((rng.uniform() * n as f64) as usize).min(n - 1)).collect();
-            let (bb, aa) = (sum(&tb, &pick).metrics(), sum(&ta, &pick).metrics());
-            if bb.n_pairs > 0 && aa.n_pairs > 0 {
-                shrinks.push(shrink_of(&bb, &aa));
-                gains.push(bb.systematic - aa.systematic);
-            }
+    for pick in folds.resamples(seed_label) {
+        let (bb, aa) = (sum_of(&tb, &pick).metrics(), sum_of(&ta, &pick).metrics());
+        if bb.n_pairs > 0 && aa.n_pairs > 0 {
+            shrinks.push(shrink_of(&bb, &aa));
+            gains.push(bb.systematic - aa.systematic);
         }
     }
-    Comparison { before: b, after: a, shrink, ci95: interval(shrinks), gain_ci95: interval(gains), shrink_mean_abs_bias }
+    let profile_chi2 = [profile_sums(before).chi2(), profile_sums(after).chi2()];
+    Comparison { before: b, after: a, shrink, ci95: interval(shrinks), gain_ci95: interval(gains), shrink_mean_abs_bias, profile_chi2 }
+}
+
+/// Order trials: those that explain first, each group by its held-out score
+/// ([`Comparison::score`]), best first.
+fn order(trials: &mut [Trial]) {
+    trials.sort_by(|a, b| b.explains().cmp(&a.explains()).then(b.held_out.score().total_cmp(&a.held_out.score())));
 }
 
 fn interval(mut v: Vec<f64>) -> [f64; 2] {
@@ -206,7 +256,6 @@ pub struct Ranking {
 /// Rank `names` on the nominal chain, then climb the ladder. `on_step` is told each effect tried.
 pub fn rank(folds: &Folds, names: &[&str], on_step: &dyn Fn(&str)) -> Ranking {
     let nominal = State::nominal(folds);
-    let by_shrink = |a: &Trial, b: &Trial| b.held_out.shrink.total_cmp(&a.held_out.shrink);
     let mut effects: Vec<Trial> = names
         .iter()
         .filter_map(|n| {
@@ -214,7 +263,7 @@ pub fn rank(folds: &Folds, names: &[&str], on_step: &dyn Fn(&str)) -> Ranking {
             try_effect(folds, &nominal, n)
         })
         .collect();
-    effects.sort_by(by_shrink);
+    order(&mut effects);
     let unexplained = !effects.first().is_some_and(Trial::explains);
     let mut ladder: Vec<Trial> = Vec::new();
     if !unexplained {
@@ -231,7 +280,7 @@ pub fn rank(folds: &Folds, names: &[&str], on_step: &dyn Fn(&str)) -> Ranking {
                     try_effect(folds, &state, n)
                 })
                 .collect();
-            step.sort_by(by_shrink);
+            order(&mut step);
             match step.into_iter().next() {
                 Some(t) if t.explains() => {
                     state = advance(&state, &t);
