@@ -316,6 +316,22 @@ mod tests {
     }
 
     #[test]
+    fn score_averages_the_two_shrinks_only_when_the_waveform_moves() {
+        let c = |chi2: [f64; 2]| Comparison {
+            before: GapMetrics::default(),
+            after: GapMetrics::default(),
+            shrink: 0.6,
+            ci95: [0.4, 0.7],
+            gain_ci95: [0.05, 0.1],
+            shrink_mean_abs_bias: 0.5,
+            profile_chi2: chi2,
+        };
+        assert_eq!(c([1000.0, 1000.0]).profile_shrink(), None);
+        assert_eq!(c([1000.0, 1000.0]).score(), 0.6);
+        assert!((c([1000.0, 800.0]).score() - 0.4).abs() < 1e-12);
+    }
+
+    #[test]
     fn interval_of_a_constant_is_the_constant() {
         assert_eq!(interval(vec![0.3; 50]), [0.3, 0.3]);
         assert!(interval(vec![]).iter().all(|v| v.is_nan()));
