@@ -255,6 +255,20 @@ struct ExportGeoArgs {
     out: PathBuf,
 }
 
+/// Options of the ingest chain shared by `run` and `diagnose --als`.
+#[derive(Args)]
+struct ChainArgs {
+    /// Corine Land Cover GeoTIFF (EPSG:3035) or CSV shot_number,forest_type: forest type of every shot.
+    #[arg(long)]
+    landcover: Option<PathBuf>,
+    /// Projected CRS (default: the dataset's ALS CRS, else 2154).
+    #[arg(long)]
+    epsg: Option<u32>,
+    /// Geoid offset N (m, ellipsoid − orthometric) for every shot, instead of each shot's L1B geoid.
+    #[arg(long, allow_hyphen_values = true)]
+    geoid_offset: Option<f64>,
+}
+
 #[derive(Args)]
 struct RunArgs {
     /// LAS/LAZ tiles or folders (may be left out once the dataset holds the tiles).
@@ -266,15 +280,8 @@ struct RunArgs {
     /// GEDI L2A files or folders.
     #[arg(long, num_args = 1..)]
     l2a: Vec<PathBuf>,
-    /// Corine Land Cover GeoTIFF (EPSG:3035) or CSV shot_number,forest_type: forest type of every shot.
-    #[arg(long)]
-    landcover: Option<PathBuf>,
-    /// Projected CRS (default: the dataset's ALS CRS, else 2154).
-    #[arg(long)]
-    epsg: Option<u32>,
-    /// Geoid offset N (m, ellipsoid − orthometric) for every shot, instead of each shot's L1B geoid.
-    #[arg(long, allow_hyphen_values = true)]
-    geoid_offset: Option<f64>,
+    #[command(flatten)]
+    chain: ChainArgs,
     /// Dataset directory (created if needed).
     #[arg(long)]
     out: PathBuf,
@@ -723,9 +730,9 @@ fn run_command(a: RunArgs) -> Result<()> {
         als: a.als,
         l1b: a.l1b,
         l2a: a.l2a,
-        landcover: a.landcover,
-        epsg: a.epsg,
-        geoid_offset: a.geoid_offset,
+        landcover: a.chain.landcover,
+        epsg: a.chain.epsg,
+        geoid_offset: a.chain.geoid_offset,
         collocate: CollocateOptions {
             level: collocate_level(a.level),
             segment: a.segment,
@@ -740,11 +747,10 @@ fn run_command(a: RunArgs) -> Result<()> {
     Ok(())
 }
 
-/// What a run did (stderr), then the filters and the results (stdout).
-fn print_run(r: &gedisim::run::RunReport) {
+/// What the ingest and collocation of a run did (stderr).
+fn print_ingest_and_collocation(r: &gedisim::run::RunReport) {
     use gedisim::ingest::als::TileOutcome;
     use gedisim::ingest::gedi::GranuleOutcome;
-    use gedisim::study::select::Filter;
     if !r.tiles.is_empty() {
         let new: Vec<u64> = r.tiles.iter().filter_map(|t| if let TileOutcome::Ingested { points, .. } = t { Some(*points) } else { None }).collect();
         eprintln!("ALS: {} tiles ingested ({} points), {} already ingested", new.len(), new.iter().sum::<u64>(), r.tiles.len() - new.len());
@@ -777,6 +783,12 @@ fn print_run(r: &gedisim::run::RunReport) {
         }
         None => eprintln!("collocation: every granule already collocated"),
     }
+}
+
+/// What a run did (stderr), then the filters and the results (stdout).
+fn print_run(r: &gedisim::run::RunReport) {
+    use gedisim::study::select::Filter;
+    print_ingest_and_collocation(r);
     let simulated: Vec<&gedisim::run::GranuleRun> = r.granules.iter().filter(|g| g.simulated.is_some()).collect();
     if simulated.is_empty() {
         let covered: usize = r.granules.iter().map(|g| g.covered).sum();
@@ -982,15 +994,8 @@ struct DiagnoseArgs {
     /// L2A granules (files or folders).
     #[arg(long, num_args = 1..)]
     l2a: Vec<PathBuf>,
-    /// Land cover (CLC GeoTIFF in EPSG:3035, or CSV shot_number,forest_type) for the strata.
-    #[arg(long)]
-    landcover: Option<PathBuf>,
-    /// Projected CRS of the shots (default: the ALS CRS, else 2154).
-    #[arg(long)]
-    epsg: Option<u32>,
-    /// Geoid offset N (m) for every shot instead of the L1B geoid.
-    #[arg(long, allow_hyphen_values = true)]
-    geoid_offset: Option<f64>,
+    #[command(flatten)]
+    chain: ChainArgs,
     /// Output directory (diagnosis.json, tables, figures).
     #[arg(long)]
     out: PathBuf,
@@ -998,6 +1003,11 @@ struct DiagnoseArgs {
     #[arg(long, value_delimiter = ',')]
     effects: Vec<String>,
 }
+
+/// Collocation of a dataset the diagnosis makes: per track (the baseline's horizontal collocation),
+/// every run solved however short.
+const DIAGNOSIS_COLLOCATION: gedisim::collocation::CollocateOptions =
+    gedisim::collocation::CollocateOptions { level: gedisim::collocate::segments::Level::Beam, segment: 40, max_shift: 10.0, step: 1.0, min_segment: 1 };
 
 fn diagnose(a: DiagnoseArgs) -> Result<()> {
     let start = Instant::now();
@@ -1007,19 +1017,34 @@ fn diagnose(a: DiagnoseArgs) -> Result<()> {
             if a.als.is_empty() {
                 return Err(Error::Usage("give --dataset, or --als with --l1b and --l2a".into()));
             }
-            let ds = a.out.join("dataset");
-            ingest_als(IngestAlsArgs { inputs: a.als.clone(), out: ds.clone(), keep_all_classes: false, epsg: a.epsg, stats: false })?;
-            ingest_gedi(IngestGediArgs { l1b: a.l1b.clone(), l2a: a.l2a.clone(), out: ds.clone(), epsg: a.epsg, geoid_offset: a.geoid_offset, strict_join: false })?;
-            if let Some(lc) = &a.landcover {
-                ingest_strata(IngestStrataArgs { landcover: lc.clone(), dataset: ds.clone() })?;
-            }
-            ds
+            // The first half of `gedisim run`, with the diagnosis's per-track collocation.
+            let opts = gedisim::run::RunOptions {
+                als: a.als.clone(),
+                l1b: a.l1b.clone(),
+                l2a: a.l2a.clone(),
+                landcover: a.chain.landcover.clone(),
+                epsg: a.chain.epsg,
+                geoid_offset: a.chain.geoid_offset,
+                collocate: DIAGNOSIS_COLLOCATION,
+                ..gedisim::run::RunOptions::new(&a.out.join("dataset"))
+            };
+            print_ingest_and_collocation(&gedisim::run::ingest_and_collocate(&opts, &Bars::new())?);
+            opts.out
         }
     };
     let ds = Dataset::open(&root)?;
     if !ds.has_table(gedisim::dataset::tables::OFFSETS) {
         eprintln!("no offsets table: collocating per track first (the baseline's horizontal collocation)");
-        collocate(CollocateArgs { dataset: root.clone(), level: LevelArg::Beam, segment: 40, max_shift: 10.0, step: 1.0, min_segment: 1, stats: false })?;
+        let c = DIAGNOSIS_COLLOCATION;
+        collocate(CollocateArgs {
+            dataset: root.clone(),
+            level: LevelArg::Beam,
+            segment: c.segment,
+            max_shift: c.max_shift,
+            step: c.step,
+            min_segment: c.min_segment,
+            stats: false,
+        })?;
     }
     let bar = progress(0, "shots");
     bar.set_message("simulating");

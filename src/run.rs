@@ -229,21 +229,7 @@ pub fn run_study(opts: &RunOptions, progress: &dyn Progress) -> Result<RunReport
     if !(r.min_rh100.is_finite() && r.max_rh100.is_finite() && r.min_rh100 <= r.max_rh100) {
         return Err(Error::Usage(format!("RH100 bounds {}..{} m are not an interval", r.min_rh100, r.max_rh100)));
     }
-    let ds = Dataset::create(&opts.out)?;
-    let mut report = RunReport { dataset: opts.out.clone(), rules: opts.rules, ..Default::default() };
-    ingest_als(&ds, opts, progress, &mut report)?;
-    ingest_gedi(&ds, opts, progress, &mut report)?;
-    if let Some(landcover) = &opts.landcover {
-        progress.start(Step::Strata, 0);
-        let s = crate::ingest::strata::ingest_strata(&ds, landcover, &|n, total| {
-            progress.set_total(total);
-            progress.advance(n);
-        });
-        progress.finish();
-        report.strata = Some(s?);
-    }
-    let granules = list_granules(&ds)?;
-    collocate(&ds, opts, &granules, progress, &mut report)?;
+    let (ds, mut report, granules) = ingest_and_collocate_granules(opts, progress)?;
     let inputs = StudyInputs::read(&ds)?;
     let mut plans = granules.into_iter().map(|g| plan_granule(&ds, g, &inputs, &opts.rules)).collect::<Result<Vec<_>>>()?;
     let foreign = ds.root().join(tables::SIM).join("shots.parquet");
@@ -260,6 +246,32 @@ pub fn run_study(opts: &RunOptions, progress: &dyn Progress) -> Result<RunReport
         report.granules.push(p.run);
     }
     Ok(report)
+}
+
+/// The first half of a run: ingest what is new of the tiles, the granules and the land cover, then
+/// collocate the granules that need it (`opts.rules` is not used). `gedisim diagnose --als` stops
+/// here.
+pub fn ingest_and_collocate(opts: &RunOptions, progress: &dyn Progress) -> Result<RunReport> {
+    ingest_and_collocate_granules(opts, progress).map(|(_, report, _)| report)
+}
+
+fn ingest_and_collocate_granules(opts: &RunOptions, progress: &dyn Progress) -> Result<(Dataset, RunReport, Vec<GranuleFile>)> {
+    let ds = Dataset::create(&opts.out)?;
+    let mut report = RunReport { dataset: opts.out.clone(), rules: opts.rules, ..Default::default() };
+    ingest_als(&ds, opts, progress, &mut report)?;
+    ingest_gedi(&ds, opts, progress, &mut report)?;
+    if let Some(landcover) = &opts.landcover {
+        progress.start(Step::Strata, 0);
+        let s = crate::ingest::strata::ingest_strata(&ds, landcover, &|n, total| {
+            progress.set_total(total);
+            progress.advance(n);
+        });
+        progress.finish();
+        report.strata = Some(s?);
+    }
+    let granules = list_granules(&ds)?;
+    collocate(&ds, opts, &granules, progress, &mut report)?;
+    Ok((ds, report, granules))
 }
 
 fn ingest_als(ds: &Dataset, opts: &RunOptions, progress: &dyn Progress, report: &mut RunReport) -> Result<()> {

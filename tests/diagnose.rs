@@ -71,15 +71,19 @@ fn check_contract(d: &Value) {
     }
 }
 
+/// `name` is ranked first and named, with a held-out shrink ≥ 0.5.
+fn assert_named_first(d: &Value, name: &str) {
+    check_contract(d);
+    assert_eq!(first(d)["name"], name, "{:#}", d["effects"]);
+    assert_eq!(d["unexplained"], false);
+    assert!(num(&first(d)["held_out"]["shrink"]) >= 0.5, "{:#}", first(d));
+}
+
 #[test]
 fn datum_world_names_datum_and_recovers_dz() {
     let tmp = tempfile::tempdir().unwrap();
     let d = diagnose_world(tmp.path(), "datum", &["--magnitude", "2", "--seed", "11"]);
-    check_contract(&d);
-    assert_eq!(first(&d)["name"], "datum", "{:#}", d["effects"]);
-    assert_eq!(d["unexplained"], false);
-    let h = &first(&d)["held_out"];
-    assert!(num(&h["shrink"]) >= 0.5, "{h:#}");
+    assert_named_first(&d, "datum");
     let dz = num(&first(&d)["params"]["dz_m"]);
     assert!((dz - 1.0).abs() <= 0.2, "dz_m {dz} (planted 1.0)");
 }
@@ -88,10 +92,7 @@ fn datum_world_names_datum_and_recovers_dz() {
 fn ground_detection_world_names_ground_detection() {
     let tmp = tempfile::tempdir().unwrap();
     let d = diagnose_world(tmp.path(), "ground_detection", &["--seed", "12"]);
-    check_contract(&d);
-    assert_eq!(first(&d)["name"], "ground_detection", "{:#}", d["effects"]);
-    assert_eq!(d["unexplained"], false);
-    assert!(num(&first(&d)["held_out"]["shrink"]) >= 0.5, "{:#}", first(&d));
+    assert_named_first(&d, "ground_detection");
     assert_eq!(first(&d)["params"]["algorithm"], "all");
     let offset = num(&first(&d)["params"]["offset_m"]);
     assert!((offset - 0.5).abs() <= 0.1, "offset_m {offset} (planted 0.5)");
@@ -103,10 +104,7 @@ fn canopy_change_world_names_canopy_change() {
     // shape tells them apart.
     let tmp = tempfile::tempdir().unwrap();
     let d = diagnose_world(tmp.path(), "canopy_change", &["--magnitude", "2", "--seed", "14"]);
-    check_contract(&d);
-    assert_eq!(first(&d)["name"], "canopy_change", "{:#}", d["effects"]);
-    assert_eq!(d["unexplained"], false);
-    assert!(num(&first(&d)["held_out"]["shrink"]) >= 0.5, "{:#}", first(&d));
+    assert_named_first(&d, "canopy_change");
     let height = num(&first(&d)["params"]["height_m"]);
     assert!((height - 10.0).abs() <= 2.0, "height_m {height} (planted 10)");
 }
