@@ -1,6 +1,7 @@
 //! What the diagnosis knows about one shot: the real side (its L1B record facts and L2A products,
 //! in the ALS vertical datum through the nominal geoid) and the simulated side (ground and canopy
-//! parts of the ALS waveform, without a pulse, for each footprint width and weighting tried).
+//! parts of the ALS waveform, without a pulse, for each footprint width and weighting tried, at
+//! the collocated position and, for short segments, at nearby positions).
 
 use crate::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
 use crate::process::l2a::Noise;
@@ -45,6 +46,9 @@ pub struct RealShot {
     pub algorithms: [Option<RealAlgorithm>; N_ALGORITHMS],
     /// Strata of the shot (labels of `study::classes`).
     pub strata: Strata,
+    /// The collocation segment (shots sharing one offset; the shot number when not collocated):
+    /// the unit re-placed together.
+    pub segment: String,
     /// Vertical offset of the shot's collocation segment (`offsets.dz`: GEDI − N − ALS, m, from
     /// the cross-correlation of whole waveforms), when collocated.
     pub collocation_dz: Option<f64>,
@@ -88,18 +92,59 @@ pub struct SimVariant {
     pub weightings: [Parts; N_WEIGHTINGS],
 }
 
-/// The simulated side of one shot: every [`FSIGMA_GRID`] width on one bin grid
-/// (bin k at `z0 − k·dz`, ALS datum), with the ALS truths of the nominal simulation.
+/// Spacing (m) of the grid of positions at which the shots of short collocation segments are
+/// also simulated ([`site_grid`]).
+pub const SITE_STEP_M: f64 = 2.0;
+/// Positions per axis on each side of the grid's centre (a 5 × 5 grid: ±4 m).
+pub const SITE_HALF: i32 = 2;
+/// Segments of this many shots or more keep their collocated position: their shared offset is
+/// pinned by many waveforms and absorbs little of a waveform-shape effect.
+pub const SHORT_SEGMENT_SHOTS: usize = 10;
+
+/// The grid of horizontal offsets (m) around its centre, row by row ([`SITE_HALF`],
+/// [`SITE_STEP_M`]). A shot of a short segment has site 0 at its collocated position, then these
+/// offsets around its segment's re-collocated centre (docs/diagnosis.md).
+pub fn site_grid() -> Vec<(f64, f64)> {
+    let mut out = Vec::new();
+    for i in -SITE_HALF..=SITE_HALF {
+        for j in -SITE_HALF..=SITE_HALF {
+            out.push((f64::from(i) * SITE_STEP_M, f64::from(j) * SITE_STEP_M));
+        }
+    }
+    out
+}
+
+/// The simulation of a shot at one horizontal position: every [`FSIGMA_GRID`] width on one bin
+/// grid (bin k at `z0 − k·dz`, ALS datum).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Site {
+    /// Offset (m) from the collocated position.
+    pub dx: f64,
+    pub dy: f64,
+    pub z0: f64,
+    /// Empty when the position could not be simulated at every width (never chosen).
+    pub variants: Vec<SimVariant>,
+    /// ALS ground at this position (count weighting, σ_f 5.5 m) (m).
+    pub als_ground: f64,
+}
+
+/// The simulated side of one shot: the collocated position (site 0) and, for a shot of a short
+/// collocation segment, the [`site_grid`] around its segment's re-collocated centre, among which
+/// each hypothesis re-places the segment (`chain::reposition`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SimShot {
-    pub z0: f64,
     pub dz: f64,
-    pub variants: Vec<SimVariant>,
-    /// ALS ground of the nominal (count, 5.5 m) simulation (m).
-    pub als_ground: f64,
+    pub sites: Vec<Site>,
     /// Noise-free RH0..RH100 of the nominal physics (count, 15 ns pulse, 5.5 m) from the ALS
-    /// ground: the study's baseline simulated RH.
+    /// ground at the collocated position: the study's baseline simulated RH.
     pub rh_nominal: Vec<f32>,
+}
+
+impl SimShot {
+    /// The collocated position (the study's).
+    pub fn collocated(&self) -> &Site {
+        &self.sites[0]
+    }
 }
 
 /// Everything the diagnosis needs about one shot.
@@ -115,7 +160,10 @@ pub struct ShotCase {
 impl ShotCase {
     /// The selected algorithm's products, if they pass the filter.
     pub fn selected(&self) -> Option<&RealAlgorithm> {
-        self.real.algorithms.get(usize::from(self.real.selected).wrapping_sub(1))?.as_ref()
+        self.real
+            .algorithms
+            .get(usize::from(self.real.selected).wrapping_sub(1))?
+            .as_ref()
     }
 }
 
@@ -134,10 +182,19 @@ pub fn nominal_noise_stddev(beam_type: BeamType) -> f64 {
 /// `noise` effect's to explain. Without usable reported σ a shot gets the nominal σ.
 pub fn set_nominal_noise(cases: &mut [ShotCase]) {
     for bt in [BeamType::Coverage, BeamType::FullPower] {
-        let mut sd: Vec<f64> = cases.iter().filter(|c| c.real.beam_type == bt).map(|c| c.real.noise.stddev).filter(|v| v.is_finite() && *v > 0.0).collect();
+        let mut sd: Vec<f64> = cases
+            .iter()
+            .filter(|c| c.real.beam_type == bt)
+            .map(|c| c.real.noise.stddev)
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .collect();
         sd.sort_by(|a, b| a.total_cmp(b));
         let nominal = nominal_noise_stddev(bt);
-        let scale = if sd.is_empty() { f64::NAN } else { nominal / sd[sd.len() / 2] };
+        let scale = if sd.is_empty() {
+            f64::NAN
+        } else {
+            nominal / sd[sd.len() / 2]
+        };
         for c in cases.iter_mut().filter(|c| c.real.beam_type == bt) {
             let v = c.real.noise.stddev * scale;
             c.real.nominal_noise_stddev = if v.is_finite() && v > 0.0 { v } else { nominal };
