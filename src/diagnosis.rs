@@ -754,8 +754,9 @@ fn to_json(d: &Diagnosis, r: &CaseReport) -> Value {
             "strata": w.strata.iter().map(|s| json!({"kind": s.kind, "label": s.label, "n_shots": s.n_shots, "mean_abs_bias_rh1_99": finite(s.metrics.mean_abs_bias_rh), "msd": finite(s.metrics.msd), "sb": finite(s.metrics.sb), "sdsd": finite(s.metrics.sdsd), "lcs": finite(s.metrics.lcs), "ground_bias_m": finite(s.metrics.ground_bias), "share_of_squared_error": s.share_of_squared_error})).collect::<Vec<_>>(),
             "waveform_residual": {"height_m": w.waveform.height, "real": w.waveform.real, "simulated": w.waveform.simulated, "residual": w.waveform.residual, "n_shots": w.waveform.n_shots},
         },
-        "shots": {"read": r.shots_read, "used": d.n_shots, "pairs_ground_mismatch": d.mismatched, "dropped": r.dropped.iter().map(|(k, n)| json!({"reason": k, "n": n})).collect::<Vec<_>>()},
-        "settings": {"min_shrink_lower": crate::diagnose::rank::MIN_SHRINK_LOWER, "min_gain_m": crate::diagnose::rank::MIN_GAIN_M, "bootstrap": crate::diagnose::rank::BOOTSTRAP, "folds": 2, "split": "by track (granule/beam)"},
+        "shots": {"read": r.shots_read, "used": d.n_shots, "re_placed_per_hypothesis": d.n_replaceable, "pairs_ground_mismatch": d.mismatched, "dropped": r.dropped.iter().map(|(k, n)| json!({"reason": k, "n": n})).collect::<Vec<_>>()},
+        "settings": {"min_shrink_lower": crate::diagnose::rank::MIN_SHRINK_LOWER, "min_gain_m": crate::diagnose::rank::MIN_GAIN_M, "bootstrap": crate::diagnose::rank::BOOTSTRAP, "folds": 2, "split": "by track (granule/beam)",
+            "placement": {"short_segment_shots": crate::diagnose::case::SHORT_SEGMENT_SHOTS, "site_grid_step_m": crate::diagnose::case::SITE_STEP_M, "site_grid_half_width_m": f64::from(crate::diagnose::case::SITE_HALF) * crate::diagnose::case::SITE_STEP_M, "recollocation_shift_m": RECOLLOCATE_SHIFT_M, "recollocation_step_m": RECOLLOCATE_STEP_M}},
     })
 }
 

@@ -147,6 +147,17 @@ fn canopy_change_world_names_canopy_change() {
 }
 
 #[test]
+fn pulse_world_names_pulse_and_recovers_its_width() {
+    // On tracks of one or two shots the nominal collocation absorbs much of a pulse change into
+    // the positions; the diagnosis re-places them for each hypothesis.
+    let tmp = tempfile::tempdir().unwrap();
+    let d = diagnose_world(tmp.path(), "pulse", &["--seed", "15"]);
+    assert_named_first(&d, "pulse");
+    let sigma = num(&first(&d)["params"]["pulse_sigma_m"]);
+    assert!((sigma - 1.5).abs() <= 0.3, "pulse_sigma_m {sigma} (planted 1.5)");
+}
+
+#[test]
 fn control_world_is_unexplained() {
     let tmp = tempfile::tempdir().unwrap();
     let d = diagnose_world(tmp.path(), "none", &["--seed", "13"]);

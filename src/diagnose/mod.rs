@@ -4,7 +4,8 @@
 //! - [`locate`]: **where** — the study's baseline gap by RH percentile, by stratum, and as the
 //!   waveform residual by height above the ALS ground.
 //! - [`chain`]: the forward model of a hypothesis — the nominal GEDI chain (ALS waveform, pulse,
-//!   noise twin, L2A a1–a6) with effects from the shared registry (`scenario::effects`).
+//!   noise twin, L2A a1–a6) with effects from the shared registry (`scenario::effects`), and the
+//!   hypothesis's placement of the shots of short collocation segments.
 //! - [`gap`]: the gap of a set of shots in the RH frame and the ALS frame, as additive sums.
 //! - [`profile`]: the waveform-level gap (mean normalised waveforms by height, as a χ²).
 //! - [`fit`]: each effect's parameters fitted to a calibration set.
@@ -29,6 +30,8 @@ pub struct Diagnosis {
     pub nominal: gap::GapMetrics,
     pub ranking: rank::Ranking,
     pub n_shots: usize,
+    /// Shots of short collocation segments, which each hypothesis re-places (`chain::reposition`).
+    pub n_replaceable: usize,
     pub n_tracks: usize,
     /// (shot, algorithm) pairs left out as ground mismatches.
     pub mismatched: usize,
@@ -52,6 +55,7 @@ pub fn diagnose(mut cases: Vec<ShotCase>, names: &[&str], on_step: &dyn Fn(&str)
         nominal,
         ranking,
         n_shots: cases.len(),
+        n_replaceable: cases.iter().filter(|c| c.sim.sites.len() > 1).count(),
         n_tracks: folds.n_tracks,
         mismatched,
     }
