@@ -10,17 +10,17 @@
 //! Reference (CONTRACTS.md, simulator-reference.md §6.4): collocateWaves on a planted 40-shot
 //! track of the same scene, same grid: 105.7 s wall, 1.27 GB max RSS.
 
-mod common;
 #[path = "../tests/common/planted.rs"]
 mod planted;
+mod common;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use arrow::array::AsArray;
 use arrow::datatypes::{Float64Type, UInt32Type};
-use common::{field, run, scene_25m};
 use gedisim::dataset::Dataset;
+use common::{field, run, scene_25m};
 use planted::{write_planted_l1b, Plant, PlantedBeam};
 
 /// Scene extent (simulator-reference.md §6.3).
@@ -37,18 +37,8 @@ fn main() {
     if !als_dataset.join("tiles").is_dir() {
         let t = Instant::now();
         let _ = std::fs::remove_dir_all(&als_dataset);
-        run(&[
-            "ingest",
-            "als",
-            laz.to_str().unwrap(),
-            "--out",
-            als_dataset.to_str().unwrap(),
-        ]);
-        println!(
-            "ingested the scene into {} in {:.1} s",
-            als_dataset.display(),
-            t.elapsed().as_secs_f64()
-        );
+        run(&["ingest", "als", laz.to_str().unwrap(), "--out", als_dataset.to_str().unwrap()]);
+        println!("ingested the scene into {} in {:.1} s", als_dataset.display(), t.elapsed().as_secs_f64());
     }
 
     // A dataset sharing the scene's `als/` table, with the planted granule.
@@ -62,46 +52,17 @@ fn main() {
         shots: 40,
         energy: 6000.0,
     };
-    let plant = Plant {
-        shift: (4.0, -3.0),
-        datum: 47.5,
-        l1b_geoid: 47.3,
-        noise_sigma: 2.5,
-        seed: 11,
-    };
-    let l1b: PathBuf = tmp.path().join(gedisim::gedi::granule::v2_file_name(
-        "01_B",
-        "2019108080338",
-        1964,
-        2,
-        5337,
-    ));
+    let plant = Plant { shift: (4.0, -3.0), datum: 47.5, l1b_geoid: 47.3, noise_sigma: 2.5, seed: 11 };
+    let l1b: PathBuf = tmp.path().join(gedisim::gedi::granule::v2_file_name("01_B", "2019108080338", 1964, 2, 5337));
     write_planted_l1b(&ds, &[beam], &plant, &l1b);
-    run(&[
-        "ingest",
-        "gedi",
-        "--l1b",
-        l1b.to_str().unwrap(),
-        "--out",
-        tmp.path().to_str().unwrap(),
-        "--geoid-offset",
-        "0",
-    ]);
+    run(&["ingest", "gedi", "--l1b", l1b.to_str().unwrap(), "--out", tmp.path().to_str().unwrap(), "--geoid-offset", "0"]);
 
     let t = Instant::now();
-    let out = run(&[
-        "collocate",
-        "--dataset",
-        tmp.path().to_str().unwrap(),
-        "--stats",
-    ]);
+    let out = run(&["collocate", "--dataset", tmp.path().to_str().unwrap(), "--stats"]);
     let wall = t.elapsed().as_secs_f64();
     let rss_mb = field(&out, " MB,");
     println!("collocate benchmark: 24,719,400 ALS points, 40 shots, ±10 m at 1 m (441 offsets), vertical solve included (2 cores)");
-    println!(
-        "  gedisim collocate : {wall:.2} s wall (process), {}",
-        out.trim()
-    );
+    println!("  gedisim collocate : {wall:.2} s wall (process), {}", out.trim());
     println!("  reference         : {REFERENCE_S} s, {REFERENCE_GB} GB (collocateWaves, simulator-reference.md §6.4)");
     let cpu = field(&out, " s, peak");
     println!(
@@ -115,23 +76,11 @@ fn main() {
 
 fn print_offsets(ds: &Path, plant: &Plant) {
     let f = std::fs::File::open(ds.join("offsets/offsets.parquet")).unwrap();
-    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(f)
-        .unwrap()
-        .build()
-        .unwrap();
+    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(f).unwrap().build().unwrap();
     for b in reader {
         let b = b.unwrap();
-        let v = |c: &str, i: usize| {
-            b.column_by_name(c)
-                .unwrap()
-                .as_primitive::<Float64Type>()
-                .value(i)
-        };
-        let n = b
-            .column_by_name("n_shots")
-            .unwrap()
-            .as_primitive::<UInt32Type>()
-            .clone();
+        let v = |c: &str, i: usize| b.column_by_name(c).unwrap().as_primitive::<Float64Type>().value(i);
+        let n = b.column_by_name("n_shots").unwrap().as_primitive::<UInt32Type>().clone();
         for i in 0..b.num_rows() {
             println!(
                 "  recovered: dx {:+.2} dy {:+.2} dz {:+.3} m (planted {:+.1} {:+.1} {:+.1}) from {} shots; r {:.3} → {:.4}",

@@ -15,17 +15,7 @@ use std::time::Instant;
 
 use serde_json::Value;
 
-const EFFECTS: [&str; 9] = [
-    "datum",
-    "ground_detection",
-    "canopy_change",
-    "occlusion",
-    "weighting",
-    "pulse",
-    "footprint",
-    "noise",
-    "geolocation",
-];
+const EFFECTS: [&str; 9] = ["datum", "ground_detection", "canopy_change", "occlusion", "weighting", "pulse", "footprint", "noise", "geolocation"];
 
 /// Main parameter of an effect (the one `--magnitude` scales) and its nominal value.
 fn main_param(effect: &str) -> (&'static str, f64) {
@@ -43,28 +33,13 @@ fn main_param(effect: &str) -> (&'static str, f64) {
 }
 
 fn list(var: &str, default: &str) -> Vec<String> {
-    std::env::var(var)
-        .unwrap_or_else(|_| default.to_string())
-        .split(',')
-        .map(|s| s.trim().to_string())
-        .filter(|s| !s.is_empty())
-        .collect()
+    std::env::var(var).unwrap_or_else(|_| default.to_string()).split(',').map(|s| s.trim().to_string()).filter(|s| !s.is_empty()).collect()
 }
 
 fn run(args: &[&str]) -> bool {
-    let out = Command::new(env!("CARGO_BIN_EXE_gedisim"))
-        .args(args)
-        .output()
-        .expect("gedisim runs");
+    let out = Command::new(env!("CARGO_BIN_EXE_gedisim")).args(args).output().expect("gedisim runs");
     if !out.status.success() {
-        eprintln!(
-            "gedisim {}: {}",
-            args.join(" "),
-            String::from_utf8_lossy(&out.stderr)
-                .lines()
-                .last()
-                .unwrap_or("")
-        );
+        eprintln!("gedisim {}: {}", args.join(" "), String::from_utf8_lossy(&out.stderr).lines().last().unwrap_or(""));
     }
     out.status.success()
 }
@@ -85,15 +60,7 @@ fn world(dir: &Path, effect: &str, magnitude: &str, seed: &str) -> Option<Row> {
     let w = dir.join(format!("{effect}-m{magnitude}-s{seed}"));
     let _ = std::fs::remove_dir_all(&w);
     let ws = w.join("world");
-    let mut args = vec![
-        "scenario",
-        "--effect",
-        effect,
-        "--seed",
-        seed,
-        "--out",
-        ws.to_str()?,
-    ];
+    let mut args = vec!["scenario", "--effect", effect, "--seed", seed, "--out", ws.to_str()?];
     if effect != "none" {
         args.extend(["--magnitude", magnitude]);
     }
@@ -102,39 +69,19 @@ fn world(dir: &Path, effect: &str, magnitude: &str, seed: &str) -> Option<Row> {
     }
     let start = Instant::now();
     let (g, a, o) = (ws.join("gedi"), ws.join("als"), w.join("diagnosis"));
-    if !run(&[
-        "diagnose",
-        "--als",
-        a.to_str()?,
-        "--l1b",
-        g.to_str()?,
-        "--l2a",
-        g.to_str()?,
-        "--out",
-        o.to_str()?,
-    ]) {
+    if !run(&["diagnose", "--als", a.to_str()?, "--l1b", g.to_str()?, "--l2a", g.to_str()?, "--out", o.to_str()?]) {
         return None;
     }
     let seconds = start.elapsed().as_secs_f64();
-    let d: Value =
-        serde_json::from_str(&std::fs::read_to_string(o.join("diagnosis.json")).ok()?).ok()?;
-    let t: Value =
-        serde_json::from_str(&std::fs::read_to_string(ws.join("truth.json")).ok()?).ok()?;
+    let d: Value = serde_json::from_str(&std::fs::read_to_string(o.join("diagnosis.json")).ok()?).ok()?;
+    let t: Value = serde_json::from_str(&std::fs::read_to_string(ws.join("truth.json")).ok()?).ok()?;
     let first = &d["effects"][0];
     let (p, _) = main_param(effect);
     let truth = t["effects"][0]["params"][p].as_f64().unwrap_or(f64::NAN);
-    let fitted = if first["name"] == effect {
-        first["params"][p].as_f64().unwrap_or(f64::NAN)
-    } else {
-        f64::NAN
-    };
+    let fitted = if first["name"] == effect { first["params"][p].as_f64().unwrap_or(f64::NAN) } else { f64::NAN };
     Some(Row {
         effect: effect.to_string(),
-        magnitude: if effect == "none" {
-            "-".into()
-        } else {
-            magnitude.to_string()
-        },
+        magnitude: if effect == "none" { "-".into() } else { magnitude.to_string() },
         seed: seed.to_string(),
         first: first["name"].as_str().unwrap_or("?").to_string(),
         unexplained: d["unexplained"].as_bool().unwrap_or(false),
@@ -147,9 +94,7 @@ fn world(dir: &Path, effect: &str, magnitude: &str, seed: &str) -> Option<Row> {
 
 fn main() {
     let tmp = tempfile::tempdir().expect("temporary folder");
-    let dir = std::env::var("GEDISIM_BENCH_DIR")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|_| tmp.path().to_path_buf());
+    let dir = std::env::var("GEDISIM_BENCH_DIR").map(std::path::PathBuf::from).unwrap_or_else(|_| tmp.path().to_path_buf());
     let effects = list("GEDISIM_BENCH_EFFECTS", &EFFECTS.join(","));
     let magnitudes = list("GEDISIM_BENCH_MAGNITUDES", "1,2");
     let seeds = list("GEDISIM_BENCH_SEEDS", "1,2");
@@ -162,15 +107,8 @@ fn main() {
             }
         }
     }
-    jobs.extend(
-        controls
-            .iter()
-            .map(|s| ("none".to_string(), "1".to_string(), s.clone())),
-    );
-    println!(
-        "{:<17} {:>4} {:>4}  {:<17} {:>11} {:>7}  {:>9} {:>9} {:>7}  {:>6}",
-        "effect", "mag", "seed", "first", "unexplained", "shrink", "truth", "fitted", "error", "s"
-    );
+    jobs.extend(controls.iter().map(|s| ("none".to_string(), "1".to_string(), s.clone())));
+    println!("{:<17} {:>4} {:>4}  {:<17} {:>11} {:>7}  {:>9} {:>9} {:>7}  {:>6}", "effect", "mag", "seed", "first", "unexplained", "shrink", "truth", "fitted", "error", "s");
     let mut rows = Vec::new();
     for (e, m, s) in &jobs {
         let Some(r) = world(&dir, e, m, s) else {
@@ -180,39 +118,19 @@ fn main() {
         let err = (r.fitted - r.truth).abs() / r.truth.abs();
         println!(
             "{:<17} {:>4} {:>4}  {:<17} {:>11} {:>7.2}  {:>9.3} {:>9.3} {:>6.0}%  {:>6.0}",
-            r.effect,
-            r.magnitude,
-            r.seed,
-            r.first,
-            r.unexplained,
-            r.shrink,
-            r.truth,
-            r.fitted,
-            100.0 * err,
-            r.seconds
+            r.effect, r.magnitude, r.seed, r.first, r.unexplained, r.shrink, r.truth, r.fitted, 100.0 * err, r.seconds
         );
         rows.push(r);
     }
     let with: Vec<&Row> = rows.iter().filter(|r| r.effect != "none").collect();
-    let right: Vec<&&Row> = with
-        .iter()
-        .filter(|r| r.first == r.effect && !r.unexplained)
-        .collect();
+    let right: Vec<&&Row> = with.iter().filter(|r| r.first == r.effect && !r.unexplained).collect();
     let n = with.len().max(1) as f64;
     let mut shrinks: Vec<f64> = right.iter().map(|r| r.shrink).collect();
     shrinks.sort_by(|a, b| a.total_cmp(b));
-    let within = right
-        .iter()
-        .filter(|r| (r.fitted - r.truth).abs() <= 0.2 * r.truth.abs())
-        .count();
+    let within = right.iter().filter(|r| (r.fitted - r.truth).abs() <= 0.2 * r.truth.abs()).count();
     let controls: Vec<&Row> = rows.iter().filter(|r| r.effect == "none").collect();
     println!();
-    println!(
-        "right effect first (and named): {}/{} = {:.0} %",
-        right.len(),
-        with.len(),
-        100.0 * right.len() as f64 / n
-    );
+    println!("right effect first (and named): {}/{} = {:.0} %", right.len(), with.len(), 100.0 * right.len() as f64 / n);
     if !shrinks.is_empty() {
         println!(
             "held-out shrink when right: median {:.2}, min {:.2}; ≥ 0.70 in {}/{}",
@@ -221,22 +139,12 @@ fn main() {
             shrinks.iter().filter(|&&s| s >= 0.7).count(),
             shrinks.len()
         );
-        println!(
-            "main parameter within 20 % of the truth when right: {within}/{}",
-            right.len()
-        );
+        println!("main parameter within 20 % of the truth when right: {within}/{}", right.len());
     }
-    println!(
-        "controls unexplained: {}/{}",
-        controls.iter().filter(|r| r.unexplained).count(),
-        controls.len()
-    );
+    println!("controls unexplained: {}/{}", controls.iter().filter(|r| r.unexplained).count(), controls.len());
     for e in &effects {
         let of: Vec<&&Row> = with.iter().filter(|r| &r.effect == e).collect();
-        let ok = of
-            .iter()
-            .filter(|r| r.first == r.effect && !r.unexplained)
-            .count();
+        let ok = of.iter().filter(|r| r.first == r.effect && !r.unexplained).count();
         println!("  {e:<17} right first {ok}/{}", of.len());
     }
 }

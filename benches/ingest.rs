@@ -18,14 +18,7 @@ fn main() {
     for file in [tile, scene] {
         let decode = run(&["bench", "decode", file.to_str().unwrap()]);
         let out = tempfile::tempdir().unwrap();
-        let ingest = run(&[
-            "ingest",
-            "als",
-            file.to_str().unwrap(),
-            "--out",
-            out.path().to_str().unwrap(),
-            "--stats",
-        ]);
+        let ingest = run(&["ingest", "als", file.to_str().unwrap(), "--out", out.path().to_str().unwrap(), "--stats"]);
         let (td, ti) = (field(&decode, " s,"), field(&ingest, " s,"));
         println!("{}", file.file_name().unwrap().to_string_lossy());
         println!("  las decode alone : {}", decode.trim());

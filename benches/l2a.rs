@@ -118,10 +118,7 @@ fn main() {
     timing.print("process     (SQL path: one pair per call)      ", pairs);
 
     // Where the time goes: the two smoothings every waveform needs (widths 6.5 and 3.5).
-    let kernels = [
-        GaussianKernel::for_width(6.5),
-        GaussianKernel::for_width(3.5),
-    ];
+    let kernels = [GaussianKernel::for_width(6.5), GaussianKernel::for_width(3.5)];
     let mut smoothed = Vec::new();
     let timing = best(&mut || {
         for _ in 0..ROUNDS {

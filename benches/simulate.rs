@@ -32,21 +32,9 @@ fn main() {
     let out = |name: &str| work.path().join(name).to_str().unwrap().to_string();
     let s = |p: &PathBuf| p.to_str().unwrap().to_string();
 
-    println!(
-        "simulator benchmark: {} (2 cores; wall clock of separate processes)",
-        scene.display()
-    );
+    println!("simulator benchmark: {} (2 cores; wall clock of separate processes)", scene.display());
     let direct = |fp: &PathBuf, name: &str| {
-        run(&[
-            "simulate",
-            "--als",
-            &s(&scene),
-            "--footprints",
-            &s(fp),
-            "--out",
-            &out(name),
-            "--stats",
-        ])
+        run(&["simulate", "--als", &s(&scene), "--footprints", &s(fp), "--out", &out(name), "--stats"])
     };
     let d2 = direct(&pair, "d2.parquet");
     let d2000 = direct(&lattice, "d2000.parquet");
@@ -55,25 +43,11 @@ fn main() {
     let ds = out("ds");
     let ingest = run(&["ingest", "als", &s(&scene), "--out", &ds, "--stats"]);
     let on_dataset = |fp: &PathBuf, name: &str| {
-        run(&[
-            "simulate",
-            "--dataset",
-            &ds,
-            "--footprints",
-            &s(fp),
-            "--out",
-            &out(name),
-            "--stats",
-        ])
+        run(&["simulate", "--dataset", &ds, "--footprints", &s(fp), "--out", &out(name), "--stats"])
     };
     let t2 = on_dataset(&pair, "t2.parquet");
     let t2000 = on_dataset(&lattice, "t2000.parquet");
-    report(
-        "dataset path (ingest once, then simulate --dataset --footprints)",
-        &t2,
-        &t2000,
-        Some(&ingest),
-    );
+    report("dataset path (ingest once, then simulate --dataset --footprints)", &t2, &t2000, Some(&ingest));
 }
 
 /// Print one path's figures and its ratios to the reference.
@@ -86,22 +60,12 @@ fn report(title: &str, two: &str, all: &str, ingest: Option<&str>) {
     println!("  2 footprints    : {}", two.trim());
     println!("  2000 footprints : {}", all.trim());
     println!("  per additional footprint: {per_wave_ms:.3} ms (reference {ref_per_wave_ms:.1} ms): {:.0}× faster", ref_per_wave_ms / per_wave_ms);
-    println!(
-        "  end to end (2000): {t2000:.2} s vs {REF_2000_S} s: {:.1}× faster",
-        REF_2000_S / t2000
-    );
-    println!(
-        "  peak RSS {rss:.0} MB = {:.1} % of the reference's {REF_RSS_GB} GB",
-        rss / (REF_RSS_GB * 1e3) * 100.0
-    );
+    println!("  end to end (2000): {t2000:.2} s vs {REF_2000_S} s: {:.1}× faster", REF_2000_S / t2000);
+    println!("  peak RSS {rss:.0} MB = {:.1} % of the reference's {REF_RSS_GB} GB", rss / (REF_RSS_GB * 1e3) * 100.0);
     if let Some(ingest) = ingest {
         let ti = field(ingest, " s,");
         println!("  one-time ingest : {}", ingest.trim());
-        println!(
-            "  ingest + 2000 footprints: {:.2} s vs {REF_2000_S} s: {:.1}× faster",
-            ti + t2000,
-            REF_2000_S / (ti + t2000)
-        );
+        println!("  ingest + 2000 footprints: {:.2} s vs {REF_2000_S} s: {:.1}× faster", ti + t2000, REF_2000_S / (ti + t2000));
     }
 }
 

@@ -7,17 +7,15 @@ use std::path::{Path, PathBuf};
 
 use arrow::array::{Array, AsArray};
 use arrow::datatypes::{Float32Type, Float64Type, UInt16Type, UInt8Type};
-use parquet::arrow::arrow_reader::{
-    ArrowReaderMetadata, ArrowReaderOptions, ParquetRecordBatchReaderBuilder,
-};
+use parquet::arrow::arrow_reader::{ArrowReaderMetadata, ArrowReaderOptions, ParquetRecordBatchReaderBuilder};
 use parquet::arrow::ProjectionMask;
+use rayon::prelude::*;
 use parquet::file::metadata::ParquetMetaData;
 use parquet::file::statistics::Statistics;
-use rayon::prelude::*;
 
-use crate::collocate::PointCloud;
 use crate::dataset::{self, tables, Dataset};
 use crate::error::{Error, Result};
+use crate::collocate::PointCloud;
 use crate::sim::AlsPoints;
 
 /// Axis-aligned box [xmin, ymin, xmax, ymax].
@@ -58,28 +56,19 @@ impl AlsTable {
     /// Open the `als/` table of a dataset (reads only the footers).
     pub fn open(ds: &Dataset) -> Result<Self> {
         let dir = ds.root().join(tables::ALS);
-        let paths = dataset::table_files(&dir).map_err(|e| {
-            Error::file(
-                &dir,
-                format!("no ALS table ({e}): run `gedisim ingest als`"),
-            )
-        })?;
+        let paths = dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no ALS table ({e}): run `gedisim ingest als`")))?;
         let mut files = Vec::new();
         let mut cover_index: HashMap<(i64, i64), Vec<(usize, usize)>> = HashMap::new();
         for path in paths {
             let file = File::open(&path).map_err(|e| Error::file(&path, e))?;
-            let meta = ArrowReaderMetadata::load(&file, ArrowReaderOptions::new())
-                .map_err(|e| Error::table(&path, e))?;
+            let meta = ArrowReaderMetadata::load(&file, ArrowReaderOptions::new()).map_err(|e| Error::table(&path, e))?;
             let groups = row_group_boxes(meta.metadata(), &path)?;
             for (g, b) in groups.iter().enumerate() {
                 let cell = |v: f64| (v / COVER_CELL).floor() as i64;
                 let t = COVER_TOLERANCE;
                 for cx in cell(b[0] - t)..=cell(b[2] + t) {
                     for cy in cell(b[1] - t)..=cell(b[3] + t) {
-                        cover_index
-                            .entry((cx, cy))
-                            .or_default()
-                            .push((files.len(), g));
+                        cover_index.entry((cx, cy)).or_default().push((files.len(), g));
                     }
                 }
             }
@@ -96,10 +85,7 @@ impl AlsTable {
             return false;
         }
         let inside = |px: f64, py: f64| {
-            let key = (
-                (px / COVER_CELL).floor() as i64,
-                (py / COVER_CELL).floor() as i64,
-            );
+            let key = ((px / COVER_CELL).floor() as i64, (py / COVER_CELL).floor() as i64);
             let t = COVER_TOLERANCE;
             self.cover_index.get(&key).is_some_and(|v| {
                 v.iter().any(|&(f, g)| {
@@ -118,8 +104,7 @@ impl AlsTable {
     /// x, y, z of the points inside any of `boxes` (inclusive), reading only those three columns
     /// of the row groups that meet a box, in parallel.
     pub fn xyz_in_boxes(&self, boxes: &[BBox]) -> Result<(PointCloud, ReadStats)> {
-        let meets =
-            |g: &BBox, b: &BBox| g[0] <= b[2] && g[2] >= b[0] && g[1] <= b[3] && g[3] >= b[1];
+        let meets = |g: &BBox, b: &BBox| g[0] <= b[2] && g[2] >= b[0] && g[1] <= b[3] && g[3] >= b[1];
         let mut jobs: Vec<(usize, usize, Vec<BBox>)> = Vec::new();
         for (fi, f) in self.files.iter().enumerate() {
             for (g, gb) in f.groups.iter().enumerate() {
@@ -134,23 +119,13 @@ impl AlsTable {
             .map(|(fi, g, hit)| self.read_xyz(*fi, *g, hit))
             .collect::<Result<Vec<PointCloud>>>()?;
         let n = parts.iter().map(PointCloud::len).sum();
-        let mut out = PointCloud {
-            x: Vec::with_capacity(n),
-            y: Vec::with_capacity(n),
-            z: Vec::with_capacity(n),
-        };
+        let mut out = PointCloud { x: Vec::with_capacity(n), y: Vec::with_capacity(n), z: Vec::with_capacity(n) };
         for p in parts {
             out.x.extend_from_slice(&p.x);
             out.y.extend_from_slice(&p.y);
             out.z.extend_from_slice(&p.z);
         }
-        Ok((
-            out,
-            ReadStats {
-                row_groups_read: jobs.len(),
-                row_groups_total: self.row_groups(),
-            },
-        ))
+        Ok((out, ReadStats { row_groups_read: jobs.len(), row_groups_total: self.row_groups() }))
     }
 
     /// x, y, z of row group `g` of file `fi`, kept when inside one of `boxes`.
@@ -172,17 +147,12 @@ impl AlsTable {
                 batch
                     .column_by_name(name)
                     .and_then(|c| c.as_primitive_opt::<Float64Type>())
-                    .ok_or_else(|| {
-                        Error::field(&f.path, name, "missing or not float64 in the ALS table")
-                    })
+                    .ok_or_else(|| Error::field(&f.path, name, "missing or not float64 in the ALS table"))
             };
             let (x, y, z) = (col("x")?.values(), col("y")?.values(), col("z")?.values());
             for i in 0..batch.num_rows() {
                 let (px, py) = (x[i], y[i]);
-                if boxes
-                    .iter()
-                    .any(|b| px >= b[0] && px <= b[2] && py >= b[1] && py <= b[3])
-                {
+                if boxes.iter().any(|b| px >= b[0] && px <= b[2] && py >= b[1] && py <= b[3]) {
                     out.x.push(px);
                     out.y.push(py);
                     out.z.push(z[i]);
@@ -210,20 +180,13 @@ impl AlsTable {
 
     fn read(&self, boxes: &[BBox], keep: Option<BBox>) -> Result<(AlsPoints, ReadStats)> {
         let mut out = AlsPoints::default();
-        let mut stats = ReadStats {
-            row_groups_read: 0,
-            row_groups_total: self.row_groups(),
-        };
+        let mut stats = ReadStats { row_groups_read: 0, row_groups_total: self.row_groups() };
         for f in &self.files {
             let wanted: Vec<usize> = f
                 .groups
                 .iter()
                 .enumerate()
-                .filter(|(_, g)| {
-                    boxes
-                        .iter()
-                        .any(|b| g[0] <= b[2] && g[2] >= b[0] && g[1] <= b[3] && g[3] >= b[1])
-                })
+                .filter(|(_, g)| boxes.iter().any(|b| g[0] <= b[2] && g[2] >= b[0] && g[1] <= b[3] && g[3] >= b[1]))
                 .map(|(i, _)| i)
                 .collect();
             if wanted.is_empty() {
@@ -236,10 +199,7 @@ impl AlsTable {
                     // The point attributes only: `tile` and `cell` are constant per row group.
                     let columns = POINT_COLUMNS.iter().copied();
                     let mask = parquet::arrow::ProjectionMask::columns(b.parquet_schema(), columns);
-                    b.with_row_groups(wanted)
-                        .with_projection(mask)
-                        .with_batch_size(1 << 16)
-                        .build()
+                    b.with_row_groups(wanted).with_projection(mask).with_batch_size(1 << 16).build()
                 })
                 .map_err(|e| Error::table(&f.path, e))?;
             for batch in reader {
@@ -276,11 +236,7 @@ fn row_group_boxes(meta: &ParquetMetaData, path: &Path) -> Result<Vec<BBox>> {
     let range = |g: usize, i: usize, name: &str| match meta.row_group(g).column(i).statistics() {
         Some(Statistics::Double(s)) => match (s.min_opt(), s.max_opt()) {
             (Some(a), Some(b)) => Ok((*a, *b)),
-            _ => Err(Error::field(
-                path,
-                name,
-                "row group without min/max statistics",
-            )),
+            _ => Err(Error::field(path, name, "row group without min/max statistics")),
         },
         _ => Err(Error::field(path, name, "row group without f64 statistics")),
     };
@@ -294,24 +250,11 @@ fn row_group_boxes(meta: &ParquetMetaData, path: &Path) -> Result<Vec<BBox>> {
 }
 
 /// Append the rows of `b` (those inside `keep`, when given) to `out`.
-fn append(
-    out: &mut AlsPoints,
-    b: &arrow::record_batch::RecordBatch,
-    keep: Option<BBox>,
-    path: &Path,
-) -> Result<()> {
-    let col = |name: &str| {
-        b.column_by_name(name)
-            .ok_or_else(|| Error::field(path, name, "column missing from the ALS table"))
-    };
-    let (x, y) = (
-        col("x")?.as_primitive::<Float64Type>().values(),
-        col("y")?.as_primitive::<Float64Type>().values(),
-    );
+fn append(out: &mut AlsPoints, b: &arrow::record_batch::RecordBatch, keep: Option<BBox>, path: &Path) -> Result<()> {
+    let col = |name: &str| b.column_by_name(name).ok_or_else(|| Error::field(path, name, "column missing from the ALS table"));
+    let (x, y) = (col("x")?.as_primitive::<Float64Type>().values(), col("y")?.as_primitive::<Float64Type>().values());
     let rows: Vec<usize> = match keep {
-        Some(k) => (0..b.num_rows())
-            .filter(|&i| x[i] >= k[0] && x[i] <= k[2] && y[i] >= k[1] && y[i] <= k[3])
-            .collect(),
+        Some(k) => (0..b.num_rows()).filter(|&i| x[i] >= k[0] && x[i] <= k[2] && y[i] >= k[1] && y[i] <= k[3]).collect(),
         None => (0..b.num_rows()).collect(),
     };
     fn put<T: Copy>(dst: &mut Vec<T>, src: &[T], rows: &[usize]) {
@@ -323,54 +266,14 @@ fn append(
     }
     put(&mut out.x, x, &rows);
     put(&mut out.y, y, &rows);
-    put(
-        &mut out.z,
-        col("z")?.as_primitive::<Float64Type>().values(),
-        &rows,
-    );
-    put(
-        &mut out.intensity,
-        col("intensity")?.as_primitive::<UInt16Type>().values(),
-        &rows,
-    );
-    put(
-        &mut out.return_number,
-        col("return_number")?.as_primitive::<UInt8Type>().values(),
-        &rows,
-    );
-    put(
-        &mut out.number_of_returns,
-        col("number_of_returns")?
-            .as_primitive::<UInt8Type>()
-            .values(),
-        &rows,
-    );
-    put(
-        &mut out.classification,
-        col("classification")?.as_primitive::<UInt8Type>().values(),
-        &rows,
-    );
-    put(
-        &mut out.scan_angle_deg,
-        col("scan_angle_deg")?
-            .as_primitive::<Float32Type>()
-            .values(),
-        &rows,
-    );
+    put(&mut out.z, col("z")?.as_primitive::<Float64Type>().values(), &rows);
+    put(&mut out.intensity, col("intensity")?.as_primitive::<UInt16Type>().values(), &rows);
+    put(&mut out.return_number, col("return_number")?.as_primitive::<UInt8Type>().values(), &rows);
+    put(&mut out.number_of_returns, col("number_of_returns")?.as_primitive::<UInt8Type>().values(), &rows);
+    put(&mut out.classification, col("classification")?.as_primitive::<UInt8Type>().values(), &rows);
+    put(&mut out.scan_angle_deg, col("scan_angle_deg")?.as_primitive::<Float32Type>().values(), &rows);
     let gps = col("gps_time")?.as_primitive::<Float64Type>();
-    out.gps_time.extend(rows.iter().map(|&i| {
-        if gps.is_null(i) {
-            f64::NAN
-        } else {
-            gps.value(i)
-        }
-    }));
-    put(
-        &mut out.point_source_id,
-        col("point_source_id")?
-            .as_primitive::<UInt16Type>()
-            .values(),
-        &rows,
-    );
+    out.gps_time.extend(rows.iter().map(|&i| if gps.is_null(i) { f64::NAN } else { gps.value(i) }));
+    put(&mut out.point_source_id, col("point_source_id")?.as_primitive::<UInt16Type>().values(), &rows);
     Ok(())
 }

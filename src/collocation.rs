@@ -43,13 +43,7 @@ pub struct CollocateOptions {
 
 impl Default for CollocateOptions {
     fn default() -> Self {
-        CollocateOptions {
-            level: Level::Beam,
-            segment: 40,
-            max_shift: 10.0,
-            step: 1.0,
-            min_segment: MIN_SEGMENT,
-        }
+        CollocateOptions { level: Level::Beam, segment: 40, max_shift: 10.0, step: 1.0, min_segment: MIN_SEGMENT }
     }
 }
 
@@ -125,20 +119,12 @@ impl<'a> Collocation<'a> {
 
     /// [`plan`](Self::plan) restricted to some files of `shots/` (one granule each): what `run`
     /// uses to collocate only the granules that arrived since the last run.
-    pub fn plan_files(
-        ds: &'a Dataset,
-        opts: &CollocateOptions,
-        files: Vec<PathBuf>,
-    ) -> Result<Collocation<'a>> {
+    pub fn plan_files(ds: &'a Dataset, opts: &CollocateOptions, files: Vec<PathBuf>) -> Result<Collocation<'a>> {
         Self::plan_some(ds, opts, Some(files))
     }
 
     /// The given files of `shots/`, or all of them.
-    fn plan_some(
-        ds: &'a Dataset,
-        opts: &CollocateOptions,
-        files: Option<Vec<PathBuf>>,
-    ) -> Result<Collocation<'a>> {
+    fn plan_some(ds: &'a Dataset, opts: &CollocateOptions, files: Option<Vec<PathBuf>>) -> Result<Collocation<'a>> {
         if opts.segment == 0 {
             return Err(Error::Usage("--segment must be at least 1".into()));
         }
@@ -149,26 +135,16 @@ impl<'a> Collocation<'a> {
             Some(f) => f,
             None => {
                 let dir = ds.root().join(tables::SHOTS);
-                dataset::table_files(&dir).map_err(|e| {
-                    Error::file(
-                        &dir,
-                        format!("no shots table ({e}): run `gedisim ingest gedi`"),
-                    )
-                })?
+                dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi`")))?
             }
         };
-        let mut report = CollocateReport {
-            table: ds.root().join(tables::OFFSETS).join("offsets.parquet"),
-            ..Default::default()
-        };
+        let mut report = CollocateReport { table: ds.root().join(tables::OFFSETS).join("offsets.parquet"), ..Default::default() };
         let mut granules = Vec::new();
         for path in files {
             let (granule, mut shots) = read_shot_records(&path)?;
             report.shots += shots.len();
             for s in &mut shots {
-                s.covered = s.x.is_finite()
-                    && s.y.is_finite()
-                    && als.covers(s.x, s.y, cfg.model.fsigma as f64);
+                s.covered = s.x.is_finite() && s.y.is_finite() && als.covers(s.x, s.y, cfg.model.fsigma as f64);
                 if s.skip.is_none() && !s.covered {
                     s.skip = Some("no_als");
                 }
@@ -177,30 +153,14 @@ impl<'a> Collocation<'a> {
                 }
             }
             let units = plan_units(&granule, &shots, opts, &mut report.short_runs);
-            granules.push(GranulePlan {
-                path,
-                granule,
-                shots,
-                units,
-            });
+            granules.push(GranulePlan { path, granule, shots, units });
         }
-        Ok(Collocation {
-            ds,
-            opts: opts.clone(),
-            cfg,
-            als,
-            granules,
-            report,
-        })
+        Ok(Collocation { ds, opts: opts.clone(), cfg, als, granules, report })
     }
 
     /// Shots whose waveforms will be correlated (the progress total).
     pub fn shots_to_process(&self) -> usize {
-        self.granules
-            .iter()
-            .flat_map(|g| &g.units)
-            .map(|u| support_of(&u.plans).len())
-            .sum()
+        self.granules.iter().flat_map(|g| &g.units).map(|u| support_of(&u.plans).len()).sum()
     }
 
     /// Solves every unit (pass B) and writes the offsets table (replacing it); `on_shot` is
@@ -212,10 +172,7 @@ impl<'a> Collocation<'a> {
         let (rows, mut report) = self.solve(on_shot)?;
         let dest = ds.table_file(tables::OFFSETS, "offsets")?;
         let mut metadata = std::collections::HashMap::new();
-        metadata.insert(
-            "gedisim:collocate_level".to_string(),
-            level.name().to_string(),
-        );
+        metadata.insert("gedisim:collocate_level".to_string(), level.name().to_string());
         metadata.insert("gedisim:max_shift_m".to_string(), max_shift.to_string());
         metadata.insert("gedisim:step_m".to_string(), step.to_string());
         dataset::write_parquet(&dest, offsets_schema(), &[offsets_batch(&rows)?], &metadata)?;
@@ -225,10 +182,7 @@ impl<'a> Collocation<'a> {
 
     /// Solves every unit (pass B) without writing: the rows and the report (whose `table` is
     /// where [`run`](Self::run) would write them).
-    pub fn solve(
-        mut self,
-        on_shot: &(dyn Fn() + Sync),
-    ) -> Result<(Vec<OffsetRow>, CollocateReport)> {
+    pub fn solve(mut self, on_shot: &(dyn Fn() + Sync)) -> Result<(Vec<OffsetRow>, CollocateReport)> {
         let mut rows = Vec::new();
         let mut skipped = std::mem::take(&mut self.report.skipped);
         let mut read = (0u64, 0u64);
@@ -263,22 +217,10 @@ impl<'a> Collocation<'a> {
                 skip("no_waveform");
                 continue;
             };
-            match real_profile(
-                &wave,
-                s.z_top - s.geoid,
-                s.z_bottom - s.geoid,
-                self.cfg.model.res,
-            ) {
+            match real_profile(&wave, s.z_top - s.geoid, s.z_bottom - s.geoid, self.cfg.model.res) {
                 Ok(real) => {
                     kernel_index[i] = Some(inputs.len());
-                    inputs.push((
-                        i,
-                        ShotInput {
-                            x: s.x,
-                            y: s.y,
-                            real,
-                        },
-                    ));
+                    inputs.push((i, ShotInput { x: s.x, y: s.y, real }));
                 }
                 Err(e) => skip(match e {
                     ProfileError::BadGeometry => "bad_waveform_geometry",
@@ -293,35 +235,20 @@ impl<'a> Collocation<'a> {
             .iter()
             .map(|p| SegmentPlan {
                 support: p.support.iter().filter_map(|&i| kernel_index[i]).collect(),
-                applies_to: p
-                    .applies_to
-                    .iter()
-                    .filter_map(|&i| kernel_index[i])
-                    .collect(),
+                applies_to: p.applies_to.iter().filter_map(|&i| kernel_index[i]).collect(),
             })
             .collect();
         let shots: Vec<ShotInput> = inputs.iter().map(|(_, s)| s.clone()).collect();
         let half = self.cfg.support_half_width();
         let als = &self.als;
         let mut points_for = |idx: &[usize]| -> Result<PointCloud> {
-            let boxes: Vec<BBox> = idx
-                .iter()
-                .map(|&k| {
-                    [
-                        shots[k].x - half,
-                        shots[k].y - half,
-                        shots[k].x + half,
-                        shots[k].y + half,
-                    ]
-                })
-                .collect();
+            let boxes: Vec<BBox> = idx.iter().map(|&k| [shots[k].x - half, shots[k].y - half, shots[k].x + half, shots[k].y + half]).collect();
             let (cloud, stats) = als.xyz_in_boxes(&boxes)?;
             read.0 += cloud.len() as u64;
             read.1 += stats.row_groups_read as u64;
             Ok(cloud)
         };
-        let (solutions, skips) =
-            collocate_unit(&shots, &plans, &self.cfg, &mut points_for, on_shot)?;
+        let (solutions, skips) = collocate_unit(&shots, &plans, &self.cfg, &mut points_for, on_shot)?;
         for s in skips.iter().flatten() {
             skip(s.reason());
         }
@@ -333,14 +260,11 @@ impl<'a> Collocation<'a> {
                 Level::Shot => p.applies_to.clone(),
                 _ => sol.used.clone(),
             };
-            if applies.is_empty()
-                || (self.opts.level == Level::Shot && !sol.used.contains(&applies[0]))
-            {
+            if applies.is_empty() || (self.opts.level == Level::Shot && !sol.used.contains(&applies[0])) {
                 continue;
             }
             let shot_numbers: Vec<u64> = applies.iter().map(|&k| record(k).shot_number).collect();
-            let geoid =
-                sol.used.iter().map(|&k| record(k).geoid).sum::<f64>() / sol.used.len() as f64;
+            let geoid = sol.used.iter().map(|&k| record(k).geoid).sum::<f64>() / sol.used.len() as f64;
             let o = sol.optimum;
             rows.push(OffsetRow {
                 segment_id: format!("{}:{}:{}", g.granule, unit.beam, shot_numbers[0]),
@@ -365,32 +289,20 @@ impl<'a> Collocation<'a> {
 }
 
 /// Collocate every shot of the dataset (plan, then run); `on_shot` is called per shot processed.
-pub fn collocate_dataset(
-    ds: &Dataset,
-    opts: &CollocateOptions,
-    on_shot: &(dyn Fn() + Sync),
-) -> Result<CollocateReport> {
+pub fn collocate_dataset(ds: &Dataset, opts: &CollocateOptions, on_shot: &(dyn Fn() + Sync)) -> Result<CollocateReport> {
     Collocation::plan(ds, opts)?.run(on_shot)
 }
 
 /// Sorted union of the plans' supports.
 fn support_of(plans: &[SegmentPlan]) -> Vec<usize> {
-    let mut s: Vec<usize> = plans
-        .iter()
-        .flat_map(|p| p.support.iter().copied())
-        .collect();
+    let mut s: Vec<usize> = plans.iter().flat_map(|p| p.support.iter().copied()).collect();
     s.sort_unstable();
     s.dedup();
     s
 }
 
 /// The units of one granule at the chosen level; short runs are described in `short`.
-fn plan_units(
-    granule: &str,
-    shots: &[ShotRecord],
-    opts: &CollocateOptions,
-    short: &mut Vec<String>,
-) -> Vec<Unit> {
+fn plan_units(granule: &str, shots: &[ShotRecord], opts: &CollocateOptions, short: &mut Vec<String>) -> Vec<Unit> {
     let mut beams: BTreeMap<&str, Vec<usize>> = BTreeMap::new();
     for (i, s) in shots.iter().enumerate() {
         beams.entry(s.beam.as_str()).or_default().push(i);
@@ -398,25 +310,12 @@ fn plan_units(
     for v in beams.values_mut() {
         v.sort_by_key(|&i| shots[i].shot_number);
     }
-    let slot = |i: usize, step: i64| Slot {
-        step,
-        covered: shots[i].covered,
-        usable: shots[i].covered && shots[i].skip.is_none(),
-    };
+    let slot = |i: usize, step: i64| Slot { step, covered: shots[i].covered, usable: shots[i].covered && shots[i].skip.is_none() };
     // (beam label, shots in slot order, slots)
     let groups: Vec<(String, Vec<usize>, Vec<Slot>)> = match opts.level {
         Level::Beam | Level::Shot => beams
             .iter()
-            .map(|(b, idx)| {
-                (
-                    b.to_string(),
-                    idx.clone(),
-                    idx.iter()
-                        .enumerate()
-                        .map(|(k, &i)| slot(i, k as i64))
-                        .collect(),
-                )
-            })
+            .map(|(b, idx)| (b.to_string(), idx.clone(), idx.iter().enumerate().map(|(k, &i)| slot(i, k as i64)).collect()))
             .collect(),
         Level::Track => {
             let steps = along_track_steps(shots, &beams);
@@ -431,31 +330,19 @@ fn plan_units(
         let (plans, runs) = plan(&slots, opts.level, opts.segment, opts.min_segment);
         for r in runs {
             let first = shots[idx[r.shots[0]]].shot_number;
-            short.push(format!(
-                "{granule}:{beam}: {} usable shots from shot {first}",
-                r.shots.len()
-            ));
+            short.push(format!("{granule}:{beam}: {} usable shots from shot {first}", r.shots.len()));
         }
         let plans: Vec<SegmentPlan> = plans
             .into_iter()
-            .map(|p| SegmentPlan {
-                support: p.support.iter().map(|&k| idx[k]).collect(),
-                applies_to: p.applies_to.iter().map(|&k| idx[k]).collect(),
-            })
+            .map(|p| SegmentPlan { support: p.support.iter().map(|&k| idx[k]).collect(), applies_to: p.applies_to.iter().map(|&k| idx[k]).collect() })
             .collect();
         match opts.level {
             Level::Shot => {
                 for chunk in plans.chunks(SHOT_UNIT) {
-                    units.push(Unit {
-                        beam: beam.clone(),
-                        plans: chunk.to_vec(),
-                    });
+                    units.push(Unit { beam: beam.clone(), plans: chunk.to_vec() });
                 }
             }
-            _ => units.extend(plans.into_iter().map(|p| Unit {
-                beam: beam.clone(),
-                plans: vec![p],
-            })),
+            _ => units.extend(plans.into_iter().map(|p| Unit { beam: beam.clone(), plans: vec![p] })),
         }
     }
     units
@@ -477,10 +364,7 @@ fn along_track_steps(shots: &[ShotRecord], beams: &BTreeMap<&str, Vec<usize>>) -
     }
     gaps.sort_by(f64::total_cmp);
     let interval = gaps.get(gaps.len() / 2).copied();
-    let t0 = shots
-        .iter()
-        .filter_map(|s| s.delta_time)
-        .fold(f64::INFINITY, f64::min);
+    let t0 = shots.iter().filter_map(|s| s.delta_time).fold(f64::INFINITY, f64::min);
     let mut steps = vec![0i64; shots.len()];
     for idx in beams.values() {
         for (k, &i) in idx.iter().enumerate() {
@@ -496,51 +380,20 @@ fn along_track_steps(shots: &[ShotRecord], beams: &BTreeMap<&str, Vec<usize>>) -
 /// Pass A: the cheap columns of every shot of one `shots/` file, classified.
 fn read_shot_records(path: &Path) -> Result<(String, Vec<ShotRecord>)> {
     let file = std::fs::File::open(path).map_err(|e| Error::file(path, e))?;
-    let builder =
-        ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| Error::table(path, e))?;
+    let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| Error::table(path, e))?;
     let schema = builder.schema().clone();
-    for required in [
-        "shot_number",
-        "x",
-        "y",
-        "rx_waveform",
-        "elevation_bin0",
-        "elevation_lastbin",
-        "geoid_offset_used",
-    ] {
+    for required in ["shot_number", "x", "y", "rx_waveform", "elevation_bin0", "elevation_lastbin", "geoid_offset_used"] {
         if schema.field_with_name(required).is_err() {
-            return Err(Error::field(
-                path,
-                required,
-                "column missing from the shots table (collocate needs ingested L1B waveforms)",
-            ));
+            return Err(Error::field(path, required, "column missing from the shots table (collocate needs ingested L1B waveforms)"));
         }
     }
-    let wanted: Vec<&str> = [
-        "shot_number",
-        "x",
-        "y",
-        "granule",
-        "beam",
-        "delta_time",
-        "elevation_bin0",
-        "elevation_lastbin",
-        "geoid_offset_used",
-        "rx_sample_count",
-        "stale_return_flag",
-    ]
-    .into_iter()
-    .filter(|c| schema.field_with_name(c).is_ok())
-    .collect();
+    let wanted: Vec<&str> = ["shot_number", "x", "y", "granule", "beam", "delta_time", "elevation_bin0", "elevation_lastbin", "geoid_offset_used", "rx_sample_count", "stale_return_flag"]
+        .into_iter()
+        .filter(|c| schema.field_with_name(c).is_ok())
+        .collect();
     let mask = ProjectionMask::columns(builder.parquet_schema(), wanted.iter().copied());
-    let reader = builder
-        .with_projection(mask)
-        .build()
-        .map_err(|e| Error::table(path, e))?;
-    let stem = path
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
+    let reader = builder.with_projection(mask).build().map_err(|e| Error::table(path, e))?;
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     let mut granule = None;
     let mut out = Vec::new();
     for b in reader {
@@ -548,61 +401,30 @@ fn read_shot_records(path: &Path) -> Result<(String, Vec<ShotRecord>)> {
         let f64s = |n: &str| -> Result<Option<arrow::array::Float64Array>> {
             match b.column_by_name(n) {
                 None => Ok(None),
-                Some(c) => c
-                    .as_primitive_opt::<Float64Type>()
-                    .cloned()
-                    .map(Some)
-                    .ok_or_else(|| Error::field(path, n, "not float64")),
+                Some(c) => c.as_primitive_opt::<Float64Type>().cloned().map(Some).ok_or_else(|| Error::field(path, n, "not float64")),
             }
         };
-        let sn = b
-            .column_by_name("shot_number")
-            .and_then(|c| c.as_primitive_opt::<UInt64Type>().cloned())
-            .ok_or_else(|| Error::field(path, "shot_number", "not uint64"))?;
+        let sn = b.column_by_name("shot_number").and_then(|c| c.as_primitive_opt::<UInt64Type>().cloned()).ok_or_else(|| Error::field(path, "shot_number", "not uint64"))?;
         let (x, y, dt) = (f64s("x")?, f64s("y")?, f64s("delta_time")?);
-        let (e0, e1, geoid) = (
-            f64s("elevation_bin0")?,
-            f64s("elevation_lastbin")?,
-            f64s("geoid_offset_used")?,
-        );
-        let count = b
-            .column_by_name("rx_sample_count")
-            .and_then(|c| c.as_primitive_opt::<UInt32Type>().cloned());
-        let stale = b
-            .column_by_name("stale_return_flag")
-            .and_then(|c| c.as_primitive_opt::<UInt8Type>().cloned());
-        let beams = b
-            .column_by_name("beam")
-            .and_then(|c| c.as_string_opt::<i32>().cloned());
+        let (e0, e1, geoid) = (f64s("elevation_bin0")?, f64s("elevation_lastbin")?, f64s("geoid_offset_used")?);
+        let count = b.column_by_name("rx_sample_count").and_then(|c| c.as_primitive_opt::<UInt32Type>().cloned());
+        let stale = b.column_by_name("stale_return_flag").and_then(|c| c.as_primitive_opt::<UInt8Type>().cloned());
+        let beams = b.column_by_name("beam").and_then(|c| c.as_string_opt::<i32>().cloned());
         if granule.is_none() {
-            granule = b.column_by_name("granule").and_then(|c| {
-                c.as_string_opt::<i32>()
-                    .filter(|a| !a.is_empty() && a.is_valid(0))
-                    .map(|a| a.value(0).to_string())
-            });
+            granule = b.column_by_name("granule").and_then(|c| c.as_string_opt::<i32>().filter(|a| !a.is_empty() && a.is_valid(0)).map(|a| a.value(0).to_string()));
         }
-        let get = |a: &Option<arrow::array::Float64Array>, i: usize| {
-            a.as_ref()
-                .filter(|a| a.is_valid(i))
-                .map(|a| a.value(i))
-                .filter(|v| v.is_finite())
-        };
+        let get = |a: &Option<arrow::array::Float64Array>, i: usize| a.as_ref().filter(|a| a.is_valid(i)).map(|a| a.value(i)).filter(|v| v.is_finite());
         for i in 0..b.num_rows() {
             let (px, py) = (get(&x, i), get(&y, i));
             let (z_top, z_bottom, n) = (get(&e0, i), get(&e1, i), get(&geoid, i));
-            let has_wave = count
-                .as_ref()
-                .is_none_or(|c| c.is_valid(i) && c.value(i) >= 2);
+            let has_wave = count.as_ref().is_none_or(|c| c.is_valid(i) && c.value(i) >= 2);
             let skip = if px.is_none() || py.is_none() {
                 Some("no_position")
             } else if !has_wave || z_top.is_none() || z_bottom.is_none() {
                 Some("no_waveform")
             } else if n.is_none() {
                 Some("no_geoid_offset")
-            } else if stale
-                .as_ref()
-                .is_some_and(|s| s.is_valid(i) && s.value(i) == 1)
-            {
+            } else if stale.as_ref().is_some_and(|s| s.is_valid(i) && s.value(i) == 1) {
                 Some("stale_return")
             } else {
                 None
@@ -610,10 +432,7 @@ fn read_shot_records(path: &Path) -> Result<(String, Vec<ShotRecord>)> {
             out.push(ShotRecord {
                 row: out.len(),
                 shot_number: sn.value(i),
-                beam: beams
-                    .as_ref()
-                    .filter(|a| a.is_valid(i))
-                    .map_or_else(|| "ALL".to_string(), |a| a.value(i).to_string()),
+                beam: beams.as_ref().filter(|a| a.is_valid(i)).map_or_else(|| "ALL".to_string(), |a| a.value(i).to_string()),
                 delta_time: get(&dt, i),
                 x: px.unwrap_or(f64::NAN),
                 y: py.unwrap_or(f64::NAN),
@@ -635,44 +454,28 @@ fn read_waveforms(path: &Path, rows: impl Iterator<Item = usize>) -> Result<Vec<
         return Ok(Vec::new());
     }
     let file = std::fs::File::open(path).map_err(|e| Error::file(path, e))?;
-    let builder =
-        ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| Error::table(path, e))?;
+    let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| Error::table(path, e))?;
     let total = builder.metadata().file_metadata().num_rows() as usize;
     let selection = crate::dataset::row_selection(&rows, total);
     let mask = ProjectionMask::columns(builder.parquet_schema(), ["rx_waveform"]);
-    let reader = builder
-        .with_projection(mask)
-        .with_row_selection(selection)
-        .with_batch_size(1024)
-        .build()
-        .map_err(|e| Error::table(path, e))?;
+    let reader = builder.with_projection(mask).with_row_selection(selection).with_batch_size(1024).build().map_err(|e| Error::table(path, e))?;
     let mut out = Vec::with_capacity(rows.len());
     for b in reader {
         let b = b.map_err(|e| Error::table(path, e))?;
-        let col = b.column_by_name("rx_waveform").ok_or_else(|| {
-            Error::field(path, "rx_waveform", "column missing from the shots table")
-        })?;
-        let list = col
-            .as_list_opt::<i32>()
-            .ok_or_else(|| Error::field(path, "rx_waveform", "not a list"))?;
+        let col = b.column_by_name("rx_waveform").ok_or_else(|| Error::field(path, "rx_waveform", "column missing from the shots table"))?;
+        let list = col.as_list_opt::<i32>().ok_or_else(|| Error::field(path, "rx_waveform", "not a list"))?;
         for i in 0..list.len() {
             if list.is_null(i) {
                 out.push(None);
                 continue;
             }
             let v = list.value(i);
-            let v = v
-                .as_primitive_opt::<arrow::datatypes::Float32Type>()
-                .ok_or_else(|| Error::field(path, "rx_waveform", "not a list of float32"))?;
+            let v = v.as_primitive_opt::<arrow::datatypes::Float32Type>().ok_or_else(|| Error::field(path, "rx_waveform", "not a list of float32"))?;
             out.push(Some(v.values().to_vec()));
         }
     }
     if out.len() != rows.len() {
-        return Err(Error::field(
-            path,
-            "rx_waveform",
-            format!("read {} waveforms for {} rows", out.len(), rows.len()),
-        ));
+        return Err(Error::field(path, "rx_waveform", format!("read {} waveforms for {} rows", out.len(), rows.len())));
     }
     Ok(out)
 }

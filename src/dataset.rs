@@ -14,11 +14,11 @@ use arrow::datatypes::SchemaRef;
 use arrow::record_batch::RecordBatch;
 use parquet::arrow::arrow_writer::{compute_leaves, ArrowColumnChunk, ArrowRowGroupWriterFactory};
 use parquet::arrow::ArrowWriter;
+use parquet::file::writer::SerializedFileWriter;
+use rayon::prelude::*;
 use parquet::basic::{Compression, ZstdLevel};
 use parquet::file::metadata::KeyValue;
 use parquet::file::properties::{EnabledStatistics, WriterProperties};
-use parquet::file::writer::SerializedFileWriter;
-use rayon::prelude::*;
 use sha2::{Digest, Sha256};
 
 use crate::error::{Error, Result};
@@ -54,24 +54,16 @@ pub struct Dataset {
 impl Dataset {
     /// Open (and create if needed) the dataset at `root`.
     pub fn create(root: &Path) -> Result<Self> {
-        std::fs::create_dir_all(root)
-            .map_err(|e| Error::file(root, format!("cannot create dataset directory: {e}")))?;
-        Ok(Dataset {
-            root: root.to_path_buf(),
-        })
+        std::fs::create_dir_all(root).map_err(|e| Error::file(root, format!("cannot create dataset directory: {e}")))?;
+        Ok(Dataset { root: root.to_path_buf() })
     }
 
     /// Open an existing dataset.
     pub fn open(root: &Path) -> Result<Self> {
         if !root.is_dir() {
-            return Err(Error::file(
-                root,
-                "not a dataset directory (run `gedisim ingest` first)",
-            ));
+            return Err(Error::file(root, "not a dataset directory (run `gedisim ingest` first)"));
         }
-        Ok(Dataset {
-            root: root.to_path_buf(),
-        })
+        Ok(Dataset { root: root.to_path_buf() })
     }
 
     /// The dataset's directory.
@@ -82,16 +74,13 @@ impl Dataset {
     /// Folder of table `name` (created if needed).
     pub fn table_dir(&self, name: &str) -> Result<PathBuf> {
         let dir = self.root.join(name);
-        std::fs::create_dir_all(&dir)
-            .map_err(|e| Error::file(&dir, format!("cannot create table directory: {e}")))?;
+        std::fs::create_dir_all(&dir).map_err(|e| Error::file(&dir, format!("cannot create table directory: {e}")))?;
         Ok(dir)
     }
 
     /// Whether table `name` has at least one complete Parquet file.
     pub fn has_table(&self, name: &str) -> bool {
-        table_files(&self.root.join(name))
-            .map(|f| !f.is_empty())
-            .unwrap_or(false)
+        table_files(&self.root.join(name)).map(|f| !f.is_empty()).unwrap_or(false)
     }
 
     /// Path of the Parquet file `stem` of table `name`.
@@ -115,19 +104,11 @@ pub fn table_files(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
 
 /// Writer properties shared by every table: zstd, page-level statistics, the given
 /// key-value metadata and row-group size.
-pub fn writer_properties(
-    metadata: &HashMap<String, String>,
-    max_row_group_rows: usize,
-) -> WriterProperties {
-    let mut kv: Vec<KeyValue> = metadata
-        .iter()
-        .map(|(k, v)| KeyValue::new(k.clone(), v.clone()))
-        .collect();
+pub fn writer_properties(metadata: &HashMap<String, String>, max_row_group_rows: usize) -> WriterProperties {
+    let mut kv: Vec<KeyValue> = metadata.iter().map(|(k, v)| KeyValue::new(k.clone(), v.clone())).collect();
     kv.sort_by(|a, b| a.key.cmp(&b.key));
     WriterProperties::builder()
-        .set_compression(Compression::ZSTD(
-            ZstdLevel::try_new(3).expect("valid zstd level"),
-        ))
+        .set_compression(Compression::ZSTD(ZstdLevel::try_new(3).expect("valid zstd level")))
         .set_statistics_enabled(EnabledStatistics::Page)
         .set_max_row_group_row_count(Some(max_row_group_rows))
         .set_key_value_metadata(Some(kv))
@@ -155,24 +136,14 @@ impl AtomicParquet {
     /// Start writing `dest` with `schema` and `props`.
     pub fn create(dest: &Path, schema: SchemaRef, props: WriterProperties) -> Result<Self> {
         let tmp = tmp_path(dest);
-        let file =
-            File::create(&tmp).map_err(|e| Error::file(&tmp, format!("cannot create: {e}")))?;
-        let writer =
-            ArrowWriter::try_new(file, schema, Some(props)).map_err(|e| Error::table(dest, e))?;
-        Ok(AtomicParquet {
-            writer: Some(Writer::Buffered(writer)),
-            tmp,
-            dest: dest.to_path_buf(),
-        })
+        let file = File::create(&tmp).map_err(|e| Error::file(&tmp, format!("cannot create: {e}")))?;
+        let writer = ArrowWriter::try_new(file, schema, Some(props)).map_err(|e| Error::table(dest, e))?;
+        Ok(AtomicParquet { writer: Some(Writer::Buffered(writer)), tmp, dest: dest.to_path_buf() })
     }
 
     /// Append a batch.
     pub fn write(&mut self, batch: &RecordBatch) -> Result<()> {
-        match self
-            .writer
-            .as_mut()
-            .expect("writer is present until finish")
-        {
+        match self.writer.as_mut().expect("writer is present until finish") {
             Writer::Buffered(w) => w.write(batch).map_err(|e| Error::table(&self.dest, e)),
             Writer::RowGroups(..) => Err(Error::table(&self.dest, "write after write_row_group")),
         }
@@ -180,11 +151,7 @@ impl AtomicParquet {
 
     /// Close the current row group (the next batch starts a new one).
     pub fn flush_row_group(&mut self) -> Result<()> {
-        match self
-            .writer
-            .as_mut()
-            .expect("writer is present until finish")
-        {
+        match self.writer.as_mut().expect("writer is present until finish") {
             Writer::Buffered(w) => w.flush().map_err(|e| Error::table(&self.dest, e)),
             Writer::RowGroups(..) => Ok(()),
         }
@@ -194,18 +161,12 @@ impl AtomicParquet {
     pub fn write_row_group(&mut self, batch: &RecordBatch) -> Result<()> {
         let table_err = |e: parquet::errors::ParquetError| Error::table(&self.dest, e);
         if let Some(Writer::Buffered(_)) = self.writer {
-            let Some(Writer::Buffered(w)) = self.writer.take() else {
-                unreachable!()
-            };
+            let Some(Writer::Buffered(w)) = self.writer.take() else { unreachable!() };
             let (file, factory) = w.into_serialized_writer().map_err(table_err)?;
             self.writer = Some(Writer::RowGroups(file, factory));
         }
-        let Some(Writer::RowGroups(file, factory)) = self.writer.as_mut() else {
-            unreachable!()
-        };
-        let writers = factory
-            .create_column_writers(file.flushed_row_groups().len())
-            .map_err(table_err)?;
+        let Some(Writer::RowGroups(file, factory)) = self.writer.as_mut() else { unreachable!() };
+        let writers = factory.create_column_writers(file.flushed_row_groups().len()).map_err(table_err)?;
         let schema = batch.schema();
         // One leaf per column: the tables written this way have no nested columns.
         let chunks: Vec<ArrowColumnChunk> = writers
@@ -221,9 +182,7 @@ impl AtomicParquet {
             .map_err(table_err)?;
         let mut row_group = file.next_row_group().map_err(table_err)?;
         for chunk in chunks {
-            chunk
-                .append_to_row_group(&mut row_group)
-                .map_err(table_err)?;
+            chunk.append_to_row_group(&mut row_group).map_err(table_err)?;
         }
         row_group.close().map_err(table_err)?;
         Ok(())
@@ -237,8 +196,7 @@ impl AtomicParquet {
         }
         .map_err(|e| Error::table(&self.dest, e))?;
         file.sync_all().map_err(|e| Error::file(&self.tmp, e))?;
-        std::fs::rename(&self.tmp, &self.dest)
-            .map_err(|e| Error::file(&self.dest, format!("cannot rename into place: {e}")))?;
+        std::fs::rename(&self.tmp, &self.dest).map_err(|e| Error::file(&self.dest, format!("cannot rename into place: {e}")))?;
         Ok(self.dest.clone())
     }
 }
@@ -252,12 +210,7 @@ impl Drop for AtomicParquet {
 }
 
 /// Write `batches` to `dest` atomically.
-pub fn write_parquet(
-    dest: &Path,
-    schema: SchemaRef,
-    batches: &[RecordBatch],
-    metadata: &HashMap<String, String>,
-) -> Result<PathBuf> {
+pub fn write_parquet(dest: &Path, schema: SchemaRef, batches: &[RecordBatch], metadata: &HashMap<String, String>) -> Result<PathBuf> {
     let mut w = AtomicParquet::create(dest, schema, writer_properties(metadata, 1 << 17))?;
     for b in batches {
         w.write(b)?;
@@ -266,10 +219,7 @@ pub fn write_parquet(
 }
 
 fn tmp_path(dest: &Path) -> PathBuf {
-    let mut name = dest
-        .file_name()
-        .map(|n| n.to_os_string())
-        .unwrap_or_default();
+    let mut name = dest.file_name().map(|n| n.to_os_string()).unwrap_or_default();
     name.push(format!(".{}.tmp", std::process::id()));
     dest.with_file_name(name)
 }
@@ -280,9 +230,7 @@ pub fn content_hash(path: &Path) -> Result<String> {
     let mut hasher = Sha256::new();
     let mut buf = vec![0u8; 1 << 20];
     loop {
-        let n = file
-            .read(&mut buf)
-            .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
+        let n = file.read(&mut buf).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
         if n == 0 {
             break;
         }
@@ -313,8 +261,7 @@ pub fn write_result(out: &Path, batches: &[RecordBatch]) -> Result<()> {
         w.write(b).map_err(|e| Error::table(out, e))?;
     }
     drop(w);
-    std::fs::rename(&tmp, out)
-        .map_err(|e| Error::file(out, format!("cannot rename into place: {e}")))
+    std::fs::rename(&tmp, out).map_err(|e| Error::file(out, format!("cannot rename into place: {e}")))
 }
 
 /// A Parquet row selection of the sorted row indices `rows` of a file of `total` rows

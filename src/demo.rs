@@ -37,13 +37,7 @@ pub struct DemoOptions {
 
 impl Default for DemoOptions {
     fn default() -> Self {
-        DemoOptions {
-            out: PathBuf::from("gedisim-demo"),
-            effect: "ground_detection".into(),
-            seed: 1,
-            passes: 8,
-            force: false,
-        }
+        DemoOptions { out: PathBuf::from("gedisim-demo"), effect: "ground_detection".into(), seed: 1, passes: 8, force: false }
     }
 }
 
@@ -67,21 +61,12 @@ pub fn layout(out: &Path) -> (PathBuf, PathBuf) {
 /// crosses a tile with 0–3 shots, fewer than a beam segment's default minimum (20): every run is
 /// solved (`min_segment` 1), one offset per beam of a granule.
 pub fn demo_collocation() -> CollocateOptions {
-    CollocateOptions {
-        level: Level::Beam,
-        min_segment: 1,
-        ..CollocateOptions::default()
-    }
+    CollocateOptions { level: Level::Beam, min_segment: 1, ..CollocateOptions::default() }
 }
 
 /// scenario → run → report on the bundled tiles. `on_report_step` follows the report's steps.
-pub fn run_demo(
-    opts: &DemoOptions,
-    progress: &dyn Progress,
-    on_report_step: &dyn Fn(&str),
-) -> Result<DemoReport> {
-    let effects =
-        EffectSet::parse(&opts.effect, None, &[]).map_err(|e| Error::Usage(e.to_string()))?;
+pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress, on_report_step: &dyn Fn(&str)) -> Result<DemoReport> {
+    let effects = EffectSet::parse(&opts.effect, None, &[]).map_err(|e| Error::Usage(e.to_string()))?;
     let (world_dir, ds_dir) = layout(&opts.out);
     let truth = world_dir.join("truth.json");
     let mut reuse = false;
@@ -92,16 +77,13 @@ pub fn run_demo(
             .ok_or_else(|| Error::file(&truth, "not a scenario truth file"))?;
         let same = t["effect_spec"].as_str() == Some(opts.effect.as_str())
             && t["seed"].as_u64() == Some(opts.seed)
-            && t["granules"].as_array().map(|g| g.len())
-                == t["tiles"].as_array().map(|t| t.len() * opts.passes);
+            && t["granules"].as_array().map(|g| g.len()) == t["tiles"].as_array().map(|t| t.len() * opts.passes);
         if same {
             reuse = true;
         } else if opts.force {
             for d in [&world_dir, &ds_dir] {
                 if d.exists() {
-                    std::fs::remove_dir_all(d).map_err(|e| {
-                        Error::file(d, format!("cannot remove the previous demo: {e}"))
-                    })?;
+                    std::fs::remove_dir_all(d).map_err(|e| Error::file(d, format!("cannot remove the previous demo: {e}")))?;
                 }
             }
         } else {
@@ -149,11 +131,5 @@ pub fn run_demo(
     let ds = Dataset::open(&ds_dir)?;
     let report = crate::report::run_report(&ds, None, on_report_step)?;
     let headline = Headline::read(&report.dir)?;
-    Ok(DemoReport {
-        world,
-        world_dir,
-        run,
-        report,
-        headline,
-    })
+    Ok(DemoReport { world, world_dir, run, report, headline })
 }

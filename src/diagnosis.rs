@@ -6,18 +6,13 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use arrow::array::{
-    Array, AsArray, Float64Array, ListArray, RecordBatch, StringArray, UInt64Array,
-};
+use arrow::array::{Array, AsArray, Float64Array, ListArray, RecordBatch, StringArray, UInt64Array};
 use arrow::datatypes::{Field, Float32Type, Float64Type, Schema, UInt64Type, UInt8Type};
 use serde_json::{json, Value};
 
 use crate::als_table::AlsTable;
 use crate::dataset::{self, tables, Dataset};
-use crate::diagnose::case::{
-    nominal_noise_stddev, site_grid, Parts, RealAlgorithm, RealShot, SimShot, SimVariant, Site,
-    Strata, FSIGMA_GRID, SHORT_SEGMENT_SHOTS,
-};
+use crate::diagnose::case::{nominal_noise_stddev, site_grid, Parts, RealAlgorithm, RealShot, SimShot, SimVariant, Site, Strata, FSIGMA_GRID, SHORT_SEGMENT_SHOTS};
 use crate::diagnose::gap::{GapMetrics, N_PCT};
 use crate::diagnose::rank::Trial;
 use crate::diagnose::{self, Diagnosis, ShotCase};
@@ -61,32 +56,18 @@ struct Pending {
 
 /// Read every usable shot of the dataset with its simulations. `on_shot` is called per shot
 /// simulated.
-pub fn read_cases(
-    ds: &Dataset,
-    on_shot: &(dyn Fn() + Sync),
-) -> Result<(Vec<ShotCase>, CaseReport)> {
+pub fn read_cases(ds: &Dataset, on_shot: &(dyn Fn() + Sync)) -> Result<(Vec<ShotCase>, CaseReport)> {
     let mut report = CaseReport::default();
     let offsets = crate::tables::offsets::read_offsets(ds)?;
     let forest = read_forest_types(ds)?;
     let dir = ds.root().join(tables::SHOTS);
-    let files = dataset::table_files(&dir).map_err(|e| {
-        Error::file(
-            &dir,
-            format!("no shots table ({e}): run `gedisim ingest gedi`"),
-        )
-    })?;
+    let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi`")))?;
     let mut pending = Vec::new();
-    for_each_batch(files, |f, b| {
-        read_shots(f, b, &offsets, &forest, &mut pending, &mut report)
-    })?;
+    for_each_batch(files, |f, b| read_shots(f, b, &offsets, &forest, &mut pending, &mut report))?;
     let mut segment_shots: HashMap<&str, usize> = HashMap::new();
-    offsets
-        .values()
-        .for_each(|o| *segment_shots.entry(o.segment_id.as_str()).or_default() += 1);
+    offsets.values().for_each(|o| *segment_shots.entry(o.segment_id.as_str()).or_default() += 1);
     for p in &mut pending {
-        p.sites = segment_shots
-            .get(p.real.segment.as_str())
-            .is_some_and(|&n| n < SHORT_SEGMENT_SHOTS);
+        p.sites = segment_shots.get(p.real.segment.as_str()).is_some_and(|&n| n < SHORT_SEGMENT_SHOTS);
     }
     let als = AlsTable::open(ds)?;
     let centres = recollocate(&als, &pending, reference_dz(&offsets))?;
@@ -102,14 +83,8 @@ fn read_forest_types(ds: &Dataset) -> Result<HashMap<u64, String>> {
     let dir = ds.root().join(tables::STRATA);
     let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, e))?;
     for_each_batch(files, |f, b| {
-        let sn = column(f, b, "shot_number")?
-            .as_primitive_opt::<UInt64Type>()
-            .cloned()
-            .ok_or_else(|| Error::field(f, "shot_number", "not uint64"))?;
-        let ft = column(f, b, "forest_type")?
-            .as_string_opt::<i32>()
-            .cloned()
-            .ok_or_else(|| Error::field(f, "forest_type", "not a string"))?;
+        let sn = column(f, b, "shot_number")?.as_primitive_opt::<UInt64Type>().cloned().ok_or_else(|| Error::field(f, "shot_number", "not uint64"))?;
+        let ft = column(f, b, "forest_type")?.as_string_opt::<i32>().cloned().ok_or_else(|| Error::field(f, "forest_type", "not a string"))?;
         for i in 0..b.num_rows() {
             out.insert(sn.value(i), ft.value(i).to_string());
         }
@@ -119,10 +94,7 @@ fn read_forest_types(ds: &Dataset) -> Result<HashMap<u64, String>> {
 }
 
 /// Call `f` on every batch of every file of `files` (Parquet).
-fn for_each_batch(
-    files: Vec<PathBuf>,
-    mut f: impl FnMut(&Path, &RecordBatch) -> Result<()>,
-) -> Result<()> {
+fn for_each_batch(files: Vec<PathBuf>, mut f: impl FnMut(&Path, &RecordBatch) -> Result<()>) -> Result<()> {
     for path in files {
         let file = std::fs::File::open(&path).map_err(|e| Error::file(&path, e))?;
         let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
@@ -136,29 +108,19 @@ fn for_each_batch(
 }
 
 fn column<'a>(path: &Path, b: &'a RecordBatch, name: &str) -> Result<&'a Arc<dyn Array>> {
-    b.column_by_name(name)
-        .ok_or_else(|| Error::field(path, name, "column missing from the table"))
+    b.column_by_name(name).ok_or_else(|| Error::field(path, name, "column missing from the table"))
 }
 
 fn f64s(path: &Path, b: &RecordBatch, name: &str) -> Result<Float64Array> {
-    column(path, b, name)?
-        .as_primitive_opt::<Float64Type>()
-        .cloned()
-        .ok_or_else(|| Error::field(path, name, "not float64"))
+    column(path, b, name)?.as_primitive_opt::<Float64Type>().cloned().ok_or_else(|| Error::field(path, name, "not float64"))
 }
 
 fn u8s(path: &Path, b: &RecordBatch, name: &str) -> Result<arrow::array::UInt8Array> {
-    column(path, b, name)?
-        .as_primitive_opt::<UInt8Type>()
-        .cloned()
-        .ok_or_else(|| Error::field(path, name, "not uint8"))
+    column(path, b, name)?.as_primitive_opt::<UInt8Type>().cloned().ok_or_else(|| Error::field(path, name, "not uint8"))
 }
 
 fn lists(path: &Path, b: &RecordBatch, name: &str) -> Result<ListArray> {
-    column(path, b, name)?
-        .as_list_opt::<i32>()
-        .cloned()
-        .ok_or_else(|| Error::field(path, name, "not a list"))
+    column(path, b, name)?.as_list_opt::<i32>().cloned().ok_or_else(|| Error::field(path, name, "not a list"))
 }
 
 fn list_f32(l: &ListArray, i: usize) -> Option<Vec<f32>> {
@@ -170,10 +132,7 @@ fn list_f32(l: &ListArray, i: usize) -> Option<Vec<f32>> {
     Some(v.values().to_vec())
 }
 
-fn opt<P: arrow::datatypes::ArrowPrimitiveType>(
-    a: &arrow::array::PrimitiveArray<P>,
-    i: usize,
-) -> Option<P::Native> {
+fn opt<P: arrow::datatypes::ArrowPrimitiveType>(a: &arrow::array::PrimitiveArray<P>, i: usize) -> Option<P::Native> {
     (!a.is_null(i)).then(|| a.value(i))
 }
 
@@ -186,25 +145,13 @@ fn read_shots(
     report: &mut CaseReport,
 ) -> Result<()> {
     let s = |n: &str| -> Result<StringArray> {
-        column(path, b, n)?
-            .as_string_opt::<i32>()
-            .cloned()
-            .ok_or_else(|| Error::field(path, n, "not a string"))
+        column(path, b, n)?.as_string_opt::<i32>().cloned().ok_or_else(|| Error::field(path, n, "not a string"))
     };
     let (granule, beam, beam_type) = (s("granule")?, s("beam")?, s("beam_type")?);
-    let sn: UInt64Array = column(path, b, "shot_number")?
-        .as_primitive_opt::<UInt64Type>()
-        .cloned()
-        .ok_or_else(|| Error::field(path, "shot_number", "not uint64"))?;
+    let sn: UInt64Array = column(path, b, "shot_number")?.as_primitive_opt::<UInt64Type>().cloned().ok_or_else(|| Error::field(path, "shot_number", "not uint64"))?;
     let (x, y) = (f64s(path, b, "x")?, f64s(path, b, "y")?);
-    let (bin0, lastbin) = (
-        f64s(path, b, "elevation_bin0")?,
-        f64s(path, b, "elevation_lastbin")?,
-    );
-    let (nmean, nsd) = (
-        f64s(path, b, "noise_mean_corrected")?,
-        f64s(path, b, "noise_stddev_corrected")?,
-    );
+    let (bin0, lastbin) = (f64s(path, b, "elevation_bin0")?, f64s(path, b, "elevation_lastbin")?);
+    let (nmean, nsd) = (f64s(path, b, "noise_mean_corrected")?, f64s(path, b, "noise_stddev_corrected")?);
     let (geoid, geoid_used) = (f64s(path, b, "geoid")?, f64s(path, b, "geoid_offset_used")?);
     let rx = lists(path, b, "rx_waveform")?;
     let degrade = u8s(path, b, "degrade_flag")?;
@@ -229,12 +176,7 @@ fn read_shots(
             count_dropped(report, "no L1B waveform");
             continue;
         };
-        let (Some(e0), Some(e1), Some(mean), Some(sd)) = (
-            opt(&bin0, i),
-            opt(&lastbin, i),
-            opt(&nmean, i),
-            opt(&nsd, i),
-        ) else {
+        let (Some(e0), Some(e1), Some(mean), Some(sd)) = (opt(&bin0, i), opt(&lastbin, i), opt(&nmean, i), opt(&nsd, i)) else {
             count_dropped(report, "no record geolocation or noise");
             continue;
         };
@@ -258,28 +200,18 @@ fn read_shots(
             }
             let ground = opt(elev, i)?;
             let rh = list_f32(rh, i).filter(|r| r.len() == RH_LEN)?;
-            ground.is_finite().then(|| RealAlgorithm {
-                ground: ground - n_geoid,
-                rh,
-            })
+            ground.is_finite().then(|| RealAlgorithm { ground: ground - n_geoid, rh })
         });
         if algorithms.iter().all(Option::is_none) {
-            count_dropped(
-                report,
-                "no algorithm passes quality (quality_flag, degrade_flag, sensitivity ≥ 0.9)",
-            );
+            count_dropped(report, "no algorithm passes quality (quality_flag, degrade_flag, sensitivity ≥ 0.9)");
             continue;
         }
-        let sel = opt(&selected, i)
-            .filter(|s| (1..=N_ALGORITHMS as u8).contains(s))
-            .unwrap_or(1);
+        let sel = opt(&selected, i).filter(|s| (1..=N_ALGORITHMS as u8).contains(s)).unwrap_or(1);
         let sens_sel = opt(&alg_cols[usize::from(sel) - 1].2, i).unwrap_or(f64::NAN);
         let energy: f64 = wave.iter().map(|&v| f64::from(v) - mean).sum();
         let (dx, dy) = offsets.get(&shot).map_or((0.0, 0.0), |o| (o.dx, o.dy));
         let collocation_dz = offsets.get(&shot).map(|o| o.dz).filter(|dz| dz.is_finite());
-        let segment = offsets
-            .get(&shot)
-            .map_or_else(|| shot.to_string(), |o| o.segment_id.clone());
+        let segment = offsets.get(&shot).map_or_else(|| shot.to_string(), |o| o.segment_id.clone());
         let real = RealShot {
             shot_number: shot,
             track: format!("{}/{}", granule.value(i), beam.value(i)),
@@ -296,28 +228,14 @@ fn read_shots(
             segment,
             collocation_dz,
             strata: Strata {
-                forest_type: forest
-                    .get(&shot)
-                    .cloned()
-                    .unwrap_or_else(|| classes::UNKNOWN.to_string()),
+                forest_type: forest.get(&shot).cloned().unwrap_or_else(|| classes::UNKNOWN.to_string()),
                 phenology: classes::phenology(opt(&leaf_off, i)).to_string(),
-                sensitivity_group: classes::sensitivity_group(sens_sel)
-                    .unwrap_or(classes::UNKNOWN)
-                    .to_string(),
+                sensitivity_group: classes::sensitivity_group(sens_sel).unwrap_or(classes::UNKNOWN).to_string(),
                 beam_type: beam_type.value(i).to_string(),
                 ..Default::default()
             },
         };
-        out.push(Pending {
-            real,
-            footprint: Footprint {
-                id: shot.to_string(),
-                x: px + dx,
-                y: py + dy,
-            },
-            reported: (px, py),
-            sites: false,
-        });
+        out.push(Pending { real, footprint: Footprint { id: shot.to_string(), x: px + dx, y: py + dy }, reported: (px, py), sites: false });
     }
     Ok(())
 }
@@ -329,12 +247,7 @@ fn configs() -> (SimConfig, Vec<SimConfig>) {
     let nominal = SimConfig::new(Profile::Default);
     let variants = FSIGMA_GRID
         .iter()
-        .map(|&f| SimConfig {
-            fsigma: f as f32,
-            pulse: sim::Pulse::dirac(),
-            min_covered_fraction: None,
-            ..nominal.clone()
-        })
+        .map(|&f| SimConfig { fsigma: f as f32, pulse: sim::Pulse::dirac(), min_covered_fraction: None, ..nominal.clone() })
         .collect();
     (nominal, variants)
 }
@@ -346,33 +259,21 @@ const RECOLLOCATE_STEP_M: f64 = 1.0;
 /// The vertical reference of the re-collocation: the median of the collocation segments'
 /// vertical offsets (GEDI − N − ALS, m), one value for all (0 without offsets).
 fn reference_dz(offsets: &HashMap<u64, crate::tables::offsets::AppliedOffset>) -> f64 {
-    let mut by_segment: HashMap<&str, f64> = HashMap::new();
-    offsets.values().filter(|o| o.dz.is_finite()).for_each(|o| {
-        by_segment.insert(o.segment_id.as_str(), o.dz);
-    });
+    let by_segment: HashMap<&str, f64> = offsets.values().filter(|o| o.dz.is_finite()).map(|o| (o.segment_id.as_str(), o.dz)).collect();
     let mut dz: Vec<f64> = by_segment.into_values().collect();
     dz.sort_by(|a, b| a.total_cmp(b));
-    if dz.is_empty() {
-        0.0
-    } else {
-        dz[dz.len() / 2]
-    }
+    if dz.is_empty() { 0.0 } else { dz[dz.len() / 2] }
 }
 
-/// The centre of the [`site_grid`] of each short segment: its horizontal collocation redone with
-/// the vertical offset fixed at `dz` ([`crate::collocate::horizontal_offset_at`]), as an absolute
-/// position per shot (the reported position plus the segment's offset).
+/// The centre of the [`site_grid`] of each short segment's shots: the segment's horizontal
+/// collocation redone with the vertical offset fixed at `dz`
+/// ([`crate::collocate::horizontal_offset_at`]), as an absolute position per shot.
 fn recollocate(als: &AlsTable, pending: &[Pending], dz: f64) -> Result<HashMap<u64, (f64, f64)>> {
-    use crate::collocate::{
-        horizontal_offset_at, profile::real_profile, CollocateConfig, ShotInput,
-    };
+    use crate::collocate::{horizontal_offset_at, profile::real_profile, CollocateConfig, ShotInput};
     let cfg = CollocateConfig::new(RECOLLOCATE_SHIFT_M, RECOLLOCATE_STEP_M)?;
     let half = cfg.support_half_width();
     let mut segments: std::collections::BTreeMap<&str, Vec<&Pending>> = Default::default();
-    pending
-        .iter()
-        .filter(|p| p.sites)
-        .for_each(|p| segments.entry(p.real.segment.as_str()).or_default().push(p));
+    pending.iter().filter(|p| p.sites).for_each(|p| segments.entry(p.real.segment.as_str()).or_default().push(p));
     let mut out = HashMap::new();
     for shots in segments.values() {
         let inputs: Vec<ShotInput> = shots
@@ -380,20 +281,13 @@ fn recollocate(als: &AlsTable, pending: &[Pending], dz: f64) -> Result<HashMap<u
             .filter_map(|p| {
                 let r = &p.real;
                 let real = real_profile(&r.wave, r.bin0, r.lastbin, cfg.model.res).ok()?;
-                Some(ShotInput {
-                    x: p.reported.0,
-                    y: p.reported.1,
-                    real,
-                })
+                Some(ShotInput { x: p.reported.0, y: p.reported.1, real })
             })
             .collect();
         if inputs.is_empty() {
             continue;
         }
-        let boxes: Vec<crate::als_table::BBox> = inputs
-            .iter()
-            .map(|s| [s.x - half, s.y - half, s.x + half, s.y + half])
-            .collect();
+        let boxes: Vec<crate::als_table::BBox> = inputs.iter().map(|s| [s.x - half, s.y - half, s.x + half, s.y + half]).collect();
         let (cloud, _) = als.xyz_in_boxes(&boxes)?;
         if let Some((ox, oy)) = horizontal_offset_at(&inputs, &cloud, &cfg, dz) {
             for p in shots {
@@ -416,14 +310,13 @@ fn simulate_cases(
     }
     let (nominal, variants) = configs();
     let fmax = FSIGMA_GRID[FSIGMA_GRID.len() - 1] as f32;
-    let grid = site_grid();
     let half = sim::footprint::gauss_sep(fmax, sim::footprint::I_THRESH) as f64 + 1.0;
+    let grid = site_grid();
     // Site 0 at the collocated position, then the grid around the segment's re-collocated centre.
     let items: Vec<(Footprint, (RealShot, Vec<(f64, f64)>))> = pending
         .into_iter()
         .map(|p| {
-            let (x, y) = (p.footprint.x, p.footprint.y);
-            let mut sites = vec![(x, y)];
+            let mut sites = vec![(p.footprint.x, p.footprint.y)];
             if let Some(&(cx, cy)) = centres.get(&p.real.shot_number).filter(|_| p.sites) {
                 sites.extend(grid.iter().map(|(dx, dy)| (cx + dx, cy + dy)));
             }
@@ -432,28 +325,14 @@ fn simulate_cases(
         .collect();
     let mut cases = Vec::new();
     for block in crate::simulate::blocks(items) {
-        let mut bb = [
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NEG_INFINITY,
-        ];
-        for (x, y) in block
-            .iter()
-            .flat_map(|(_, (_, sites))| sites.iter().copied())
-        {
-            bb = [
-                bb[0].min(x - half),
-                bb[1].min(y - half),
-                bb[2].max(x + half),
-                bb[3].max(y + half),
-            ];
+        let mut bb = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        for (x, y) in block.iter().flat_map(|(_, (_, sites))| sites.iter().copied()) {
+            bb = [bb[0].min(x - half), bb[1].min(y - half), bb[2].max(x + half), bb[3].max(y + half)];
         }
         let (points, _) = als.points_in(bb)?;
-        let (fps, reals): (Vec<Footprint>, Vec<(RealShot, Vec<(f64, f64)>)>) =
-            block.into_iter().unzip();
+        let (fps, reals): (Vec<Footprint>, Vec<(RealShot, Vec<(f64, f64)>)>) = block.into_iter().unzip();
         let nom = sim::simulate(&points, &fps, &nominal)?;
-        // Every footprint of the block at every site it needs: (shot j, site k) → index.
+        // Every site of every shot of the block as one footprint: index[j][k] for shot j, site k.
         let mut placed: Vec<Footprint> = Vec::new();
         let mut index: Vec<Vec<usize>> = Vec::with_capacity(fps.len());
         for (f, (_, sites)) in fps.iter().zip(&reals) {
@@ -461,27 +340,17 @@ fn simulate_cases(
                 sites
                     .iter()
                     .map(|&(x, y)| {
-                        placed.push(Footprint {
-                            id: f.id.clone(),
-                            x,
-                            y,
-                        });
+                        placed.push(Footprint { id: f.id.clone(), x, y });
                         placed.len() - 1
                     })
                     .collect(),
             );
         }
-        let vars = variants
-            .iter()
-            .map(|cfg| sim::simulate(&points, &placed, cfg))
-            .collect::<Result<Vec<_>>>()?;
+        let vars = variants.iter().map(|cfg| sim::simulate(&points, &placed, cfg)).collect::<Result<Vec<_>>>()?;
         for (j, (mut real, positions)) in reals.into_iter().enumerate() {
             on_shot();
             let Ok(n) = &nom[j] else {
-                count_dropped(
-                    report,
-                    "footprint not simulated (no ALS points or partly covered)",
-                );
+                count_dropped(report, "footprint not simulated (no ALS points or partly covered)");
                 continue;
             };
             let count = n.get(Weighting::Count);
@@ -489,59 +358,32 @@ fn simulate_cases(
                 count_dropped(report, "simulated footprint has no ground");
                 continue;
             };
-            let offset = |k: usize| {
-                (
-                    positions[k].0 - positions[0].0,
-                    positions[k].1 - positions[0].1,
-                )
-            };
+            let offset = |k: usize| (positions[k].0 - positions[0].0, positions[k].1 - positions[0].1);
             let mut sites = Vec::with_capacity(index[j].len());
             let mut dz = f64::NAN;
             for (k, &i) in index[j].iter().enumerate() {
-                let vs: Vec<&sim::SimulatedFootprint> =
-                    vars.iter().filter_map(|v| v[i].as_ref().ok()).collect();
+                let vs: Vec<&sim::SimulatedFootprint> = vars.iter().filter_map(|v| v[i].as_ref().ok()).collect();
                 // The collocated position keeps the nominal run's ground; another site needs
-                // every width and a ground of its own, or is left out.
-                let site_ground = if k == 0 {
-                    Some(ground)
-                } else {
-                    vs.get(NOMINAL_WIDTH)
-                        .and_then(|v| v.get(Weighting::Count).truth.als_ground)
-                };
+                // every width and a ground of its own, or is kept empty (never chosen) so that
+                // site k is the same offset for every shot of the segment.
+                let site_ground = if k == 0 { Some(ground) } else { vs.get(NOMINAL_WIDTH).and_then(|v| v.get(Weighting::Count).truth.als_ground) };
                 match site_ground {
                     Some(g) if vs.len() == FSIGMA_GRID.len() => {
                         dz = vs[0].dz;
                         sites.push(site_of(&vs, offset(k), g));
                     }
                     _ if k == 0 => break,
-                    // Kept empty so that site k stays the same offset for every shot.
-                    _ => sites.push(Site {
-                        dx: offset(k).0,
-                        dy: offset(k).1,
-                        z0: f64::NAN,
-                        variants: Vec::new(),
-                        als_ground: f64::NAN,
-                    }),
+                    _ => sites.push(Site { dx: offset(k).0, dy: offset(k).1, z0: f64::NAN, variants: Vec::new(), als_ground: f64::NAN }),
                 }
             }
-            if sites.first().is_none_or(|s| (s.dx, s.dy) != (0.0, 0.0)) {
+            if sites.is_empty() {
                 count_dropped(report, "footprint not simulated at every footprint width");
                 continue;
             }
-            real.strata.slope_class =
-                classes::slope_class(count.truth.slope_deg.map(f64::from)).to_string();
+            real.strata.slope_class = classes::slope_class(count.truth.slope_deg.map(f64::from)).to_string();
             let cover = f64::from(count.truth.als_cover);
-            real.strata.cover_class =
-                classes::cover_class((cover >= 0.0).then_some(cover)).to_string();
-            cases.push(ShotCase {
-                real,
-                sim: SimShot {
-                    dz,
-                    sites,
-                    rh_nominal: rh.to_vec(),
-                },
-                mismatch: [false; N_ALGORITHMS],
-            });
+            real.strata.cover_class = classes::cover_class((cover >= 0.0).then_some(cover)).to_string();
+            cases.push(ShotCase { real, sim: SimShot { dz, sites, rh_nominal: rh.to_vec() }, mismatch: [false; N_ALGORITHMS] });
         }
     }
     Ok(cases)
@@ -556,11 +398,7 @@ const NOMINAL_WIDTH: usize = 2;
 fn site_of(vs: &[&sim::SimulatedFootprint], (dx, dy): (f64, f64), als_ground: f64) -> Site {
     let dz = vs[0].dz;
     let top = vs.iter().map(|v| v.z0).fold(f64::NEG_INFINITY, f64::max) + PAD_M;
-    let bottom = vs
-        .iter()
-        .map(|v| v.z0 - (v.n_bins() as f64 - 1.0) * dz)
-        .fold(f64::INFINITY, f64::min)
-        - PAD_M;
+    let bottom = vs.iter().map(|v| v.z0 - (v.n_bins() as f64 - 1.0) * dz).fold(f64::INFINITY, f64::min) - PAD_M;
     let n = ((top - bottom) / dz).round() as usize + 1;
     let place = |src: &[f32], z0: f64| {
         let mut out = vec![0f32; n];
@@ -577,20 +415,11 @@ fn site_of(vs: &[&sim::SimulatedFootprint], (dx, dy): (f64, f64), als_ground: f6
         .map(|v| SimVariant {
             weightings: Weighting::ALL.map(|w| {
                 let p = v.get(w);
-                Parts {
-                    ground: place(&p.ground, v.z0),
-                    canopy: place(&p.canopy, v.z0),
-                }
+                Parts { ground: place(&p.ground, v.z0), canopy: place(&p.canopy, v.z0) }
             }),
         })
         .collect();
-    Site {
-        dx,
-        dy,
-        z0: top,
-        variants,
-        als_ground,
-    }
+    Site { dx, dy, z0: top, variants, als_ground }
 }
 
 /// What `diagnose` wrote.
@@ -604,29 +433,16 @@ pub struct DiagnosisOutput {
 
 /// Diagnose the dataset into `out`.
 /// `effects`: the effects tried (names of `diagnose::fit::FITTED_EFFECTS`; empty = all).
-pub fn diagnose_dataset(
-    ds: &Dataset,
-    out: &Path,
-    effects: &[String],
-    on_shot: &(dyn Fn() + Sync),
-    on_step: &dyn Fn(&str),
-) -> Result<DiagnosisOutput> {
+pub fn diagnose_dataset(ds: &Dataset, out: &Path, effects: &[String], on_shot: &(dyn Fn() + Sync), on_step: &dyn Fn(&str)) -> Result<DiagnosisOutput> {
     let names: Vec<&str> = if effects.is_empty() {
         diagnose::fit::FITTED_EFFECTS.to_vec()
     } else {
         effects
             .iter()
             .map(|e| {
-                diagnose::fit::FITTED_EFFECTS
-                    .iter()
-                    .copied()
-                    .find(|n| n == e)
-                    .ok_or_else(|| {
-                        Error::Usage(format!(
-                            "--effects: '{e}' is not an effect the diagnosis fits (known: {})",
-                            diagnose::fit::FITTED_EFFECTS.join(", ")
-                        ))
-                    })
+                diagnose::fit::FITTED_EFFECTS.iter().copied().find(|n| n == e).ok_or_else(|| {
+                    Error::Usage(format!("--effects: '{e}' is not an effect the diagnosis fits (known: {})", diagnose::fit::FITTED_EFFECTS.join(", ")))
+                })
             })
             .collect::<Result<_>>()?
     };
@@ -634,11 +450,7 @@ pub fn diagnose_dataset(
     if cases.len() < 4 {
         return Err(Error::file(
             ds.root().join(tables::SHOTS),
-            format!(
-                "only {} usable shot(s) for the diagnosis (need ≥ 4): {}",
-                cases.len(),
-                dropped_text(&report)
-            ),
+            format!("only {} usable shot(s) for the diagnosis (need ≥ 4): {}", cases.len(), dropped_text(&report)),
         ));
     }
     let d = diagnose::diagnose(cases, &names, on_step);
@@ -650,12 +462,7 @@ pub fn diagnose_dataset(
     let text = serde_json::to_string_pretty(&json).map_err(|e| Error::file(&path, e))?;
     figures::write_atomic(&path, text.as_bytes())?;
     files.push(path);
-    Ok(DiagnosisOutput {
-        diagnosis: d,
-        json,
-        files,
-        cases: report,
-    })
+    Ok(DiagnosisOutput { diagnosis: d, json, files, cases: report })
 }
 
 /// "reason (n), …"
@@ -663,11 +470,7 @@ pub fn dropped_text(r: &CaseReport) -> String {
     if r.dropped.is_empty() {
         return "none dropped".into();
     }
-    r.dropped
-        .iter()
-        .map(|(k, n)| format!("{k} ({n})"))
-        .collect::<Vec<_>>()
-        .join(", ")
+    r.dropped.iter().map(|(k, n)| format!("{k} ({n})")).collect::<Vec<_>>().join(", ")
 }
 
 fn param_json(v: &ParamValue) -> Value {
@@ -679,20 +482,11 @@ fn param_json(v: &ParamValue) -> Value {
 
 /// The effect's parameters as a JSON object (contract names).
 pub fn params_json(e: &Effect) -> Value {
-    Value::Object(
-        e.params()
-            .into_iter()
-            .map(|(k, v)| (k.to_string(), param_json(&v)))
-            .collect(),
-    )
+    Value::Object(e.params().into_iter().map(|(k, v)| (k.to_string(), param_json(&v))).collect())
 }
 
 fn finite(x: f64) -> Value {
-    if x.is_finite() {
-        json!(x)
-    } else {
-        Value::Null
-    }
+    if x.is_finite() { json!(x) } else { Value::Null }
 }
 
 fn gap_json(m: &GapMetrics) -> Value {
@@ -756,22 +550,13 @@ fn to_json(d: &Diagnosis, r: &CaseReport) -> Value {
         },
         "shots": {"read": r.shots_read, "used": d.n_shots, "re_placed_per_hypothesis": d.n_replaceable, "pairs_ground_mismatch": d.mismatched, "dropped": r.dropped.iter().map(|(k, n)| json!({"reason": k, "n": n})).collect::<Vec<_>>()},
         "settings": {"min_shrink_lower": crate::diagnose::rank::MIN_SHRINK_LOWER, "min_gain_m": crate::diagnose::rank::MIN_GAIN_M, "bootstrap": crate::diagnose::rank::BOOTSTRAP, "folds": 2, "split": "by track (granule/beam)",
-            "placement": {"short_segment_shots": crate::diagnose::case::SHORT_SEGMENT_SHOTS, "site_grid_step_m": crate::diagnose::case::SITE_STEP_M, "site_grid_half_width_m": f64::from(crate::diagnose::case::SITE_HALF) * crate::diagnose::case::SITE_STEP_M, "recollocation_shift_m": RECOLLOCATE_SHIFT_M, "recollocation_step_m": RECOLLOCATE_STEP_M}},
+            "placement": {"short_segment_shots": SHORT_SEGMENT_SHOTS, "site_grid_step_m": crate::diagnose::case::SITE_STEP_M, "site_grid_half_width_m": f64::from(crate::diagnose::case::SITE_HALF) * crate::diagnose::case::SITE_STEP_M, "recollocation_shift_m": RECOLLOCATE_SHIFT_M, "recollocation_step_m": RECOLLOCATE_STEP_M}},
     })
 }
 
 fn batch(fields: Vec<(&str, Arc<dyn Array>)>) -> Result<RecordBatch> {
-    let schema = Schema::new(
-        fields
-            .iter()
-            .map(|(n, a)| Field::new(*n, a.data_type().clone(), true))
-            .collect::<Vec<_>>(),
-    );
-    RecordBatch::try_new(
-        Arc::new(schema),
-        fields.into_iter().map(|(_, a)| a).collect(),
-    )
-    .map_err(|e| Error::table("diagnosis", e))
+    let schema = Schema::new(fields.iter().map(|(n, a)| Field::new(*n, a.data_type().clone(), true)).collect::<Vec<_>>());
+    RecordBatch::try_new(Arc::new(schema), fields.into_iter().map(|(_, a)| a).collect()).map_err(|e| Error::table("diagnosis", e))
 }
 
 fn floats(v: impl IntoIterator<Item = f64>) -> Arc<dyn Array> {
@@ -786,129 +571,59 @@ fn write_tables(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
     let w = &d.where_;
     let mut files = Vec::new();
     let p = &w.percentiles;
-    files.extend(crate::report::write_named_table(
-        out,
-        "where_percentiles",
-        &batch(vec![
-            ("rh", floats(p.iter().map(|p| p.k as f64))),
-            ("bias", floats(p.iter().map(|p| p.bias))),
-            ("bias_als_frame", floats(p.iter().map(|p| p.bias_als_frame))),
-            ("rmse", floats(p.iter().map(|p| p.rmse))),
-            ("sb", floats(p.iter().map(|p| p.sb))),
-            ("sdsd", floats(p.iter().map(|p| p.sdsd))),
-            ("lcs", floats(p.iter().map(|p| p.lcs))),
-        ])?,
-    )?);
+    files.extend(crate::report::write_named_table(out, "where_percentiles", &batch(vec![
+        ("rh", floats(p.iter().map(|p| p.k as f64))),
+        ("bias", floats(p.iter().map(|p| p.bias))),
+        ("bias_als_frame", floats(p.iter().map(|p| p.bias_als_frame))),
+        ("rmse", floats(p.iter().map(|p| p.rmse))),
+        ("sb", floats(p.iter().map(|p| p.sb))),
+        ("sdsd", floats(p.iter().map(|p| p.sdsd))),
+        ("lcs", floats(p.iter().map(|p| p.lcs))),
+    ])?)?);
     let s = &w.strata;
-    files.extend(crate::report::write_named_table(
-        out,
-        "where_strata",
-        &batch(vec![
-            ("kind", texts(s.iter().map(|s| s.kind.as_str()))),
-            ("label", texts(s.iter().map(|s| s.label.as_str()))),
-            ("n_shots", floats(s.iter().map(|s| s.n_shots as f64))),
-            (
-                "mean_abs_bias_rh1_99",
-                floats(s.iter().map(|s| s.metrics.mean_abs_bias_rh)),
-            ),
-            ("msd", floats(s.iter().map(|s| s.metrics.msd))),
-            ("sb", floats(s.iter().map(|s| s.metrics.sb))),
-            ("sdsd", floats(s.iter().map(|s| s.metrics.sdsd))),
-            ("lcs", floats(s.iter().map(|s| s.metrics.lcs))),
-            (
-                "ground_bias_m",
-                floats(s.iter().map(|s| s.metrics.ground_bias)),
-            ),
-            (
-                "share_of_squared_error",
-                floats(s.iter().map(|s| s.share_of_squared_error)),
-            ),
-        ])?,
-    )?);
+    files.extend(crate::report::write_named_table(out, "where_strata", &batch(vec![
+        ("kind", texts(s.iter().map(|s| s.kind.as_str()))),
+        ("label", texts(s.iter().map(|s| s.label.as_str()))),
+        ("n_shots", floats(s.iter().map(|s| s.n_shots as f64))),
+        ("mean_abs_bias_rh1_99", floats(s.iter().map(|s| s.metrics.mean_abs_bias_rh))),
+        ("msd", floats(s.iter().map(|s| s.metrics.msd))),
+        ("sb", floats(s.iter().map(|s| s.metrics.sb))),
+        ("sdsd", floats(s.iter().map(|s| s.metrics.sdsd))),
+        ("lcs", floats(s.iter().map(|s| s.metrics.lcs))),
+        ("ground_bias_m", floats(s.iter().map(|s| s.metrics.ground_bias))),
+        ("share_of_squared_error", floats(s.iter().map(|s| s.share_of_squared_error))),
+    ])?)?);
     let r = &w.waveform;
-    files.extend(crate::report::write_named_table(
-        out,
-        "waveform_residual",
-        &batch(vec![
-            ("height_m", floats(r.height.iter().copied())),
-            ("real", floats(r.real.iter().copied())),
-            ("simulated", floats(r.simulated.iter().copied())),
-            ("residual", floats(r.residual.iter().copied())),
-        ])?,
-    )?);
-    for (name, trials) in [
-        ("effects", &d.ranking.effects),
-        ("ladder", &d.ranking.ladder),
-    ] {
-        files.extend(crate::report::write_named_table(
-            out,
-            name,
-            &batch(vec![
-                ("step", floats((0..trials.len()).map(|i| i as f64 + 1.0))),
-                ("effect", texts(trials.iter().map(|t| t.effect.name()))),
-                (
-                    "params",
-                    texts(trials.iter().map(|t| params_json(&t.effect).to_string())),
-                ),
-                (
-                    "mean_abs_bias_before",
-                    floats(trials.iter().map(|t| t.held_out.before.mean_abs_bias)),
-                ),
-                (
-                    "mean_abs_bias_after",
-                    floats(trials.iter().map(|t| t.held_out.after.mean_abs_bias)),
-                ),
-                ("shrink", floats(trials.iter().map(|t| t.held_out.shrink))),
-                (
-                    "shrink_ci95_lo",
-                    floats(trials.iter().map(|t| t.held_out.ci95[0])),
-                ),
-                (
-                    "shrink_ci95_hi",
-                    floats(trials.iter().map(|t| t.held_out.ci95[1])),
-                ),
-                (
-                    "msd_before",
-                    floats(trials.iter().map(|t| t.held_out.before.msd)),
-                ),
-                (
-                    "msd_after",
-                    floats(trials.iter().map(|t| t.held_out.after.msd)),
-                ),
-                (
-                    "waveform_shrink",
-                    Arc::new(Float64Array::from(
-                        trials
-                            .iter()
-                            .map(|t| t.held_out.profile_shrink())
-                            .collect::<Vec<_>>(),
-                    )),
-                ),
-                ("score", floats(trials.iter().map(|t| t.held_out.score()))),
-            ])?,
-        )?);
+    files.extend(crate::report::write_named_table(out, "waveform_residual", &batch(vec![
+        ("height_m", floats(r.height.iter().copied())),
+        ("real", floats(r.real.iter().copied())),
+        ("simulated", floats(r.simulated.iter().copied())),
+        ("residual", floats(r.residual.iter().copied())),
+    ])?)?);
+    for (name, trials) in [("effects", &d.ranking.effects), ("ladder", &d.ranking.ladder)] {
+        files.extend(crate::report::write_named_table(out, name, &batch(vec![
+            ("step", floats((0..trials.len()).map(|i| i as f64 + 1.0))),
+            ("effect", texts(trials.iter().map(|t| t.effect.name()))),
+            ("params", texts(trials.iter().map(|t| params_json(&t.effect).to_string()))),
+            ("mean_abs_bias_before", floats(trials.iter().map(|t| t.held_out.before.mean_abs_bias))),
+            ("mean_abs_bias_after", floats(trials.iter().map(|t| t.held_out.after.mean_abs_bias))),
+            ("shrink", floats(trials.iter().map(|t| t.held_out.shrink))),
+            ("shrink_ci95_lo", floats(trials.iter().map(|t| t.held_out.ci95[0]))),
+            ("shrink_ci95_hi", floats(trials.iter().map(|t| t.held_out.ci95[1]))),
+            ("msd_before", floats(trials.iter().map(|t| t.held_out.before.msd))),
+            ("msd_after", floats(trials.iter().map(|t| t.held_out.after.msd))),
+            ("waveform_shrink", Arc::new(Float64Array::from(trials.iter().map(|t| t.held_out.profile_shrink()).collect::<Vec<_>>()))),
+            ("score", floats(trials.iter().map(|t| t.held_out.score()))),
+        ])?)?);
     }
     Ok(files)
 }
 
 fn write_figures(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
     let mut files = Vec::new();
-    let profile = |label: &str, b: &[f64; N_PCT]| {
-        (
-            label.to_string(),
-            (0..N_PCT)
-                .map(|k| ((k + 1) as f64, b[k]))
-                .collect::<Vec<_>>(),
-        )
-    };
-    let mut rh = vec![
-        profile("baseline (noise-free)", &d.where_.overall.bias_rh),
-        profile("nominal chain", &d.nominal.bias_rh),
-    ];
-    let mut als = vec![
-        profile("baseline (noise-free)", &d.where_.overall.bias_als),
-        profile("nominal chain", &d.nominal.bias_als),
-    ];
+    let profile = |label: &str, b: &[f64; N_PCT]| (label.to_string(), (0..N_PCT).map(|k| ((k + 1) as f64, b[k])).collect::<Vec<_>>());
+    let mut rh = vec![profile("baseline (noise-free)", &d.where_.overall.bias_rh), profile("nominal chain", &d.nominal.bias_rh)];
+    let mut als = vec![profile("baseline (noise-free)", &d.where_.overall.bias_als), profile("nominal chain", &d.nominal.bias_als)];
     let mut names = Vec::new();
     for t in &d.ranking.ladder {
         names.push(t.effect.name());
@@ -927,10 +642,7 @@ fn write_figures(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
         title: "Held-out bias (real − simulated) before and after the diagnosed effects".into(),
         x_desc: "RH percentile".into(),
         y_desc: "bias (m)".into(),
-        panels: vec![
-            ("RH frame (own grounds)".into(), rh),
-            ("ALS frame (heights above the ALS ground)".into(), als),
-        ],
+        panels: vec![("RH frame (own grounds)".into(), rh), ("ALS frame (heights above the ALS ground)".into(), als)],
         zero_line: true,
         legend_lower: false,
         own_y: false,
@@ -938,32 +650,14 @@ fn write_figures(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
     files.extend(figures::render(&fig, out, "bias_profile_before_after")?);
     let r = &d.where_.waveform;
     // In % of the waveform energy, so that the residual's ticks stay readable.
-    let series = |label: &str, v: &[f64]| {
-        (
-            label.to_string(),
-            r.height
-                .iter()
-                .zip(v)
-                .map(|(&h, &y)| (h, 100.0 * y))
-                .collect::<Vec<_>>(),
-        )
-    };
+    let series = |label: &str, v: &[f64]| (label.to_string(), r.height.iter().zip(v).map(|(&h, &y)| (h, 100.0 * y)).collect::<Vec<_>>());
     let fig = LinePanels {
-        title: format!(
-            "Mean normalised waveform by height above the ALS ground ({} shots)",
-            r.n_shots
-        ),
+        title: format!("Mean normalised waveform by height above the ALS ground ({} shots)", r.n_shots),
         x_desc: "height above ALS ground (m)".into(),
         y_desc: "% of the waveform energy per 0.5 m".into(),
         panels: vec![
-            (
-                "real and simulated (baseline)".into(),
-                vec![series("real", &r.real), series("simulated", &r.simulated)],
-            ),
-            (
-                "residual real − simulated".into(),
-                vec![series("residual", &r.residual)],
-            ),
+            ("real and simulated (baseline)".into(), vec![series("real", &r.real), series("simulated", &r.simulated)]),
+            ("residual real − simulated".into(), vec![series("residual", &r.residual)]),
         ],
         zero_line: true,
         legend_lower: false,
@@ -981,13 +675,7 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
         "{} shots on {} tracks. Baseline gap: mean |bias| over RH1–RH99 {:.2} m, ground bias (GEDI − ALS) {:+.2} m.",
         d.n_shots, d.n_tracks, w.overall.mean_abs_bias_rh, w.overall.ground_bias
     ));
-    let (k, b) = w
-        .overall
-        .bias_rh
-        .iter()
-        .enumerate()
-        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
-        .map_or((0, 0.0), |(k, b)| (k + 1, *b));
+    let (k, b) = w.overall.bias_rh.iter().enumerate().max_by(|a, b| a.1.abs().total_cmp(&b.1.abs())).map_or((0, 0.0), |(k, b)| (k + 1, *b));
     let mut place = format!("Where: the largest bias is at RH{k} ({b:+.2} m)");
     // Among strata of kinds with at least two labels: the one holding most of the squared error
     // relative to its share of the shots.
@@ -996,10 +684,7 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
         .strata
         .iter()
         .filter(|s| labels(&s.kind) >= 2 && s.n_shots >= 5)
-        .max_by(|a, b| {
-            (a.share_of_squared_error / a.n_shots as f64)
-                .total_cmp(&(b.share_of_squared_error / b.n_shots as f64))
-        });
+        .max_by(|a, b| (a.share_of_squared_error / a.n_shots as f64).total_cmp(&(b.share_of_squared_error / b.n_shots as f64)));
     if let Some(s) = worst {
         place += &format!(
             "; {} = {} holds {:.0} % of the squared error with {:.0} % of the shots",

@@ -7,11 +7,7 @@ use std::path::PathBuf;
 pub enum Error {
     /// A problem with one field (dataset, column, header entry) of one input file.
     #[error("{}: {field}: {message}", path.display())]
-    Field {
-        path: PathBuf,
-        field: String,
-        message: String,
-    },
+    Field { path: PathBuf, field: String, message: String },
 
     /// The file itself could not be opened, read or written.
     #[error("{}: {message}", path.display())]
@@ -28,32 +24,18 @@ pub enum Error {
 
 impl Error {
     /// Error about `field` of the file at `path`.
-    pub fn field(
-        path: impl Into<PathBuf>,
-        field: impl Into<String>,
-        message: impl std::fmt::Display,
-    ) -> Self {
-        Error::Field {
-            path: path.into(),
-            field: field.into(),
-            message: message.to_string(),
-        }
+    pub fn field(path: impl Into<PathBuf>, field: impl Into<String>, message: impl std::fmt::Display) -> Self {
+        Error::Field { path: path.into(), field: field.into(), message: message.to_string() }
     }
 
     /// Error about the file at `path` as a whole.
     pub fn file(path: impl Into<PathBuf>, message: impl std::fmt::Display) -> Self {
-        Error::File {
-            path: path.into(),
-            message: one_line(&message.to_string()),
-        }
+        Error::File { path: path.into(), message: one_line(&message.to_string()) }
     }
 
     /// Error while writing or reading a table at `path`.
     pub fn table(path: impl Into<PathBuf>, message: impl std::fmt::Display) -> Self {
-        Error::Table {
-            path: path.into(),
-            message: one_line(&message.to_string()),
-        }
+        Error::Table { path: path.into(), message: one_line(&message.to_string()) }
     }
 }
 

@@ -12,11 +12,7 @@ use gedisim::ingest::als::{self, AlsOptions, TileOutcome};
 use gedisim::{Error, Result};
 
 #[derive(Parser)]
-#[command(
-    name = "gedisim",
-    version,
-    about = "Simulate GEDI waveforms from ALS, process them like GEDI L2A, and diagnose the sim-to-real gap"
-)]
+#[command(name = "gedisim", version, about = "Simulate GEDI waveforms from ALS, process them like GEDI L2A, and diagnose the sim-to-real gap")]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -364,7 +360,9 @@ struct ScenarioArgs {
 #[derive(Subcommand)]
 enum BenchCommand {
     /// Decode a LAS/LAZ file with the las crate alone (the baseline of the ingest benchmark).
-    Decode { file: PathBuf },
+    Decode {
+        file: PathBuf,
+    },
 }
 
 fn main() -> ExitCode {
@@ -411,33 +409,22 @@ fn ingest_als(a: IngestAlsArgs) -> Result<()> {
     }
     let mut total = 0u64;
     for f in &files {
-        total += gedisim::ingest::las::TileReader::open(f)?
-            .header()
-            .number_of_points;
+        total += gedisim::ingest::las::TileReader::open(f)?.header().number_of_points;
     }
     let ds = Dataset::create(&a.out)?;
     let bar = progress(total, "points");
-    let opts = AlsOptions {
-        keep_all_classes: a.keep_all_classes,
-        epsg: a.epsg,
-    };
+    let opts = AlsOptions { keep_all_classes: a.keep_all_classes, epsg: a.epsg };
     let outcomes = als::ingest_tiles(&ds, &files, &opts, &|n| bar.inc(n));
     bar.finish_and_clear();
     let outcomes = outcomes?;
     let mut written = 0;
     for o in &outcomes {
         match o {
-            TileOutcome::Ingested {
-                tile,
-                points,
-                dropped,
-            } => {
+            TileOutcome::Ingested { tile, points, dropped } => {
                 written += points;
                 eprintln!("{tile}: {points} points ({dropped} dropped by class)");
             }
-            TileOutcome::AlreadyIngested { tile } => {
-                eprintln!("{tile}: already ingested (same content), skipped")
-            }
+            TileOutcome::AlreadyIngested { tile } => eprintln!("{tile}: already ingested (same content), skipped"),
         }
     }
     if a.stats {
@@ -464,11 +451,7 @@ fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
         Some(e) => e,
         None => als::dataset_epsg(&ds)?.unwrap_or(2154),
     };
-    let opts = GediOptions {
-        epsg,
-        geoid_offset: a.geoid_offset,
-        strict_join: a.strict_join,
-    };
+    let opts = GediOptions { epsg, geoid_offset: a.geoid_offset, strict_join: a.strict_join };
     let n = gedi::pair_granules(&l1b, &l2a)?.0.len() as u64;
     let bar = progress(n, "granules");
     let result = gedi::ingest_into_dataset(&ds, &l1b, &l2a, &opts, &|| bar.inc(1));
@@ -480,9 +463,7 @@ fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
     for o in outcomes {
         match o {
             GranuleOutcome::Ingested { granule, shots } => eprintln!("{granule}: {shots} shots"),
-            GranuleOutcome::AlreadyIngested { granule } => {
-                eprintln!("{granule}: already ingested (same content), skipped")
-            }
+            GranuleOutcome::AlreadyIngested { granule } => eprintln!("{granule}: already ingested (same content), skipped"),
         }
     }
     Ok(())
@@ -500,23 +481,12 @@ fn ingest_strata(a: IngestStrataArgs) -> Result<()> {
     let mut counts: Vec<_> = report.counts.iter().collect();
     counts.sort();
     let counts: Vec<String> = counts.iter().map(|(k, v)| format!("{k} {v}")).collect();
-    eprintln!(
-        "{} shots → {} ({})",
-        report.rows,
-        report.path.display(),
-        counts.join(", ")
-    );
+    eprintln!("{} shots → {} ({})", report.rows, report.path.display(), counts.join(", "));
     if report.outside > 0 || report.no_position > 0 {
-        eprintln!(
-            "{} shots outside the raster and {} without a position: forest type `unknown`",
-            report.outside, report.no_position
-        );
+        eprintln!("{} shots outside the raster and {} without a position: forest type `unknown`", report.outside, report.no_position);
     }
     if report.not_in_dataset > 0 {
-        eprintln!(
-            "warning: {} CSV rows name shots that are not in the dataset's shots table",
-            report.not_in_dataset
-        );
+        eprintln!("warning: {} CSV rows name shots that are not in the dataset's shots table", report.not_in_dataset);
     }
     Ok(())
 }
@@ -538,10 +508,8 @@ fn simulate(a: SimulateArgs) -> Result<()> {
         ("gaussian", None) => cfg.pulse,
         (file, _) => {
             let path = PathBuf::from(file);
-            let text = std::fs::read_to_string(&path)
-                .map_err(|e| Error::file(&path, format!("cannot read pulse file: {e}")))?;
-            let pairs =
-                sim::pulse::parse_pulse_text(&text).map_err(|e| Error::field(&path, "pulse", e))?;
+            let text = std::fs::read_to_string(&path).map_err(|e| Error::file(&path, format!("cannot read pulse file: {e}")))?;
+            let pairs = sim::pulse::parse_pulse_text(&text).map_err(|e| Error::field(&path, "pulse", e))?;
             sim::Pulse::tabulated(&pairs).map_err(|e| Error::field(&path, "pulse", e))?
         }
     };
@@ -550,59 +518,34 @@ fn simulate(a: SimulateArgs) -> Result<()> {
         let ds = Dataset::open(&dir)?;
         let (footprints, dest) = match &a.footprints {
             Some(csv) => {
-                let stem = csv
-                    .file_stem()
-                    .and_then(|s| s.to_str())
-                    .unwrap_or("footprints");
+                let stem = csv.file_stem().and_then(|s| s.to_str()).unwrap_or("footprints");
                 let dest = match &a.out {
                     Some(out) => out.clone(),
                     None => ds.table_file(gedisim::dataset::tables::SIM, stem)?,
                 };
-                (
-                    gedisim::ingest::footprints::read_footprints_csv(csv)?
-                        .into_iter()
-                        .map(|f| (f, None))
-                        .collect(),
-                    dest,
-                )
+                (gedisim::ingest::footprints::read_footprints_csv(csv)?.into_iter().map(|f| (f, None)).collect(), dest)
             }
-            None if a.out.is_some() => {
-                return Err(Error::Usage(
-                    "--out in dataset mode needs --footprints".into(),
-                ))
-            }
-            None => (
-                gedisim::simulate::shot_footprints(&ds)?,
-                ds.table_file(gedisim::dataset::tables::SIM, "shots")?,
-            ),
+            None if a.out.is_some() => return Err(Error::Usage("--out in dataset mode needs --footprints".into())),
+            None => (gedisim::simulate::shot_footprints(&ds)?, ds.table_file(gedisim::dataset::tables::SIM, "shots")?),
         };
         let bar = progress(footprints.len() as u64, "footprints");
-        let r =
-            gedisim::simulate::simulate_on_dataset(&ds, footprints, &cfg, profile, &dest, &|k| {
-                bar.inc(k as u64)
-            });
+        let r = gedisim::simulate::simulate_on_dataset(&ds, footprints, &cfg, profile, &dest, &|k| bar.inc(k as u64));
         bar.finish_and_clear();
         let (ok, skipped) = r?;
         (ok, skipped, dest)
     } else {
         let (Some(als_path), Some(fp_path), Some(out)) = (a.als, a.footprints, a.out) else {
-            return Err(Error::Usage(
-                "give --als, --footprints and --out (direct mode) or --dataset".into(),
-            ));
+            return Err(Error::Usage("give --als, --footprints and --out (direct mode) or --dataset".into()));
         };
         let footprints = gedisim::ingest::footprints::read_footprints_csv(&fp_path)?;
         let mut points = gedisim::ingest::las::read_points(&als_path)?;
         if profile == Profile::Default && !a.keep_all_classes {
             points = gedisim::simulate::drop_ingest_classes(&points);
         }
-        let (ok, skipped) =
-            gedisim::simulate::simulate_direct(&points, &footprints, &cfg, profile, &out)?;
+        let (ok, skipped) = gedisim::simulate::simulate_direct(&points, &footprints, &cfg, profile, &out)?;
         (ok, skipped, out)
     };
-    eprintln!(
-        "{ok} footprints simulated, {skipped} skipped (see the status column) → {}",
-        out.display()
-    );
+    eprintln!("{ok} footprints simulated, {skipped} skipped (see the status column) → {}", out.display());
     if a.stats {
         let s = start.elapsed().as_secs_f64();
         println!(
@@ -621,13 +564,7 @@ fn collocate(a: CollocateArgs) -> Result<()> {
     let start = Instant::now();
     let level = collocate_level(a.level);
     let ds = Dataset::open(&a.dataset)?;
-    let opts = CollocateOptions {
-        level,
-        segment: a.segment,
-        max_shift: a.max_shift,
-        step: a.step,
-        min_segment: a.min_segment,
-    };
+    let opts = CollocateOptions { level, segment: a.segment, max_shift: a.max_shift, step: a.step, min_segment: a.min_segment };
     let plan = Collocation::plan(&ds, &opts)?;
     let bar = progress(plan.shots_to_process() as u64, "shots");
     let result = plan.run(&|| bar.inc(1));
@@ -636,21 +573,11 @@ fn collocate(a: CollocateArgs) -> Result<()> {
     for s in &report.short_runs {
         eprintln!("too short, not collocated: {s}");
     }
-    let skipped: Vec<String> = report
-        .skipped
-        .iter()
-        .map(|(k, v)| format!("{k} {v}"))
-        .collect();
+    let skipped: Vec<String> = report.skipped.iter().map(|(k, v)| format!("{k} {v}")).collect();
     if !skipped.is_empty() {
         eprintln!("shots not used: {}", skipped.join(", "));
     }
-    eprintln!(
-        "{} shots read, {} {} offsets → {}",
-        report.shots,
-        report.segments,
-        level.name(),
-        report.table.display()
-    );
+    eprintln!("{} shots read, {} {} offsets → {}", report.shots, report.segments, level.name(), report.table.display());
     if a.stats {
         println!(
             "collocate: {:.2} s, CPU {:.2} s, peak RSS {:.1} MB, {} ALS points kept from {} row groups",
@@ -669,30 +596,20 @@ fn l2a(a: L2aArgs) -> Result<()> {
     let settings = a
         .algorithms
         .iter()
-        .map(|&n| {
-            AlgorithmSettings::gedi(n).ok_or_else(|| {
-                Error::Usage(format!("--algorithms: {n} is not a GEDI algorithm (1..6)"))
-            })
-        })
+        .map(|&n| AlgorithmSettings::gedi(n).ok_or_else(|| Error::Usage(format!("--algorithms: {n} is not a GEDI algorithm (1..6)"))))
         .collect::<Result<Vec<_>>>()?;
     let opts = gedisim::ingest::gedi::GediOptions::default();
     let schema = gedisim::tables::l2a::l2a_schema();
     let props = gedisim::dataset::writer_properties(&Default::default(), 1 << 16);
     let mut writer = gedisim::dataset::AtomicParquet::create(&a.out, schema, props)?;
     let mut rows = 0;
-    let report =
-        gedisim::ingest::gedi::ingest_gedi(std::slice::from_ref(&a.l1b), &[], &opts, |shots| {
-            let batch = gedisim::tables::l2a::l2a_batch(&shots, &settings, &a.l1b)?;
-            rows += batch.num_rows();
-            writer.write(&batch)
-        })?;
+    let report = gedisim::ingest::gedi::ingest_gedi(std::slice::from_ref(&a.l1b), &[], &opts, |shots| {
+        let batch = gedisim::tables::l2a::l2a_batch(&shots, &settings, &a.l1b)?;
+        rows += batch.num_rows();
+        writer.write(&batch)
+    })?;
     writer.finish()?;
-    eprintln!(
-        "{} shots × {} algorithms → {rows} rows in {}",
-        report.rows(),
-        settings.len(),
-        a.out.display()
-    );
+    eprintln!("{} shots × {} algorithms → {rows} rows in {}", report.rows(), settings.len(), a.out.display());
     Ok(())
 }
 
@@ -700,28 +617,17 @@ fn sql(a: SqlArgs) -> Result<()> {
     let query = match (a.query, a.file) {
         (Some(q), None) => q,
         (None, Some(f)) => std::fs::read_to_string(&f).map_err(|e| Error::file(&f, e))?,
-        _ => {
-            return Err(Error::Usage(
-                "give either a SQL statement or -f <file>".into(),
-            ))
-        }
+        _ => return Err(Error::Usage("give either a SQL statement or -f <file>".into())),
     };
     let ds = Dataset::open(&a.dataset)?;
     let rt = tokio::runtime::Runtime::new().map_err(|e| Error::Usage(e.to_string()))?;
     rt.block_on(async move {
         let ctx = gedisim::sql::session(&ds).await?;
-        let df = ctx
-            .sql(&query)
-            .await
-            .map_err(|e| Error::Usage(format!("SQL: {e}")))?;
-        let batches = df
-            .collect()
-            .await
-            .map_err(|e| Error::Usage(format!("SQL: {e}")))?;
+        let df = ctx.sql(&query).await.map_err(|e| Error::Usage(format!("SQL: {e}")))?;
+        let batches = df.collect().await.map_err(|e| Error::Usage(format!("SQL: {e}")))?;
         match a.out {
             None => {
-                let table = arrow::util::pretty::pretty_format_batches(&batches)
-                    .map_err(|e| Error::Usage(e.to_string()))?;
+                let table = arrow::util::pretty::pretty_format_batches(&batches).map_err(|e| Error::Usage(e.to_string()))?;
                 println!("{table}");
             }
             Some(out) => gedisim::dataset::write_result(&out, &batches)?,
@@ -733,9 +639,7 @@ fn sql(a: SqlArgs) -> Result<()> {
 fn report(a: ReportArgs) -> Result<()> {
     let ds = Dataset::open(&a.dataset)?;
     let bar = ProgressBar::new_spinner();
-    let s = gedisim::report::run_report(&ds, a.out.as_deref(), &|step| {
-        bar.set_message(step.to_string())
-    });
+    let s = gedisim::report::run_report(&ds, a.out.as_deref(), &|step| bar.set_message(step.to_string()));
     bar.finish_and_clear();
     let s = s?;
     for (name, rows) in &s.tables {
@@ -835,10 +739,7 @@ fn run_command(a: RunArgs) -> Result<()> {
             min_segment: a.min_segment,
             ..CollocateOptions::default()
         },
-        rules: gedisim::study::select::StudyRules {
-            max_days_apart: a.max_days_apart,
-            ..Default::default()
-        },
+        rules: gedisim::study::select::StudyRules { max_days_apart: a.max_days_apart, ..Default::default() },
         ..RunOptions::new(&a.out)
     };
     let report = gedisim::run::run_study(&opts, &Bars::new())?;
@@ -851,42 +752,12 @@ fn print_ingest_and_collocation(r: &gedisim::run::RunReport) {
     use gedisim::ingest::als::TileOutcome;
     use gedisim::ingest::gedi::GranuleOutcome;
     if !r.tiles.is_empty() {
-        let new: Vec<u64> = r
-            .tiles
-            .iter()
-            .filter_map(|t| {
-                if let TileOutcome::Ingested { points, .. } = t {
-                    Some(*points)
-                } else {
-                    None
-                }
-            })
-            .collect();
-        eprintln!(
-            "ALS: {} tiles ingested ({} points), {} already ingested",
-            new.len(),
-            new.iter().sum::<u64>(),
-            r.tiles.len() - new.len()
-        );
+        let new: Vec<u64> = r.tiles.iter().filter_map(|t| if let TileOutcome::Ingested { points, .. } = t { Some(*points) } else { None }).collect();
+        eprintln!("ALS: {} tiles ingested ({} points), {} already ingested", new.len(), new.iter().sum::<u64>(), r.tiles.len() - new.len());
     }
     if !r.ingested.is_empty() {
-        let new: Vec<usize> = r
-            .ingested
-            .iter()
-            .filter_map(|g| {
-                if let GranuleOutcome::Ingested { shots, .. } = g {
-                    Some(*shots)
-                } else {
-                    None
-                }
-            })
-            .collect();
-        eprintln!(
-            "GEDI: {} granules ingested ({} shots), {} already ingested",
-            new.len(),
-            new.iter().sum::<usize>(),
-            r.ingested.len() - new.len()
-        );
+        let new: Vec<usize> = r.ingested.iter().filter_map(|g| if let GranuleOutcome::Ingested { shots, .. } = g { Some(*shots) } else { None }).collect();
+        eprintln!("GEDI: {} granules ingested ({} shots), {} already ingested", new.len(), new.iter().sum::<usize>(), r.ingested.len() - new.len());
     }
     for w in &r.warnings {
         eprintln!("warning: {w}");
@@ -900,11 +771,7 @@ fn print_ingest_and_collocation(r: &gedisim::run::RunReport) {
     match &r.collocation {
         Some(c) => {
             let skipped: Vec<String> = c.skipped.iter().map(|(k, v)| format!("{k} {v}")).collect();
-            let skipped = if skipped.is_empty() {
-                String::new()
-            } else {
-                format!("; shots not used: {}", skipped.join(", "))
-            };
+            let skipped = if skipped.is_empty() { String::new() } else { format!("; shots not used: {}", skipped.join(", ")) };
             eprintln!(
                 "collocation: {} granules, {} shots read, {} segments solved, {} runs too short{skipped} → {}",
                 r.collocated.len(),
@@ -922,11 +789,7 @@ fn print_ingest_and_collocation(r: &gedisim::run::RunReport) {
 fn print_run(r: &gedisim::run::RunReport) {
     use gedisim::study::select::Filter;
     print_ingest_and_collocation(r);
-    let simulated: Vec<&gedisim::run::GranuleRun> = r
-        .granules
-        .iter()
-        .filter(|g| g.simulated.is_some())
-        .collect();
+    let simulated: Vec<&gedisim::run::GranuleRun> = r.granules.iter().filter(|g| g.simulated.is_some()).collect();
     if simulated.is_empty() {
         let covered: usize = r.granules.iter().map(|g| g.covered).sum();
         if covered == 0 {
@@ -935,17 +798,11 @@ fn print_run(r: &gedisim::run::RunReport) {
             eprintln!("simulation: up to date, nothing simulated ({covered} covered shots)");
         }
     } else {
-        let (ok, skipped) = simulated
-            .iter()
-            .filter_map(|g| g.simulated)
-            .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        let (ok, skipped) = simulated.iter().filter_map(|g| g.simulated).fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
         eprintln!("simulation: {} shots of {} granules ({ok} simulated, {skipped} skipped by the simulator)", ok + skipped, simulated.len());
     }
     let written = r.granules_processed();
-    eprintln!(
-        "results: {written} granules written, {} up to date",
-        r.granules.len() - written
-    );
+    eprintln!("results: {written} granules written, {} up to date", r.granules.len() - written);
     if r.nothing_new() {
         eprintln!("nothing new since the last run: no ingest, collocation or simulation; results unchanged");
     }
@@ -955,30 +812,16 @@ fn print_run(r: &gedisim::run::RunReport) {
     for f in Filter::ALL {
         let mut line = format!("− {:>10}  {}", t.removed_by(f), f.describe(&r.rules));
         if f == Filter::AcquisitionWindow && t.window_unknown > 0 {
-            line += &format!(
-                " (not applied to {} rows: no ALS date or shot date)",
-                t.window_unknown
-            );
+            line += &format!(" (not applied to {} rows: no ALS date or shot date)", t.window_unknown);
         }
         println!("{line}");
     }
-    println!(
-        "= {:>10}  rows kept ({} shots) → {}",
-        t.kept,
-        t.shots_kept,
-        r.dataset.join("results").display()
-    );
+    println!("= {:>10}  rows kept ({} shots) → {}", t.kept, t.shots_kept, r.dataset.join("results").display());
 }
 
 fn demo(a: DemoArgs) -> Result<()> {
     let start = Instant::now();
-    let opts = gedisim::demo::DemoOptions {
-        out: a.out.clone(),
-        effect: a.effect,
-        seed: a.seed,
-        passes: a.passes,
-        force: a.force,
-    };
+    let opts = gedisim::demo::DemoOptions { out: a.out.clone(), effect: a.effect, seed: a.seed, passes: a.passes, force: a.force };
     let bars = Bars::new();
     let spinner = std::sync::Mutex::new(None::<ProgressBar>);
     let d = gedisim::demo::run_demo(&opts, &bars, &|step| {
@@ -995,20 +838,8 @@ fn demo(a: DemoArgs) -> Result<()> {
     }
     let d = d?;
     match &d.world {
-        Some(w) => eprintln!(
-            "world: {} tiles, {} granules, {} shots, effect {} → {}",
-            w.tiles,
-            w.granules,
-            w.shots,
-            opts.effect,
-            d.world_dir.display()
-        ),
-        None => eprintln!(
-            "world: reusing {} (effect {}, seed {})",
-            d.world_dir.display(),
-            opts.effect,
-            opts.seed
-        ),
+        Some(w) => eprintln!("world: {} tiles, {} granules, {} shots, effect {} → {}", w.tiles, w.granules, w.shots, opts.effect, d.world_dir.display()),
+        None => eprintln!("world: reusing {} (effect {}, seed {})", d.world_dir.display(), opts.effect, opts.seed),
     }
     print_run(&d.run);
     for (name, missing) in &d.report.skipped {
@@ -1034,10 +865,7 @@ fn demo(a: DemoArgs) -> Result<()> {
     fitting.finish_and_clear();
     let diagnosis = diagnosis?;
     println!();
-    println!(
-        "Diagnosis (the withheld effect is not told; truth: {}):",
-        d.world_dir.join("truth.json").display()
-    );
+    println!("Diagnosis (the withheld effect is not told; truth: {}):", d.world_dir.join("truth.json").display());
     for line in gedisim::diagnosis::summary_lines(&diagnosis.diagnosis) {
         println!("  {line}");
     }
@@ -1056,8 +884,7 @@ fn scenario(a: ScenarioArgs) -> Result<()> {
                 .ok_or_else(|| Error::Usage(format!("--param {p}: expected key=value")))
         })
         .collect::<Result<Vec<_>>>()?;
-    let effects = gedisim::scenario::EffectSet::parse(&a.effect, a.magnitude, &params)
-        .map_err(|e| Error::Usage(e.to_string()))?;
+    let effects = gedisim::scenario::EffectSet::parse(&a.effect, a.magnitude, &params).map_err(|e| Error::Usage(e.to_string()))?;
     let inputs = if a.als.is_empty() {
         vec![PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/als")]
     } else {
@@ -1095,12 +922,7 @@ fn scenario(a: ScenarioArgs) -> Result<()> {
 fn export_geoparquet(a: ExportGeoArgs) -> Result<()> {
     let ds = Dataset::open(&a.dataset)?;
     let rt = tokio::runtime::Runtime::new().map_err(|e| Error::Usage(e.to_string()))?;
-    let rows = rt.block_on(gedisim::report::geoparquet::export(
-        &ds,
-        &a.table,
-        &a.out,
-        gedisim::report::geoparquet::GeoCrs::Wgs84,
-    ))?;
+    let rows = rt.block_on(gedisim::report::geoparquet::export(&ds, &a.table, &a.out, gedisim::report::geoparquet::GeoCrs::Wgs84))?;
     eprintln!("{rows} rows → {}", a.out.display());
     Ok(())
 }
@@ -1108,15 +930,11 @@ fn export_geoparquet(a: ExportGeoArgs) -> Result<()> {
 fn bench_decode(file: PathBuf) -> Result<()> {
     let start = Instant::now();
     let mut reader = las::Reader::from_path(&file).map_err(|e| Error::file(&file, e))?;
-    let mut pd = las::PointDataBuilder::new()
-        .for_header(reader.header())
-        .build();
+    let mut pd = las::PointDataBuilder::new().for_header(reader.header()).build();
     let mut n = 0u64;
     let mut checksum = 0f64;
     loop {
-        let got = reader
-            .fill_points(1 << 20, &mut pd)
-            .map_err(|e| Error::file(&file, e))?;
+        let got = reader.fill_points(1 << 20, &mut pd).map_err(|e| Error::file(&file, e))?;
         if got == 0 {
             break;
         }
@@ -1125,11 +943,7 @@ fn bench_decode(file: PathBuf) -> Result<()> {
         checksum += pd.z().sum::<f64>();
     }
     let s = start.elapsed().as_secs_f64();
-    println!(
-        "decode: {n} points, {s:.2} s, {:.0} points/s, peak RSS {:.1} MB (checksum {checksum:.1})",
-        n as f64 / s,
-        peak_rss_mb()
-    );
+    println!("decode: {n} points, {s:.2} s, {:.0} points/s, peak RSS {:.1} MB (checksum {checksum:.1})", n as f64 / s, peak_rss_mb());
     Ok(())
 }
 
@@ -1161,11 +975,7 @@ fn cpu_seconds() -> f64 {
 fn peak_rss_mb() -> f64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("VmHWM:"))
-                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
-        })
+        .and_then(|s| s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok()))
         .map(|kb| kb / 1024.0)
         .unwrap_or(0.0)
 }
@@ -1197,13 +1007,7 @@ struct DiagnoseArgs {
 /// Collocation of a dataset the diagnosis makes: per track (the baseline's horizontal collocation),
 /// every run solved however short.
 const DIAGNOSIS_COLLOCATION: gedisim::collocation::CollocateOptions =
-    gedisim::collocation::CollocateOptions {
-        level: gedisim::collocate::segments::Level::Beam,
-        segment: 40,
-        max_shift: 10.0,
-        step: 1.0,
-        min_segment: 1,
-    };
+    gedisim::collocation::CollocateOptions { level: gedisim::collocate::segments::Level::Beam, segment: 40, max_shift: 10.0, step: 1.0, min_segment: 1 };
 
 fn diagnose(a: DiagnoseArgs) -> Result<()> {
     let start = Instant::now();
@@ -1211,9 +1015,7 @@ fn diagnose(a: DiagnoseArgs) -> Result<()> {
         Some(d) => d.clone(),
         None => {
             if a.als.is_empty() {
-                return Err(Error::Usage(
-                    "give --dataset, or --als with --l1b and --l2a".into(),
-                ));
+                return Err(Error::Usage("give --dataset, or --als with --l1b and --l2a".into()));
             }
             // The first half of `gedisim run`, with the diagnosis's per-track collocation.
             let opts = gedisim::run::RunOptions {
@@ -1232,9 +1034,7 @@ fn diagnose(a: DiagnoseArgs) -> Result<()> {
     };
     let ds = Dataset::open(&root)?;
     if !ds.has_table(gedisim::dataset::tables::OFFSETS) {
-        eprintln!(
-            "no offsets table: collocating per track first (the baseline's horizontal collocation)"
-        );
+        eprintln!("no offsets table: collocating per track first (the baseline's horizontal collocation)");
         let c = DIAGNOSIS_COLLOCATION;
         collocate(CollocateArgs {
             dataset: root.clone(),
@@ -1249,29 +1049,18 @@ fn diagnose(a: DiagnoseArgs) -> Result<()> {
     let bar = progress(0, "shots");
     bar.set_message("simulating");
     let shots = ProgressBar::new_spinner();
-    let out =
-        gedisim::diagnosis::diagnose_dataset(&ds, &a.out, &a.effects, &|| bar.inc(1), &|step| {
-            bar.finish_and_clear();
-            shots.set_message(format!("fitting and scoring {step}"));
-            shots.tick();
-        });
+    let out = gedisim::diagnosis::diagnose_dataset(&ds, &a.out, &a.effects, &|| bar.inc(1), &|step| {
+        bar.finish_and_clear();
+        shots.set_message(format!("fitting and scoring {step}"));
+        shots.tick();
+    });
     bar.finish_and_clear();
     shots.finish_and_clear();
     let out = out?;
-    eprintln!(
-        "shots: {} read, {} used; dropped: {}",
-        out.cases.shots_read,
-        out.diagnosis.n_shots,
-        gedisim::diagnosis::dropped_text(&out.cases)
-    );
+    eprintln!("shots: {} read, {} used; dropped: {}", out.cases.shots_read, out.diagnosis.n_shots, gedisim::diagnosis::dropped_text(&out.cases));
     for line in gedisim::diagnosis::summary_lines(&out.diagnosis) {
         println!("{line}");
     }
-    eprintln!(
-        "{} → {} ({:.1} s)",
-        "diagnosis.json, tables, figures",
-        a.out.display(),
-        start.elapsed().as_secs_f64()
-    );
+    eprintln!("{} → {} ({:.1} s)", "diagnosis.json, tables, figures", a.out.display(), start.elapsed().as_secs_f64());
     Ok(())
 }

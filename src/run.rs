@@ -37,12 +37,10 @@ use crate::ingest::gedi::{self, GediOptions, GranuleOutcome};
 use crate::ingest::strata::StrataReport;
 use crate::sim::{Footprint, Profile, SimConfig};
 use crate::study::select::{
-    als_window, select_rows, AlgorithmFacts, Filter, FilterCounts, SegmentFacts, ShotContext,
-    ShotFacts, SimFacts, StudyRules, TileWindow, WEIGHTINGS,
+    als_window, select_rows, AlgorithmFacts, Filter, FilterCounts, SegmentFacts, ShotContext, ShotFacts, SimFacts,
+    StudyRules, TileWindow, WEIGHTINGS,
 };
-use crate::tables::offsets::{
-    offsets_batch, offsets_schema, read_offsets, read_r_after, AppliedOffset,
-};
+use crate::tables::offsets::{offsets_batch, offsets_schema, read_offsets, read_r_after, AppliedOffset};
 use crate::tables::results::{results_batch, results_metadata, results_schema};
 
 /// Version of what `run` writes: a change of the selection or the simulation logic bumps it, so
@@ -200,11 +198,7 @@ pub struct RunReport {
 impl RunReport {
     /// Footprints simulated by this run.
     pub fn shots_simulated(&self) -> usize {
-        self.granules
-            .iter()
-            .filter_map(|g| g.simulated)
-            .map(|(a, b)| a + b)
-            .sum()
+        self.granules.iter().filter_map(|g| g.simulated).map(|(a, b)| a + b).sum()
     }
 
     /// Granules whose results this run wrote.
@@ -221,14 +215,8 @@ impl RunReport {
     pub fn nothing_new(&self) -> bool {
         self.collocated.is_empty()
             && self.granules_processed() == 0
-            && self
-                .tiles
-                .iter()
-                .all(|t| matches!(t, TileOutcome::AlreadyIngested { .. }))
-            && self
-                .ingested
-                .iter()
-                .all(|g| matches!(g, GranuleOutcome::AlreadyIngested { .. }))
+            && self.tiles.iter().all(|t| matches!(t, TileOutcome::AlreadyIngested { .. }))
+            && self.ingested.iter().all(|g| matches!(g, GranuleOutcome::AlreadyIngested { .. }))
     }
 }
 
@@ -236,23 +224,14 @@ impl RunReport {
 pub fn run_study(opts: &RunOptions, progress: &dyn Progress) -> Result<RunReport> {
     let r = &opts.rules;
     if !(r.max_days_apart.is_finite() && r.max_days_apart >= 0.0) {
-        return Err(Error::Usage(format!(
-            "--max-days-apart: {} is not a number of days ≥ 0",
-            r.max_days_apart
-        )));
+        return Err(Error::Usage(format!("--max-days-apart: {} is not a number of days ≥ 0", r.max_days_apart)));
     }
     if !(r.min_rh100.is_finite() && r.max_rh100.is_finite() && r.min_rh100 <= r.max_rh100) {
-        return Err(Error::Usage(format!(
-            "RH100 bounds {}..{} m are not an interval",
-            r.min_rh100, r.max_rh100
-        )));
+        return Err(Error::Usage(format!("RH100 bounds {}..{} m are not an interval", r.min_rh100, r.max_rh100)));
     }
     let (ds, mut report, granules) = ingest_and_collocate_granules(opts, progress)?;
     let inputs = StudyInputs::read(&ds)?;
-    let mut plans = granules
-        .into_iter()
-        .map(|g| plan_granule(&ds, g, &inputs, &opts.rules))
-        .collect::<Result<Vec<_>>>()?;
+    let mut plans = granules.into_iter().map(|g| plan_granule(&ds, g, &inputs, &opts.rules)).collect::<Result<Vec<_>>>()?;
     let foreign = ds.root().join(tables::SIM).join("shots.parquet");
     if foreign.exists() {
         report.warnings.push(format!(
@@ -276,16 +255,9 @@ pub fn ingest_and_collocate(opts: &RunOptions, progress: &dyn Progress) -> Resul
     ingest_and_collocate_granules(opts, progress).map(|(_, report, _)| report)
 }
 
-fn ingest_and_collocate_granules(
-    opts: &RunOptions,
-    progress: &dyn Progress,
-) -> Result<(Dataset, RunReport, Vec<GranuleFile>)> {
+fn ingest_and_collocate_granules(opts: &RunOptions, progress: &dyn Progress) -> Result<(Dataset, RunReport, Vec<GranuleFile>)> {
     let ds = Dataset::create(&opts.out)?;
-    let mut report = RunReport {
-        dataset: opts.out.clone(),
-        rules: opts.rules,
-        ..Default::default()
-    };
+    let mut report = RunReport { dataset: opts.out.clone(), rules: opts.rules, ..Default::default() };
     ingest_als(&ds, opts, progress, &mut report)?;
     ingest_gedi(&ds, opts, progress, &mut report)?;
     if let Some(landcover) = &opts.landcover {
@@ -302,83 +274,46 @@ fn ingest_and_collocate_granules(
     Ok((ds, report, granules))
 }
 
-fn ingest_als(
-    ds: &Dataset,
-    opts: &RunOptions,
-    progress: &dyn Progress,
-    report: &mut RunReport,
-) -> Result<()> {
+fn ingest_als(ds: &Dataset, opts: &RunOptions, progress: &dyn Progress, report: &mut RunReport) -> Result<()> {
     if opts.als.is_empty() {
         if !ds.has_table(tables::ALS) {
-            return Err(Error::Usage(format!(
-                "--als: {} has no ALS table yet; give the LAS/LAZ tiles",
-                opts.out.display()
-            )));
+            return Err(Error::Usage(format!("--als: {} has no ALS table yet; give the LAS/LAZ tiles", opts.out.display())));
         }
         return Ok(());
     }
     let files = als::expand_inputs(&opts.als)?;
     if files.is_empty() {
-        return Err(Error::Usage(
-            "--als: no LAS/LAZ file found in the inputs".into(),
-        ));
+        return Err(Error::Usage("--als: no LAS/LAZ file found in the inputs".into()));
     }
     let mut total = 0;
     for f in &files {
-        total += crate::ingest::las::TileReader::open(f)?
-            .header()
-            .number_of_points;
+        total += crate::ingest::las::TileReader::open(f)?.header().number_of_points;
     }
     progress.start(Step::IngestAls, total);
-    let outcomes = als::ingest_tiles(
-        ds,
-        &files,
-        &AlsOptions {
-            keep_all_classes: false,
-            epsg: opts.epsg,
-        },
-        &|n| progress.advance(n),
-    );
+    let outcomes = als::ingest_tiles(ds, &files, &AlsOptions { keep_all_classes: false, epsg: opts.epsg }, &|n| progress.advance(n));
     progress.finish();
     report.tiles = outcomes?;
     Ok(())
 }
 
-fn ingest_gedi(
-    ds: &Dataset,
-    opts: &RunOptions,
-    progress: &dyn Progress,
-    report: &mut RunReport,
-) -> Result<()> {
+fn ingest_gedi(ds: &Dataset, opts: &RunOptions, progress: &dyn Progress, report: &mut RunReport) -> Result<()> {
     if opts.l1b.is_empty() && opts.l2a.is_empty() {
         if !ds.has_table(tables::SHOTS) {
-            return Err(Error::Usage(format!(
-                "--l1b/--l2a: {} has no shots table yet; give the GEDI granules",
-                opts.out.display()
-            )));
+            return Err(Error::Usage(format!("--l1b/--l2a: {} has no shots table yet; give the GEDI granules", opts.out.display())));
         }
         return Ok(());
     }
     let l1b = gedi::expand_granule_inputs(&opts.l1b, "GEDI01_B")?;
     let l2a = gedi::expand_granule_inputs(&opts.l2a, "GEDI02_A")?;
     if l1b.is_empty() && l2a.is_empty() {
-        return Err(Error::Usage(
-            "--l1b/--l2a: no GEDI01_B or GEDI02_A .h5 file found in the inputs".into(),
-        ));
+        return Err(Error::Usage("--l1b/--l2a: no GEDI01_B or GEDI02_A .h5 file found in the inputs".into()));
     }
     let epsg = match opts.epsg {
         Some(e) => e,
         None => als::dataset_epsg(ds)?.unwrap_or(2154),
     };
-    let gopts = GediOptions {
-        epsg,
-        geoid_offset: opts.geoid_offset,
-        strict_join: false,
-    };
-    progress.start(
-        Step::IngestGedi,
-        gedi::pair_granules(&l1b, &l2a)?.0.len() as u64,
-    );
+    let gopts = GediOptions { epsg, geoid_offset: opts.geoid_offset, strict_join: false };
+    progress.start(Step::IngestGedi, gedi::pair_granules(&l1b, &l2a)?.0.len() as u64);
     let r = gedi::ingest_into_dataset(ds, &l1b, &l2a, &gopts, &|| progress.advance(1));
     progress.finish();
     let (outcomes, ingest) = r?;
@@ -400,41 +335,21 @@ struct GranuleFile {
 
 fn list_granules(ds: &Dataset) -> Result<Vec<GranuleFile>> {
     let dir = ds.root().join(tables::SHOTS);
-    let files = dataset::table_files(&dir)
-        .map_err(|e| Error::file(&dir, format!("no shots table ({e}): give --l1b/--l2a")))?;
+    let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): give --l1b/--l2a")))?;
     let mut out = Vec::new();
     for path in files {
-        let key = path
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let record = ds
-            .root()
-            .join(tables::GRANULES)
-            .join(format!("{key}.parquet"));
+        let key = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let record = ds.root().join(tables::GRANULES).join(format!("{key}.parquet"));
         let inputs = match gedi::previous_hashes(&record)? {
-            Some((a, b)) => format!(
-                "l1b={} l2a={}",
-                a.unwrap_or_default(),
-                b.unwrap_or_default()
-            ),
+            Some((a, b)) => format!("l1b={} l2a={}", a.unwrap_or_default(), b.unwrap_or_default()),
             None => {
                 let m = std::fs::metadata(&path).map_err(|e| Error::file(&path, e))?;
-                let t = m
-                    .modified()
-                    .ok()
-                    .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
-                    .map_or(0, |d| d.as_nanos());
+                let t = m.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).map_or(0, |d| d.as_nanos());
                 format!("size={} mtime={t}", m.len())
             }
         };
         let name = first_string(&path, "granule")?.unwrap_or_else(|| key.clone());
-        out.push(GranuleFile {
-            key,
-            path,
-            name,
-            inputs,
-        });
+        out.push(GranuleFile { key, path, name, inputs });
     }
     Ok(out)
 }
@@ -443,18 +358,10 @@ fn list_granules(ds: &Dataset) -> Result<Vec<GranuleFile>> {
 fn first_string(path: &Path, column: &str) -> Result<Option<String>> {
     let builder = reader_builder(path)?;
     let mask = ProjectionMask::columns(builder.parquet_schema(), [column]);
-    let reader = builder
-        .with_projection(mask)
-        .with_batch_size(1)
-        .with_limit(1)
-        .build()
-        .map_err(|e| Error::table(path, e))?;
+    let reader = builder.with_projection(mask).with_batch_size(1).with_limit(1).build().map_err(|e| Error::table(path, e))?;
     for b in reader {
         let b = b.map_err(|e| Error::table(path, e))?;
-        if let Some(c) = b
-            .column_by_name(column)
-            .and_then(|c| c.as_string_opt::<i32>().cloned())
-        {
+        if let Some(c) = b.column_by_name(column).and_then(|c| c.as_string_opt::<i32>().cloned()) {
             if !c.is_empty() && c.is_valid(0) {
                 return Ok(Some(c.value(0).to_string()));
             }
@@ -473,51 +380,29 @@ fn file_metadata(path: &Path) -> Option<HashMap<String, String>> {
     let file = File::open(path).ok()?;
     let reader = parquet::file::serialized_reader::SerializedFileReader::new(file).ok()?;
     let kv = reader.metadata().file_metadata().key_value_metadata()?;
-    Some(
-        kv.iter()
-            .filter_map(|k| Some((k.key.clone(), k.value.clone()?)))
-            .collect(),
-    )
+    Some(kv.iter().filter_map(|k| Some((k.key.clone(), k.value.clone()?))).collect())
 }
 
 /// Collocate the granules never collocated (or re-ingested since), merging their segments into
 /// `offsets/offsets.parquet`.
-fn collocate(
-    ds: &Dataset,
-    opts: &RunOptions,
-    granules: &[GranuleFile],
-    progress: &dyn Progress,
-    report: &mut RunReport,
-) -> Result<()> {
+fn collocate(ds: &Dataset, opts: &RunOptions, granules: &[GranuleFile], progress: &dyn Progress, report: &mut RunReport) -> Result<()> {
     let dest = ds.table_file(tables::OFFSETS, "offsets")?;
     let mut existing: Vec<RecordBatch> = Vec::new();
     let mut meta = HashMap::new();
     if dest.exists() {
         meta = file_metadata(&dest).unwrap_or_default();
-        for b in reader_builder(&dest)?
-            .build()
-            .map_err(|e| Error::table(&dest, e))?
-        {
+        for b in reader_builder(&dest)?.build().map_err(|e| Error::table(&dest, e))? {
             let b = b.map_err(|e| Error::table(&dest, e))?;
-            existing.push(
-                RecordBatch::try_new(offsets_schema(), b.columns().to_vec())
-                    .map_err(|e| Error::table(&dest, e))?,
-            );
+            existing.push(RecordBatch::try_new(offsets_schema(), b.columns().to_vec()).map_err(|e| Error::table(&dest, e))?);
         }
     }
-    let granule_col = |b: &RecordBatch| {
-        b.column_by_name("granule")
-            .and_then(|c| c.as_string_opt::<i32>().cloned())
-    };
+    let granule_col = |b: &RecordBatch| b.column_by_name("granule").and_then(|c| c.as_string_opt::<i32>().cloned());
     let mut present = HashSet::new();
     for b in &existing {
-        let g = granule_col(b)
-            .ok_or_else(|| Error::field(&dest, "granule", "missing or not a string"))?;
+        let g = granule_col(b).ok_or_else(|| Error::field(&dest, "granule", "missing or not a string"))?;
         present.extend(g.iter().flatten().map(str::to_string));
     }
-    let recorded: Option<BTreeMap<String, String>> = meta
-        .get(META_GRANULES)
-        .and_then(|s| serde_json::from_str(s).ok());
+    let recorded: Option<BTreeMap<String, String>> = meta.get(META_GRANULES).and_then(|s| serde_json::from_str(s).ok());
     let needed: Vec<&GranuleFile> = granules
         .iter()
         .filter(|g| match &recorded {
@@ -529,11 +414,7 @@ fn collocate(
     if needed.is_empty() {
         return Ok(());
     }
-    let plan = Collocation::plan_files(
-        ds,
-        &opts.collocate,
-        needed.iter().map(|g| g.path.clone()).collect(),
-    )?;
+    let plan = Collocation::plan_files(ds, &opts.collocate, needed.iter().map(|g| g.path.clone()).collect())?;
     progress.start(Step::Collocate, plan.shots_to_process() as u64);
     let solved = plan.solve(&|| progress.advance(1));
     progress.finish();
@@ -545,61 +426,28 @@ fn collocate(
     let mut batches = Vec::new();
     let mut kept_levels = HashSet::new();
     for b in existing {
-        let g = granule_col(&b)
-            .ok_or_else(|| Error::field(&dest, "granule", "missing or not a string"))?;
-        let keep: BooleanArray = g
-            .iter()
-            .map(|v| Some(v.is_some_and(|v| current.contains(v) && !replaced.contains(v))))
-            .collect();
-        let b =
-            arrow::compute::filter_record_batch(&b, &keep).map_err(|e| Error::table(&dest, e))?;
-        if let Some(l) = b
-            .column_by_name("level")
-            .and_then(|c| c.as_string_opt::<i32>().cloned())
-        {
+        let g = granule_col(&b).ok_or_else(|| Error::field(&dest, "granule", "missing or not a string"))?;
+        let keep: BooleanArray = g.iter().map(|v| Some(v.is_some_and(|v| current.contains(v) && !replaced.contains(v)))).collect();
+        let b = arrow::compute::filter_record_batch(&b, &keep).map_err(|e| Error::table(&dest, e))?;
+        if let Some(l) = b.column_by_name("level").and_then(|c| c.as_string_opt::<i32>().cloned()) {
             kept_levels.extend(l.iter().flatten().map(str::to_string));
         }
         batches.push(b);
     }
     batches.push(offsets_batch(&rows)?);
-    let mut map = recorded.unwrap_or_else(|| {
-        granules
-            .iter()
-            .filter(|g| present.contains(&g.name))
-            .map(|g| (g.key.clone(), g.inputs.clone()))
-            .collect()
-    });
+    let mut map = recorded.unwrap_or_else(|| granules.iter().filter(|g| present.contains(&g.name)).map(|g| (g.key.clone(), g.inputs.clone())).collect());
     for g in &needed {
         map.insert(g.key.clone(), g.inputs.clone());
     }
     let level = opts.collocate.level.name();
     kept_levels.insert(level.to_string());
     let mut out_meta = HashMap::new();
-    out_meta.insert(
-        "gedisim:collocate_level".to_string(),
-        if kept_levels.len() > 1 {
-            "mixed".to_string()
-        } else {
-            level.to_string()
-        },
-    );
-    out_meta.insert(
-        "gedisim:max_shift_m".to_string(),
-        opts.collocate.max_shift.to_string(),
-    );
-    out_meta.insert(
-        "gedisim:step_m".to_string(),
-        opts.collocate.step.to_string(),
-    );
-    out_meta.insert(
-        META_GRANULES.to_string(),
-        serde_json::to_string(&map).map_err(|e| Error::table(&dest, e))?,
-    );
+    out_meta.insert("gedisim:collocate_level".to_string(), if kept_levels.len() > 1 { "mixed".to_string() } else { level.to_string() });
+    out_meta.insert("gedisim:max_shift_m".to_string(), opts.collocate.max_shift.to_string());
+    out_meta.insert("gedisim:step_m".to_string(), opts.collocate.step.to_string());
+    out_meta.insert(META_GRANULES.to_string(), serde_json::to_string(&map).map_err(|e| Error::table(&dest, e))?);
     dataset::write_parquet(&dest, offsets_schema(), &batches, &out_meta)?;
-    report.collocation = Some(CollocateReport {
-        table: dest,
-        ..collocation
-    });
+    report.collocation = Some(CollocateReport { table: dest, ..collocation });
     report.collocated = needed.iter().map(|g| g.key.clone()).collect();
     Ok(())
 }
@@ -627,11 +475,7 @@ impl StudyInputs {
         Ok(StudyInputs {
             als: AlsTable::open(ds)?,
             cover_radius: 2.0 * cfg.fsigma as f64,
-            read_radius: crate::sim::footprint::gauss_sep(
-                cfg.fsigma,
-                crate::sim::footprint::I_THRESH,
-            ) as f64
-                + 1.0,
+            read_radius: crate::sim::footprint::gauss_sep(cfg.fsigma, crate::sim::footprint::I_THRESH) as f64 + 1.0,
             cfg,
             offsets: read_offsets(ds)?,
             r_after: read_r_after(ds)?,
@@ -647,10 +491,7 @@ fn read_tiles(ds: &Dataset) -> Result<Vec<(TileWindow, String)>> {
     let dir = ds.root().join(tables::TILES);
     let mut out = Vec::new();
     for path in dataset::table_files(&dir).map_err(|e| Error::file(&dir, e))? {
-        for b in reader_builder(&path)?
-            .build()
-            .map_err(|e| Error::table(&path, e))?
-        {
+        for b in reader_builder(&path)?.build().map_err(|e| Error::table(&path, e))? {
             let b = b.map_err(|e| Error::table(&path, e))?;
             let c = Columns { b: &b, path: &path };
             for i in 0..b.num_rows() {
@@ -678,18 +519,12 @@ fn read_strata(ds: &Dataset) -> Result<HashMap<u64, String>> {
     }
     for path in dataset::table_files(&dir).map_err(|e| Error::file(&dir, e))? {
         let builder = reader_builder(&path)?;
-        let mask =
-            ProjectionMask::columns(builder.parquet_schema(), ["shot_number", "forest_type"]);
-        for b in builder
-            .with_projection(mask)
-            .build()
-            .map_err(|e| Error::table(&path, e))?
-        {
+        let mask = ProjectionMask::columns(builder.parquet_schema(), ["shot_number", "forest_type"]);
+        for b in builder.with_projection(mask).build().map_err(|e| Error::table(&path, e))? {
             let b = b.map_err(|e| Error::table(&path, e))?;
             let c = Columns { b: &b, path: &path };
             for i in 0..b.num_rows() {
-                if let (Some(s), Some(f)) = (c.u64("shot_number", i)?, c.string("forest_type", i)?)
-                {
+                if let (Some(s), Some(f)) = (c.u64("shot_number", i)?, c.string("forest_type", i)?) {
                     out.insert(s, f);
                 }
             }
@@ -707,9 +542,7 @@ struct Columns<'a> {
 
 impl Columns<'_> {
     fn col(&self, name: &str) -> Result<&ArrayRef> {
-        self.b
-            .column_by_name(name)
-            .ok_or_else(|| Error::field(self.path, name, "column missing"))
+        self.b.column_by_name(name).ok_or_else(|| Error::field(self.path, name, "column missing"))
     }
 
     fn wrong(&self, name: &str, ty: &str) -> Error {
@@ -717,57 +550,37 @@ impl Columns<'_> {
     }
 
     fn f64(&self, name: &str, i: usize) -> Result<Option<f64>> {
-        let c = self
-            .col(name)?
-            .as_primitive_opt::<Float64Type>()
-            .ok_or_else(|| self.wrong(name, "float64"))?;
+        let c = self.col(name)?.as_primitive_opt::<Float64Type>().ok_or_else(|| self.wrong(name, "float64"))?;
         Ok(c.is_valid(i).then(|| c.value(i)))
     }
 
     fn u8(&self, name: &str, i: usize) -> Result<Option<u8>> {
-        let c = self
-            .col(name)?
-            .as_primitive_opt::<UInt8Type>()
-            .ok_or_else(|| self.wrong(name, "uint8"))?;
+        let c = self.col(name)?.as_primitive_opt::<UInt8Type>().ok_or_else(|| self.wrong(name, "uint8"))?;
         Ok(c.is_valid(i).then(|| c.value(i)))
     }
 
     fn u64(&self, name: &str, i: usize) -> Result<Option<u64>> {
-        let c = self
-            .col(name)?
-            .as_primitive_opt::<UInt64Type>()
-            .ok_or_else(|| self.wrong(name, "uint64"))?;
+        let c = self.col(name)?.as_primitive_opt::<UInt64Type>().ok_or_else(|| self.wrong(name, "uint64"))?;
         Ok(c.is_valid(i).then(|| c.value(i)))
     }
 
     fn timestamp(&self, name: &str, i: usize) -> Result<Option<i64>> {
-        let c = self
-            .col(name)?
-            .as_primitive_opt::<TimestampMicrosecondType>()
-            .ok_or_else(|| self.wrong(name, "timestamp[µs]"))?;
+        let c = self.col(name)?.as_primitive_opt::<TimestampMicrosecondType>().ok_or_else(|| self.wrong(name, "timestamp[µs]"))?;
         Ok(c.is_valid(i).then(|| c.value(i)))
     }
 
     fn string(&self, name: &str, i: usize) -> Result<Option<String>> {
-        let c = self
-            .col(name)?
-            .as_string_opt::<i32>()
-            .ok_or_else(|| self.wrong(name, "a string"))?;
+        let c = self.col(name)?.as_string_opt::<i32>().ok_or_else(|| self.wrong(name, "a string"))?;
         Ok(c.is_valid(i).then(|| c.value(i).to_string()))
     }
 
     fn f32_list(&self, name: &str, i: usize) -> Result<Option<Vec<f32>>> {
-        let c = self
-            .col(name)?
-            .as_list_opt::<i32>()
-            .ok_or_else(|| self.wrong(name, "a list"))?;
+        let c = self.col(name)?.as_list_opt::<i32>().ok_or_else(|| self.wrong(name, "a list"))?;
         if c.is_null(i) {
             return Ok(None);
         }
         let v = c.value(i);
-        let v = v
-            .as_primitive_opt::<Float32Type>()
-            .ok_or_else(|| self.wrong(name, "a list of float32"))?;
+        let v = v.as_primitive_opt::<Float32Type>().ok_or_else(|| self.wrong(name, "a list of float32"))?;
         Ok(Some(v.iter().map(|x| x.unwrap_or(f32::NAN)).collect()))
     }
 }
@@ -795,47 +608,23 @@ struct GranulePlan {
 }
 
 /// Pass A of a granule: positions, coverage, and whether its simulation and results are current.
-fn plan_granule(
-    ds: &Dataset,
-    file: GranuleFile,
-    inputs: &StudyInputs,
-    rules: &StudyRules,
-) -> Result<GranulePlan> {
+fn plan_granule(ds: &Dataset, file: GranuleFile, inputs: &StudyInputs, rules: &StudyRules) -> Result<GranulePlan> {
     let builder = reader_builder(&file.path)?;
     let mask = ProjectionMask::columns(builder.parquet_schema(), ["shot_number", "x", "y"]);
     let mut covered = Vec::new();
     let mut n = 0;
-    for b in builder
-        .with_projection(mask)
-        .build()
-        .map_err(|e| Error::table(&file.path, e))?
-    {
+    for b in builder.with_projection(mask).build().map_err(|e| Error::table(&file.path, e))? {
         let b = b.map_err(|e| Error::table(&file.path, e))?;
-        let c = Columns {
-            b: &b,
-            path: &file.path,
-        };
+        let c = Columns { b: &b, path: &file.path };
         for i in 0..b.num_rows() {
             let row = n + i;
-            let Some(sn) = c.u64("shot_number", i)? else {
-                continue;
-            };
-            let (Some(x), Some(y)) = (c.f64("x", i)?, c.f64("y", i)?) else {
-                continue;
-            };
+            let Some(sn) = c.u64("shot_number", i)? else { continue };
+            let (Some(x), Some(y)) = (c.f64("x", i)?, c.f64("y", i)?) else { continue };
             let offset = inputs.offsets.get(&sn).cloned();
             let (dx, dy) = offset.as_ref().map_or((0.0, 0.0), |o| (o.dx, o.dy));
             let (x, y) = (x + dx, y + dy);
             if inputs.als.covers(x, y, inputs.cover_radius) {
-                covered.push(CoveredShot {
-                    row,
-                    footprint: Footprint {
-                        id: sn.to_string(),
-                        x,
-                        y,
-                    },
-                    offset,
-                });
+                covered.push(CoveredShot { row, footprint: Footprint { id: sn.to_string(), x, y }, offset });
             }
         }
         n += b.num_rows();
@@ -853,28 +642,14 @@ fn plan_granule(
         .tiles
         .iter()
         .zip(&inputs.tile_hashes)
-        .filter(|(t, _)| {
-            covered.iter().any(|c| {
-                c.footprint.x + r >= t.xmin
-                    && c.footprint.x - r <= t.xmax
-                    && c.footprint.y + r >= t.ymin
-                    && c.footprint.y - r <= t.ymax
-            })
-        })
+        .filter(|(t, _)| covered.iter().any(|c| c.footprint.x + r >= t.xmin && c.footprint.x - r <= t.xmax && c.footprint.y + r >= t.ymin && c.footprint.y - r <= t.ymax))
         .map(|(_, hash)| hash.as_str())
         .collect();
     tiles.sort_unstable();
     line(format!("tiles {}", tiles.join(",")));
     for c in &covered {
-        let o = c.offset.as_ref().map_or("-".to_string(), |o| {
-            format!("{} {:?}", o.segment_id, o.dz.to_bits())
-        });
-        line(format!(
-            "{} {} {} {o}",
-            c.footprint.id,
-            c.footprint.x.to_bits(),
-            c.footprint.y.to_bits()
-        ));
+        let o = c.offset.as_ref().map_or("-".to_string(), |o| format!("{} {:?}", o.segment_id, o.dz.to_bits()));
+        line(format!("{} {} {} {o}", c.footprint.id, c.footprint.x.to_bits(), c.footprint.y.to_bits()));
     }
     let sim_input = hex::encode(h.finalize());
     // What the results add: strata, collocation quality, the filters' bounds.
@@ -883,11 +658,7 @@ fn plan_granule(
     for c in &covered {
         let sn: u64 = c.footprint.id.parse().unwrap_or_default();
         let forest = inputs.strata.get(&sn).map_or("-", String::as_str);
-        let r = c
-            .offset
-            .as_ref()
-            .and_then(|o| inputs.r_after.get(&o.segment_id))
-            .map_or(0, |r| r.to_bits());
+        let r = c.offset.as_ref().and_then(|o| inputs.r_after.get(&o.segment_id)).map_or(0, |r| r.to_bits());
         h.update(format!("{sn} {forest} {r}\n").as_bytes());
     }
     let results_input = hex::encode(h.finalize());
@@ -895,13 +666,10 @@ fn plan_granule(
     let sim_path = ds.table_file(tables::SIM, &file.key)?;
     let results_path = ds.table_file(tables::RESULTS, &file.key)?;
     let sim_meta = file_metadata(&sim_path);
-    let needs_sim = !covered.is_empty()
-        && sim_meta.as_ref().and_then(|m| m.get(META_INPUT)) != Some(&sim_input);
+    let needs_sim = !covered.is_empty() && sim_meta.as_ref().and_then(|m| m.get(META_INPUT)) != Some(&sim_input);
     if covered.is_empty() && sim_meta.is_some_and(|m| m.contains_key(META_INPUT)) {
         // This run's own simulation of shots no longer covered: stale.
-        std::fs::remove_file(&sim_path).map_err(|e| {
-            Error::file(&sim_path, format!("cannot remove a stale simulation: {e}"))
-        })?;
+        std::fs::remove_file(&sim_path).map_err(|e| Error::file(&sim_path, format!("cannot remove a stale simulation: {e}")))?;
     }
     let results_meta = file_metadata(&results_path);
     let previous = results_meta
@@ -917,51 +685,22 @@ fn plan_granule(
         results_written: false,
         counts: previous.unwrap_or_default(),
     };
-    Ok(GranulePlan {
-        file,
-        covered,
-        sim_path,
-        results_path,
-        sim_input,
-        results_input,
-        needs_sim,
-        needs_results,
-        run,
-    })
+    Ok(GranulePlan { file, covered, sim_path, results_path, sim_input, results_input, needs_sim, needs_results, run })
 }
 
 /// Simulate the covered shots of every granule whose simulation is not current.
-fn simulate(
-    ds: &Dataset,
-    plans: &mut [GranulePlan],
-    inputs: &StudyInputs,
-    progress: &dyn Progress,
-) -> Result<()> {
-    let total: usize = plans
-        .iter()
-        .filter(|p| p.needs_sim)
-        .map(|p| p.covered.len())
-        .sum();
+fn simulate(ds: &Dataset, plans: &mut [GranulePlan], inputs: &StudyInputs, progress: &dyn Progress) -> Result<()> {
+    let total: usize = plans.iter().filter(|p| p.needs_sim).map(|p| p.covered.len()).sum();
     if total == 0 {
         return Ok(());
     }
     progress.start(Step::Simulate, total as u64);
     for p in plans.iter_mut().filter(|p| p.needs_sim) {
-        let footprints = p
-            .covered
-            .iter()
-            .map(|c| (c.footprint.clone(), c.offset.clone()))
-            .collect();
+        let footprints = p.covered.iter().map(|c| (c.footprint.clone(), c.offset.clone())).collect();
         let extra = HashMap::from([(META_INPUT.to_string(), p.sim_input.clone())]);
-        let r = crate::simulate::simulate_on_dataset_with(
-            ds,
-            footprints,
-            &inputs.cfg,
-            Profile::Default,
-            &p.sim_path,
-            &extra,
-            &|k| progress.advance(k as u64),
-        );
+        let r = crate::simulate::simulate_on_dataset_with(ds, footprints, &inputs.cfg, Profile::Default, &p.sim_path, &extra, &|k| {
+            progress.advance(k as u64)
+        });
         if r.is_err() {
             progress.finish();
         }
@@ -972,44 +711,29 @@ fn simulate(
 }
 
 /// Apply the filters and write `results/<key>.parquet` for every granule whose results are not current.
-fn results(
-    plans: &mut [GranulePlan],
-    inputs: &StudyInputs,
-    rules: &StudyRules,
-    progress: &dyn Progress,
-) -> Result<()> {
+fn results(plans: &mut [GranulePlan], inputs: &StudyInputs, rules: &StudyRules, progress: &dyn Progress) -> Result<()> {
     let todo = plans.iter().filter(|p| p.needs_results).count();
     if todo == 0 {
         return Ok(());
     }
     progress.start(Step::Results, todo as u64);
-    let r = plans
-        .iter_mut()
-        .filter(|p| p.needs_results)
-        .try_for_each(|p| {
-            granule_results(p, inputs, rules)?;
-            progress.advance(1);
-            Ok(())
-        });
+    let r = plans.iter_mut().filter(|p| p.needs_results).try_for_each(|p| {
+        granule_results(p, inputs, rules)?;
+        progress.advance(1);
+        Ok(())
+    });
     progress.finish();
     r
 }
 
 fn granule_results(p: &mut GranulePlan, inputs: &StudyInputs, rules: &StudyRules) -> Result<()> {
-    let sims = if p.covered.is_empty() {
-        HashMap::new()
-    } else {
-        read_sim_facts(&p.sim_path)?
-    };
+    let sims = if p.covered.is_empty() { HashMap::new() } else { read_sim_facts(&p.sim_path)? };
     let shots = read_shot_facts(&p.file.path, p.covered.iter().map(|c| c.row))?;
     let mut counts = FilterCounts::default();
     counts.remove_shots((p.run.shots - p.covered.len()) as u64, Filter::AlsCoverage);
     let mut rows = Vec::new();
     for (c, shot) in p.covered.iter().zip(&shots) {
-        let segment = c.offset.as_ref().map(|o| SegmentFacts {
-            dz: o.dz,
-            r_after: inputs.r_after.get(&o.segment_id).copied(),
-        });
+        let segment = c.offset.as_ref().map(|o| SegmentFacts { dz: o.dz, r_after: inputs.r_after.get(&o.segment_id).copied() });
         let ctx = ShotContext {
             sim: sims.get(&shot.shot_number),
             window: als_window(&inputs.tiles, c.footprint.x, c.footprint.y),
@@ -1054,28 +778,15 @@ fn read_shot_facts(path: &Path, rows: impl Iterator<Item = usize>) -> Result<Vec
     .map(String::from)
     .to_vec();
     for n in 1..=6 {
-        names.extend([
-            format!("quality_flag_a{n}"),
-            format!("sensitivity_a{n}"),
-            format!("elev_lowestmode_a{n}"),
-            format!("rh_a{n}"),
-        ]);
+        names.extend([format!("quality_flag_a{n}"), format!("sensitivity_a{n}"), format!("elev_lowestmode_a{n}"), format!("rh_a{n}")]);
     }
     let schema = builder.schema().clone();
     if let Some(missing) = names.iter().find(|n| schema.field_with_name(n).is_err()) {
-        return Err(Error::field(
-            path,
-            missing.as_str(),
-            "column missing from the shots table",
-        ));
+        return Err(Error::field(path, missing.as_str(), "column missing from the shots table"));
     }
     let mask = ProjectionMask::columns(builder.parquet_schema(), names.iter().map(String::as_str));
     let selection = crate::dataset::row_selection(&rows, total);
-    let reader = builder
-        .with_projection(mask)
-        .with_row_selection(selection)
-        .build()
-        .map_err(|e| Error::table(path, e))?;
+    let reader = builder.with_projection(mask).with_row_selection(selection).build().map_err(|e| Error::table(path, e))?;
     let mut out = Vec::with_capacity(rows.len());
     for b in reader {
         let b = b.map_err(|e| Error::table(path, e))?;
@@ -1089,19 +800,9 @@ fn read_shot_facts(path: &Path, rows: impl Iterator<Item = usize>) -> Result<Vec
                     rh: c.f32_list(&format!("rh{suffix}"), i)?,
                 })
             };
-            let algorithms = [
-                alg("")?,
-                alg("_a1")?,
-                alg("_a2")?,
-                alg("_a3")?,
-                alg("_a4")?,
-                alg("_a5")?,
-                alg("_a6")?,
-            ];
+            let algorithms = [alg("")?, alg("_a1")?, alg("_a2")?, alg("_a3")?, alg("_a4")?, alg("_a5")?, alg("_a6")?];
             out.push(ShotFacts {
-                shot_number: c
-                    .u64("shot_number", i)?
-                    .ok_or_else(|| Error::field(path, "shot_number", "null"))?,
+                shot_number: c.u64("shot_number", i)?.ok_or_else(|| Error::field(path, "shot_number", "null"))?,
                 granule: c.string("granule", i)?.unwrap_or_default(),
                 beam: c.string("beam", i)?.unwrap_or_default(),
                 beam_type: c.string("beam_type", i)?.unwrap_or_default(),
@@ -1115,10 +816,7 @@ fn read_shot_facts(path: &Path, rows: impl Iterator<Item = usize>) -> Result<Vec
         }
     }
     if out.len() != rows.len() {
-        return Err(Error::table(
-            path,
-            format!("read {} shots for {} rows", out.len(), rows.len()),
-        ));
+        return Err(Error::table(path, format!("read {} shots for {} rows", out.len(), rows.len())));
     }
     Ok(out)
 }
@@ -1128,36 +826,18 @@ fn read_sim_facts(path: &Path) -> Result<HashMap<u64, [SimFacts; 3]>> {
     let builder = reader_builder(path)?;
     let mask = ProjectionMask::columns(
         builder.parquet_schema(),
-        [
-            "footprint_id",
-            "weighting",
-            "status",
-            "als_ground",
-            "slope_deg",
-            "als_cover",
-            "rh",
-        ],
+        ["footprint_id", "weighting", "status", "als_ground", "slope_deg", "als_cover", "rh"],
     );
     let mut out: HashMap<u64, [SimFacts; 3]> = HashMap::new();
-    for b in builder
-        .with_projection(mask)
-        .build()
-        .map_err(|e| Error::table(path, e))?
-    {
+    for b in builder.with_projection(mask).build().map_err(|e| Error::table(path, e))? {
         let b = b.map_err(|e| Error::table(path, e))?;
         let c = Columns { b: &b, path };
         for i in 0..b.num_rows() {
             let id = c.string("footprint_id", i)?.unwrap_or_default();
-            let sn: u64 = id.parse().map_err(|_| {
-                Error::field(path, "footprint_id", format!("`{id}` is not a shot number"))
-            })?;
+            let sn: u64 = id.parse().map_err(|_| Error::field(path, "footprint_id", format!("`{id}` is not a shot number")))?;
             let w = c.string("weighting", i)?.unwrap_or_default();
             let Some(k) = WEIGHTINGS.iter().position(|x| *x == w) else {
-                return Err(Error::field(
-                    path,
-                    "weighting",
-                    format!("`{w}` is not count, frac or int"),
-                ));
+                return Err(Error::field(path, "weighting", format!("`{w}` is not count, frac or int")));
             };
             out.entry(sn).or_default()[k] = SimFacts {
                 ok: c.string("status", i)?.as_deref() == Some("ok"),

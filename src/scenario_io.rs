@@ -9,9 +9,7 @@ use chrono::{DateTime, Datelike, Duration, TimeZone, Timelike, Utc};
 use serde_json::{json, Value};
 
 use crate::error::{Error, Result};
-use crate::gedi::granule::{
-    v2_file_name, write_l1b_v2, write_l2a_v2, Beam, GranuleMeta, L1bShot, L2aShot, LandCover,
-};
+use crate::gedi::granule::{v2_file_name, write_l1b_v2, write_l2a_v2, Beam, GranuleMeta, L1bShot, L2aShot, LandCover};
 use crate::gedi::{beam_number, BeamType, BEAM_NAMES};
 use crate::geo::projection::Projector;
 use crate::ingest::las::TileReader;
@@ -80,8 +78,7 @@ struct Tile {
 
 /// Month rule of tests/data/als/PROVENANCE.md: May–October leaf-on, November–April leaf-off.
 fn is_leaf_off(date: Option<DateTime<Utc>>) -> bool {
-    date.map(|d| !(5..=10).contains(&d.month()))
-        .unwrap_or(false)
+    date.map(|d| !(5..=10).contains(&d.month())).unwrap_or(false)
 }
 
 fn read_tile(path: &Path, default_epsg: u32) -> Result<Tile> {
@@ -89,17 +86,9 @@ fn read_tile(path: &Path, default_epsg: u32) -> Result<Tile> {
     let h = reader.header().clone();
     let points = crate::simulate::drop_ingest_classes(&reader.read_all()?);
     if points.is_empty() {
-        return Err(Error::file(
-            path,
-            "no point left after dropping classes 7, 18, 64-67",
-        ));
+        return Err(Error::file(path, "no point left after dropping classes 7, 18, 64-67"));
     }
-    let mut gps: Vec<f64> = points
-        .gps_time
-        .iter()
-        .copied()
-        .filter(|t| t.is_finite())
-        .collect();
+    let mut gps: Vec<f64> = points.gps_time.iter().copied().filter(|t| t.is_finite()).collect();
     gps.sort_by(f64::total_cmp);
     let acquired = gps
         .get(gps.len() / 2)
@@ -107,36 +96,14 @@ fn read_tile(path: &Path, default_epsg: u32) -> Result<Tile> {
         .and_then(|us| Utc.timestamp_micros(us).single());
     let [xmin, ymin, _, xmax, ymax, _] = h.bounds;
     if !(xmax > xmin && ymax > ymin) {
-        return Err(Error::field(
-            path,
-            "header bounds",
-            format!("empty extent {xmin}..{xmax} x {ymin}..{ymax}"),
-        ));
+        return Err(Error::field(path, "header bounds", format!("empty extent {xmin}..{xmax} x {ymin}..{ymax}")));
     }
-    Ok(Tile {
-        path: path.to_path_buf(),
-        points,
-        extent: Extent {
-            xmin,
-            ymin,
-            xmax,
-            ymax,
-        },
-        epsg: h.epsg.unwrap_or(default_epsg),
-        acquired,
-    })
+    Ok(Tile { path: path.to_path_buf(), points, extent: Extent { xmin, ymin, xmax, ymax }, epsg: h.epsg.unwrap_or(default_epsg), acquired })
 }
 
 /// `YYYYDDDHHMMSS` of a time.
 fn gedi_start(t: DateTime<Utc>) -> String {
-    format!(
-        "{:04}{:03}{:02}{:02}{:02}",
-        t.year(),
-        t.ordinal(),
-        t.hour(),
-        t.minute(),
-        t.second()
-    )
+    format!("{:04}{:03}{:02}{:02}{:02}", t.year(), t.ordinal(), t.hour(), t.minute(), t.second())
 }
 
 fn delta_time(t: DateTime<Utc>) -> f64 {
@@ -149,43 +116,23 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
         return Err(Error::Usage("--als: no LAS/LAZ file".into()));
     }
     if opts.passes_per_tile == 0 || opts.passes_per_tile > 64 {
-        return Err(Error::Usage(format!(
-            "--passes: {} is not in 1..64",
-            opts.passes_per_tile
-        )));
+        return Err(Error::Usage(format!("--passes: {} is not in 1..64", opts.passes_per_tile)));
     }
     if !opts.geoid_m.is_finite() || opts.geoid_m.abs() > 200.0 {
-        return Err(Error::Usage(format!(
-            "--geoid: {} m is not a geoid height (|N| ≤ 200 m)",
-            opts.geoid_m
-        )));
+        return Err(Error::Usage(format!("--geoid: {} m is not a geoid height (|N| ≤ 200 m)", opts.geoid_m)));
     }
-    if !(opts.track_offset_sigma_m.is_finite() && (0.0..=50.0).contains(&opts.track_offset_sigma_m))
-    {
-        return Err(Error::Usage(format!(
-            "--offset-sigma: {} m is not in 0..50",
-            opts.track_offset_sigma_m
-        )));
+    if !(opts.track_offset_sigma_m.is_finite() && (0.0..=50.0).contains(&opts.track_offset_sigma_m)) {
+        return Err(Error::Usage(format!("--offset-sigma: {} m is not in 0..50", opts.track_offset_sigma_m)));
     }
     let gedi_dir = opts.out.join("gedi");
     let als_dir = opts.out.join("als");
     let truth_path = opts.out.join("truth.json");
-    let existing = truth_path.exists()
-        || std::fs::read_dir(&gedi_dir)
-            .map(|mut d| d.next().is_some())
-            .unwrap_or(false);
+    let existing = truth_path.exists() || std::fs::read_dir(&gedi_dir).map(|mut d| d.next().is_some()).unwrap_or(false);
     if existing && !opts.force {
-        return Err(Error::file(
-            &opts.out,
-            "already holds a world (truth.json or gedi/); use --force to replace it",
-        ));
+        return Err(Error::file(&opts.out, "already holds a world (truth.json or gedi/); use --force to replace it"));
     }
 
-    let tiles = opts
-        .tiles
-        .iter()
-        .map(|p| read_tile(p, opts.default_epsg))
-        .collect::<Result<Vec<_>>>()?;
+    let tiles = opts.tiles.iter().map(|p| read_tile(p, opts.default_epsg)).collect::<Result<Vec<_>>>()?;
     let physics = opts.effects.physics(&Physics::nominal());
     // Keep 2σ_f of ALS around every true and reported footprint centre, plus a metre.
     let margin = 2.0 * f64::from(physics.sim.fsigma).max(NOMINAL_FSIGMA_M) + 1.0;
@@ -209,26 +156,14 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
         l1b: String,
         l2a: String,
     }
-    let fallback = Utc
-        .with_ymd_and_hms(2022, 7, 1, 10, 0, 0)
-        .single()
-        .expect("valid date");
+    let fallback = Utc.with_ymd_and_hms(2022, 7, 1, 10, 0, 0).single().expect("valid date");
     let mut granules = Vec::new();
     for (t, tile) in tiles.iter().enumerate() {
         for pass in 0..opts.passes_per_tile {
             let mut g = Stream::new(opts.seed, &["granule", &t.to_string(), &pass.to_string()]);
-            let day = tile
-                .acquired
-                .unwrap_or(fallback)
-                .date_naive()
-                .and_hms_opt(0, 0, 0)
-                .expect("midnight")
-                .and_utc();
-            let start = day
-                + Duration::days(7 * pass as i64)
-                + Duration::seconds(3600 * 6 + (g.uniform() * 43_200.0) as i64);
-            let orbit = (1964.0 + ((delta_time(start) - ORBIT_1964_DELTA_TIME) / ORBIT_S).floor())
-                .max(1.0) as u32;
+            let day = tile.acquired.unwrap_or(fallback).date_naive().and_hms_opt(0, 0, 0).expect("midnight").and_utc();
+            let start = day + Duration::days(7 * pass as i64) + Duration::seconds(3600 * 6 + (g.uniform() * 43_200.0) as i64);
+            let orbit = (1964.0 + ((delta_time(start) - ORBIT_1964_DELTA_TIME) / ORBIT_S).floor()).max(1.0) as u32;
             let sub_orbit = 1 + (g.next_u64() % 4) as u8;
             let track = 1 + (g.next_u64() % 4470) as u32;
             let s = gedi_start(start);
@@ -248,40 +183,24 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
     // Simulate every tile's shots at their true positions with the true physics.
     let mut sims = vec![None; layout.shots.len()];
     for (t, tile) in tiles.iter().enumerate() {
-        let idx: Vec<usize> = (0..layout.shots.len())
-            .filter(|&i| layout.tracks[layout.shots[i].track].tile == t)
-            .collect();
+        let idx: Vec<usize> = (0..layout.shots.len()).filter(|&i| layout.tracks[layout.shots[i].track].tile == t).collect();
         let fps: Vec<Footprint> = idx
             .iter()
             .map(|&i| {
                 let s = &layout.shots[i];
-                Footprint {
-                    id: i.to_string(),
-                    x: s.x + s.dx,
-                    y: s.y + s.dy,
-                }
+                Footprint { id: i.to_string(), x: s.x + s.dx, y: s.y + s.dy }
             })
             .collect();
-        let out = sim::simulate(&tile.points, &fps, &physics.sim)
-            .map_err(|e| Error::file(&tile.path, e))?;
+        let out = sim::simulate(&tile.points, &fps, &physics.sim).map_err(|e| Error::file(&tile.path, e))?;
         for (i, r) in idx.into_iter().zip(out) {
             sims[i] = Some(r);
         }
     }
 
     // Make every shot.
-    let projectors: Vec<Projector> = tiles
-        .iter()
-        .map(|t| Projector::new(t.epsg))
-        .collect::<Result<_>>()?;
-    let mut l1b: Vec<Vec<Vec<L1bShot>>> = granules
-        .iter()
-        .map(|_| vec![Vec::new(); BEAM_NAMES.len()])
-        .collect();
-    let mut l2a: Vec<Vec<Vec<L2aShot>>> = granules
-        .iter()
-        .map(|_| vec![Vec::new(); BEAM_NAMES.len()])
-        .collect();
+    let projectors: Vec<Projector> = tiles.iter().map(|t| Projector::new(t.epsg)).collect::<Result<_>>()?;
+    let mut l1b: Vec<Vec<Vec<L1bShot>>> = granules.iter().map(|_| vec![Vec::new(); BEAM_NAMES.len()]).collect();
+    let mut l2a: Vec<Vec<Vec<L2aShot>>> = granules.iter().map(|_| vec![Vec::new(); BEAM_NAMES.len()]).collect();
     let mut shots_json = Vec::new();
     let mut dropped_json = Vec::new();
     let mut track_counts = vec![0usize; layout.tracks.len()];
@@ -291,10 +210,7 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
         let track = &layout.tracks[ps.track];
         let tile = &tiles[track.tile];
         let gr = &granules[track.granule];
-        let beam_idx = BEAM_NAMES
-            .iter()
-            .position(|b| *b == track.beam)
-            .unwrap_or(0);
+        let beam_idx = BEAM_NAMES.iter().position(|b| *b == track.beam).unwrap_or(0);
         let beam_type = BeamType::from_name(track.beam).unwrap_or(BeamType::Coverage);
         let rec = real::record(beam_type);
         let mut r = Stream::new(opts.seed, &["shot", &track.id, &ps.along_index.to_string()]);
@@ -334,8 +250,7 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
             },
         };
         let outcome = match &sims[i] {
-            Some(Ok(fp)) => make_shot(fp, &physics, &opts.effects, &spec, &mut processor)
-                .map_err(|e| e.to_string()),
+            Some(Ok(fp)) => make_shot(fp, &physics, &opts.effects, &spec, &mut processor).map_err(|e| e.to_string()),
             Some(Err(reason)) => Err(format!("simulation skipped: {reason:?}")),
             None => Err("not simulated".to_string()),
         };
@@ -358,8 +273,7 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
                 l1b[track.granule][beam_idx].push(a);
                 l2a[track.granule][beam_idx].push(b);
             }
-            Err(reason) => dropped_json
-                .push(json!({ "track": track.id, "x": ps.x, "y": ps.y, "reason": reason })),
+            Err(reason) => dropped_json.push(json!({ "track": track.id, "x": ps.x, "y": ps.y, "reason": reason })),
         }
     }
 
@@ -373,37 +287,19 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
     }
 
     // Write: granules and tiles under temporary names, then truth.json.
-    let tmp = opts
-        .out
-        .join(format!(".scenario-tmp-{}", std::process::id()));
-    let mk = |d: &Path| {
-        std::fs::create_dir_all(d).map_err(|e| Error::file(d, format!("cannot create folder: {e}")))
-    };
+    let tmp = opts.out.join(format!(".scenario-tmp-{}", std::process::id()));
+    let mk = |d: &Path| std::fs::create_dir_all(d).map_err(|e| Error::file(d, format!("cannot create folder: {e}")));
     if opts.force {
         for d in [&gedi_dir, &als_dir] {
             if d.exists() {
-                std::fs::remove_dir_all(d).map_err(|e| {
-                    Error::file(d, format!("cannot remove the previous world: {e}"))
-                })?;
+                std::fs::remove_dir_all(d).map_err(|e| Error::file(d, format!("cannot remove the previous world: {e}")))?;
             }
         }
     }
     mk(&tmp)?;
     mk(&gedi_dir)?;
     mk(&als_dir)?;
-    let result = write_outputs(
-        opts,
-        &tmp,
-        &gedi_dir,
-        &als_dir,
-        &tiles,
-        &granules
-            .iter()
-            .map(|g| (g.l1b.clone(), g.l2a.clone()))
-            .collect::<Vec<_>>(),
-        &l1b,
-        &l2a,
-    );
+    let result = write_outputs(opts, &tmp, &gedi_dir, &als_dir, &tiles, &granules.iter().map(|g| (g.l1b.clone(), g.l2a.clone())).collect::<Vec<_>>(), &l1b, &l2a);
     let _ = std::fs::remove_dir_all(&tmp);
     result?;
 
@@ -444,15 +340,10 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
             let params: serde_json::Map<String, Value> = e
                 .params()
                 .into_iter()
-                .map(|(k, v)| {
-                    (
-                        k.to_string(),
-                        match v {
-                            crate::scenario::effects::ParamValue::Number(x) => json!(x),
-                            crate::scenario::effects::ParamValue::Text(s) => json!(s),
-                        },
-                    )
-                })
+                .map(|(k, v)| (k.to_string(), match v {
+                    crate::scenario::effects::ParamValue::Number(x) => json!(x),
+                    crate::scenario::effects::ParamValue::Text(s) => json!(s),
+                }))
                 .collect();
             json!({ "name": e.name(), "params": params })
         })
@@ -542,34 +433,23 @@ fn write_outputs(
         write_l2a_v2(&tmp.join(n2), &beams2, &meta)?;
         for n in [n1, n2] {
             let (from, to) = (tmp.join(n), gedi_dir.join(n));
-            std::fs::rename(&from, &to)
-                .map_err(|e| Error::file(&to, format!("cannot move into place: {e}")))?;
+            std::fs::rename(&from, &to).map_err(|e| Error::file(&to, format!("cannot move into place: {e}")))?;
         }
     }
     for t in tiles {
-        let name = t
-            .path
-            .file_name()
-            .ok_or_else(|| Error::file(&t.path, "not a file name"))?;
+        let name = t.path.file_name().ok_or_else(|| Error::file(&t.path, "not a file name"))?;
         let dest = als_dir.join(name);
         let staged = tmp.join(name);
-        std::fs::copy(&t.path, &staged).map_err(|e| {
-            Error::file(&t.path, format!("cannot copy to {}: {e}", staged.display()))
-        })?;
-        std::fs::rename(&staged, &dest)
-            .map_err(|e| Error::file(&dest, format!("cannot move into place: {e}")))?;
+        std::fs::copy(&t.path, &staged).map_err(|e| Error::file(&t.path, format!("cannot copy to {}: {e}", staged.display())))?;
+        std::fs::rename(&staged, &dest).map_err(|e| Error::file(&dest, format!("cannot move into place: {e}")))?;
     }
     Ok(())
 }
 
 /// Write `bytes` to `path` through a temporary file in the same folder.
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let tmp = path.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
     std::fs::write(&tmp, bytes).map_err(|e| Error::file(&tmp, format!("cannot write: {e}")))?;
-    std::fs::rename(&tmp, path)
-        .map_err(|e| Error::file(path, format!("cannot move into place: {e}")))
+    std::fs::rename(&tmp, path).map_err(|e| Error::file(path, format!("cannot move into place: {e}")))
 }

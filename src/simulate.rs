@@ -23,21 +23,13 @@ pub const BLOCK_M: f64 = 200.0;
 /// Keep only the points whose class the ingest keeps (so that direct mode with the `default`
 /// profile sees the same points as the dataset path).
 pub fn drop_ingest_classes(p: &AlsPoints) -> AlsPoints {
-    let keep: Vec<u32> = (0..p.len() as u32)
-        .filter(|&i| !DROPPED_CLASSES.contains(&p.classification[i as usize]))
-        .collect();
+    let keep: Vec<u32> = (0..p.len() as u32).filter(|&i| !DROPPED_CLASSES.contains(&p.classification[i as usize])).collect();
     p.permuted(&keep)
 }
 
 /// Direct mode: simulate `footprints` on `points` and write the `sim` rows to `out` (atomically).
 /// Returns the number of footprints simulated and skipped.
-pub fn simulate_direct(
-    points: &AlsPoints,
-    footprints: &[Footprint],
-    cfg: &SimConfig,
-    profile: Profile,
-    out: &Path,
-) -> Result<(usize, usize)> {
+pub fn simulate_direct(points: &AlsPoints, footprints: &[Footprint], cfg: &SimConfig, profile: Profile, out: &Path) -> Result<(usize, usize)> {
     let results = sim::simulate(points, footprints, cfg)?;
     let ok = results.iter().filter(|r| r.is_ok()).count();
     let batch = sim_batch(footprints, &results, &Weighting::ALL, &[])?;
@@ -51,51 +43,25 @@ pub fn simulate_direct(
 pub fn shot_footprints(ds: &Dataset) -> Result<Vec<(Footprint, Option<AppliedOffset>)>> {
     let offsets = read_offsets(ds)?;
     let dir = ds.root().join(tables::SHOTS);
-    let files = dataset::table_files(&dir).map_err(|e| {
-        Error::file(
-            &dir,
-            format!("no shots table ({e}): run `gedisim ingest gedi`"),
-        )
-    })?;
+    let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi`")))?;
     let mut out = Vec::new();
     for f in files {
         let file = std::fs::File::open(&f).map_err(|e| Error::file(&f, e))?;
-        let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-            .map_err(|e| Error::table(&f, e))?;
-        let mask = parquet::arrow::ProjectionMask::columns(
-            builder.parquet_schema(),
-            ["shot_number", "x", "y"],
-        );
-        let reader = builder
-            .with_projection(mask)
-            .build()
-            .map_err(|e| Error::table(&f, e))?;
+        let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| Error::table(&f, e))?;
+        let mask = parquet::arrow::ProjectionMask::columns(builder.parquet_schema(), ["shot_number", "x", "y"]);
+        let reader = builder.with_projection(mask).build().map_err(|e| Error::table(&f, e))?;
         for b in reader {
             let b = b.map_err(|e| Error::table(&f, e))?;
-            let get = |n: &str| {
-                b.column_by_name(n)
-                    .ok_or_else(|| Error::field(&f, n, "column missing from the shots table"))
-            };
+            let get = |n: &str| b.column_by_name(n).ok_or_else(|| Error::field(&f, n, "column missing from the shots table"));
             let (sn, x, y) = (get("shot_number")?, get("x")?, get("y")?);
-            let (sn, x, y) = (
-                sn.as_primitive::<UInt64Type>(),
-                x.as_primitive::<Float64Type>(),
-                y.as_primitive::<Float64Type>(),
-            );
+            let (sn, x, y) = (sn.as_primitive::<UInt64Type>(), x.as_primitive::<Float64Type>(), y.as_primitive::<Float64Type>());
             for i in 0..b.num_rows() {
                 if x.is_null(i) || y.is_null(i) {
                     continue;
                 }
                 let off = offsets.get(&sn.value(i)).cloned();
                 let (dx, dy) = off.as_ref().map_or((0.0, 0.0), |o| (o.dx, o.dy));
-                out.push((
-                    Footprint {
-                        id: sn.value(i).to_string(),
-                        x: x.value(i) + dx,
-                        y: y.value(i) + dy,
-                    },
-                    off,
-                ));
+                out.push((Footprint { id: sn.value(i).to_string(), x: x.value(i) + dx, y: y.value(i) + dy }, off));
             }
         }
     }
@@ -104,12 +70,7 @@ pub fn shot_footprints(ds: &Dataset) -> Result<Vec<(Footprint, Option<AppliedOff
 
 /// Dataset mode: simulate every shot of `<dataset>/shots/` (moved by its collocation offset, if
 /// any) on the `als/` table into `<dataset>/sim/shots.parquet`. `on_batch(n)` reports progress.
-pub fn simulate_dataset(
-    ds: &Dataset,
-    cfg: &SimConfig,
-    profile: Profile,
-    on_batch: &dyn Fn(usize),
-) -> Result<(usize, usize)> {
+pub fn simulate_dataset(ds: &Dataset, cfg: &SimConfig, profile: Profile, on_batch: &dyn Fn(usize)) -> Result<(usize, usize)> {
     let shots = shot_footprints(ds)?;
     let dest = ds.table_file(tables::SIM, "shots")?;
     simulate_on_dataset(ds, shots, cfg, profile, &dest, on_batch)
@@ -126,15 +87,7 @@ pub fn simulate_on_dataset(
     dest: &Path,
     on_batch: &dyn Fn(usize),
 ) -> Result<(usize, usize)> {
-    simulate_on_dataset_with(
-        ds,
-        footprints,
-        cfg,
-        profile,
-        dest,
-        &HashMap::new(),
-        on_batch,
-    )
+    simulate_on_dataset_with(ds, footprints, cfg, profile, dest, &HashMap::new(), on_batch)
 }
 
 /// [`simulate_on_dataset`] with `extra` key-value metadata in the written file (beside the
@@ -150,11 +103,7 @@ pub fn simulate_on_dataset_with(
 ) -> Result<(usize, usize)> {
     let mut metadata = sim_metadata(profile);
     metadata.extend(extra.iter().map(|(k, v)| (k.clone(), v.clone())));
-    let mut writer = AtomicParquet::create(
-        dest,
-        sim_schema(),
-        dataset::writer_properties(&metadata, 1 << 14),
-    )?;
+    let mut writer = AtomicParquet::create(dest, sim_schema(), dataset::writer_properties(&metadata, 1 << 14))?;
     let (mut ok, mut skipped) = (0, 0);
     for block in BlockSimulation::new(ds, footprints, cfg.clone())? {
         let block = block?;
@@ -191,33 +140,18 @@ pub struct SimulatedBlock {
 impl SimulatedBlock {
     /// The block's `sim` rows.
     pub fn batch(&self) -> Result<arrow::record_batch::RecordBatch> {
-        sim_batch(
-            &self.footprints,
-            &self.results,
-            &Weighting::ALL,
-            &self.applied,
-        )
+        sim_batch(&self.footprints, &self.results, &Weighting::ALL, &self.applied)
     }
 }
 
 impl BlockSimulation {
     /// Prepare the blocks of `footprints` (the first block is read now).
-    pub fn new(
-        ds: &Dataset,
-        footprints: Vec<(Footprint, Option<AppliedOffset>)>,
-        cfg: SimConfig,
-    ) -> Result<Self> {
+    pub fn new(ds: &Dataset, footprints: Vec<(Footprint, Option<AppliedOffset>)>, cfg: SimConfig) -> Result<Self> {
         let als = AlsTable::open(ds)?;
         let half = sim::footprint::gauss_sep(cfg.fsigma, sim::footprint::I_THRESH) as f64 + 1.0;
         let mut blocks = blocks(footprints).into_iter();
         let first = blocks.next();
-        let mut this = BlockSimulation {
-            als,
-            cfg,
-            half,
-            blocks,
-            current: None,
-        };
+        let mut this = BlockSimulation { als, cfg, half, blocks, current: None };
         this.current = first.map(|b| {
             let points = this.read(&b);
             (b, points)
@@ -228,22 +162,9 @@ impl BlockSimulation {
     /// The points within the footprint radius of `block`'s footprints.
     fn read(&self, block: &[(Footprint, Option<AppliedOffset>)]) -> Result<AlsPoints> {
         let h = self.half;
-        let mut b: BBox = [
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NEG_INFINITY,
-        ];
-        for (f, _) in block
-            .iter()
-            .filter(|(f, _)| f.x.is_finite() && f.y.is_finite())
-        {
-            b = [
-                b[0].min(f.x - h),
-                b[1].min(f.y - h),
-                b[2].max(f.x + h),
-                b[3].max(f.y + h),
-            ];
+        let mut b: BBox = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        for (f, _) in block.iter().filter(|(f, _)| f.x.is_finite() && f.y.is_finite()) {
+            b = [b[0].min(f.x - h), b[1].min(f.y - h), b[2].max(f.x + h), b[3].max(f.y + h)];
         }
         if b[0] > b[2] {
             return Ok(AlsPoints::default());
@@ -262,19 +183,12 @@ impl Iterator for BlockSimulation {
             Ok(p) => p,
             Err(e) => return Some(Err(e)),
         };
-        let (footprints, applied): (Vec<Footprint>, Vec<Option<AppliedOffset>>) =
-            block.into_iter().unzip();
+        let (footprints, applied): (Vec<Footprint>, Vec<Option<AppliedOffset>>) = block.into_iter().unzip();
         let this = &*self;
-        let (results, ahead) = rayon::join(
-            || sim::simulate(&points, &footprints, &this.cfg),
-            || next.as_ref().map(|b| this.read(b)),
-        );
+        let (results, ahead) =
+            rayon::join(|| sim::simulate(&points, &footprints, &this.cfg), || next.as_ref().map(|b| this.read(b)));
         self.current = next.zip(ahead);
-        Some(results.map(|results| SimulatedBlock {
-            footprints,
-            applied,
-            results,
-        }))
+        Some(results.map(|results| SimulatedBlock { footprints, applied, results }))
     }
 }
 
@@ -283,10 +197,7 @@ impl Iterator for BlockSimulation {
 pub fn blocks<T>(mut footprints: Vec<(Footprint, T)>) -> Vec<Vec<(Footprint, T)>> {
     let key = |f: &Footprint| {
         if f.x.is_finite() && f.y.is_finite() {
-            Some((
-                (f.y / BLOCK_M).floor() as i64,
-                (f.x / BLOCK_M).floor() as i64,
-            ))
+            Some(((f.y / BLOCK_M).floor() as i64, (f.x / BLOCK_M).floor() as i64))
         } else {
             None
         }

@@ -12,23 +12,11 @@ fn ingest_gedi_writes_shots_once_and_sql_reads_them() {
     let tmp = tempfile::tempdir().unwrap();
     let ds = tmp.path().join("ds");
     let (l1b, l2a) = (data(L1B), data(L2A));
-    let args = [
-        "ingest",
-        "gedi",
-        "--l1b",
-        l1b.to_str().unwrap(),
-        "--l2a",
-        l2a.to_str().unwrap(),
-        "--out",
-        ds.to_str().unwrap(),
-    ];
+    let args = ["ingest", "gedi", "--l1b", l1b.to_str().unwrap(), "--l2a", l2a.to_str().unwrap(), "--out", ds.to_str().unwrap()];
     let (ok, _, err) = gedisim(&args);
     assert!(ok, "{err}");
     assert!(err.contains("301 shots"), "{err}");
-    assert!(
-        err.contains("warning:") && err.contains("BEAM0011"),
-        "the unpaired L2A shot is reported: {err}"
-    );
+    assert!(err.contains("warning:") && err.contains("BEAM0011"), "the unpaired L2A shot is reported: {err}");
     let (ok, _, err) = gedisim(&args);
     assert!(ok && err.contains("already ingested"), "{err}");
     assert_eq!(files_with_suffix(&ds.join("shots"), ".parquet").len(), 1);
@@ -36,29 +24,15 @@ fn ingest_gedi_writes_shots_once_and_sql_reads_them() {
     let (ok, out, err) = gedisim(&["sql", "--dataset", ds.to_str().unwrap(), q]);
     assert!(ok, "{err}");
     let row = out.lines().nth(3).unwrap();
-    let cells: Vec<&str> = row
-        .split('|')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .collect();
+    let cells: Vec<&str> = row.split('|').map(str::trim).filter(|s| !s.is_empty()).collect();
     assert_eq!(&cells[..3], &["301", "300", "301"], "{out}");
-    assert!(
-        cells[3].starts_with("1964") && cells[3].len() == 17,
-        "shot numbers stay exact u64: {out}"
-    );
+    assert!(cells[3].starts_with("1964") && cells[3].len() == 17, "shot numbers stay exact u64: {out}");
 }
 
 #[test]
 fn missing_input_file_is_a_one_line_error() {
     let tmp = tempfile::tempdir().unwrap();
-    let (ok, _, err) = gedisim(&[
-        "ingest",
-        "gedi",
-        "--l1b",
-        "/nonexistent/GEDI01_B_x.h5",
-        "--out",
-        tmp.path().to_str().unwrap(),
-    ]);
+    let (ok, _, err) = gedisim(&["ingest", "gedi", "--l1b", "/nonexistent/GEDI01_B_x.h5", "--out", tmp.path().to_str().unwrap()]);
     assert!(!ok);
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(err.contains("/nonexistent/GEDI01_B_x.h5"), "{err}");

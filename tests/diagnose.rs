@@ -13,13 +13,7 @@ use serde_json::Value;
 /// Build a world with `effect` and diagnose it with the whole chain (`--als --l1b --l2a`).
 fn diagnose_world(dir: &Path, effect: &str, extra: &[&str]) -> Value {
     let world = dir.join("world");
-    let mut args = vec![
-        "scenario",
-        "--effect",
-        effect,
-        "--out",
-        world.to_str().unwrap(),
-    ];
+    let mut args = vec!["scenario", "--effect", effect, "--out", world.to_str().unwrap()];
     args.extend_from_slice(extra);
     let (ok, _, err) = gedisim(&args);
     assert!(ok, "{err}");
@@ -37,13 +31,7 @@ fn diagnose_world(dir: &Path, effect: &str, extra: &[&str]) -> Value {
     ]);
     assert!(ok, "{err}");
     assert!(stdout.contains("Baseline gap"), "{stdout}");
-    for f in [
-        "diagnosis.json",
-        "where_strata.csv",
-        "effects.parquet",
-        "bias_profile_before_after.png",
-        "waveform_residual.svg",
-    ] {
+    for f in ["diagnosis.json", "where_strata.csv", "effects.parquet", "bias_profile_before_after.png", "waveform_residual.svg"] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
     serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap()).unwrap()
@@ -70,23 +58,12 @@ fn check_contract(d: &Value) {
     // Best first: the effects that explain (shrink and gain intervals above their bars), then
     // the rest, each group by its score (mean of the RH and waveform shrinks).
     let explains = |h: &Value| num(&h["ci95"][0]) >= 0.10 && num(&h["gain_m_ci95"][0]) >= 0.02;
-    let keys: Vec<(bool, f64)> = effects
-        .iter()
-        .map(|e| (explains(&e["held_out"]), num(&e["held_out"]["score"])))
-        .collect();
-    assert!(
-        keys.windows(2)
-            .all(|w| w[0].0 > w[1].0 || (w[0].0 == w[1].0 && w[0].1 >= w[1].1)),
-        "best first: {keys:?}"
-    );
+    let keys: Vec<(bool, f64)> = effects.iter().map(|e| (explains(&e["held_out"]), num(&e["held_out"]["score"]))).collect();
+    assert!(keys.windows(2).all(|w| w[0].0 > w[1].0 || (w[0].0 == w[1].0 && w[0].1 >= w[1].1)), "best first: {keys:?}");
     assert_eq!(d["unexplained"], !keys[0].0);
     for e in effects {
         let h = &e["held_out"];
-        for k in [
-            "mean_abs_bias_rh1_99_before",
-            "mean_abs_bias_rh1_99_after",
-            "shrink",
-        ] {
+        for k in ["mean_abs_bias_rh1_99_before", "mean_abs_bias_rh1_99_after", "shrink"] {
             assert!(num(&h[k]).is_finite(), "{k} of {}", e["name"]);
         }
         assert_eq!(h["ci95"].as_array().unwrap().len(), 2);
@@ -99,11 +76,7 @@ fn assert_named_first(d: &Value, name: &str) {
     check_contract(d);
     assert_eq!(first(d)["name"], name, "{:#}", d["effects"]);
     assert_eq!(d["unexplained"], false);
-    assert!(
-        num(&first(d)["held_out"]["shrink"]) >= 0.5,
-        "{:#}",
-        first(d)
-    );
+    assert!(num(&first(d)["held_out"]["shrink"]) >= 0.5, "{:#}", first(d));
 }
 
 #[test]
@@ -122,10 +95,7 @@ fn ground_detection_world_names_ground_detection() {
     assert_named_first(&d, "ground_detection");
     assert_eq!(first(&d)["params"]["algorithm"], "all");
     let offset = num(&first(&d)["params"]["offset_m"]);
-    assert!(
-        (offset - 0.5).abs() <= 0.1,
-        "offset_m {offset} (planted 0.5)"
-    );
+    assert!((offset - 0.5).abs() <= 0.1, "offset_m {offset} (planted 0.5)");
 }
 
 #[test]
@@ -133,17 +103,10 @@ fn canopy_change_world_names_canopy_change() {
     // A waveform-shape effect: weighting and occlusion move the RH profile alike, the waveform
     // shape tells them apart.
     let tmp = tempfile::tempdir().unwrap();
-    let d = diagnose_world(
-        tmp.path(),
-        "canopy_change",
-        &["--magnitude", "2", "--seed", "14"],
-    );
+    let d = diagnose_world(tmp.path(), "canopy_change", &["--magnitude", "2", "--seed", "14"]);
     assert_named_first(&d, "canopy_change");
     let height = num(&first(&d)["params"]["height_m"]);
-    assert!(
-        (height - 10.0).abs() <= 2.0,
-        "height_m {height} (planted 10)"
-    );
+    assert!((height - 10.0).abs() <= 2.0, "height_m {height} (planted 10)");
 }
 
 #[test]

@@ -15,13 +15,7 @@ const TILE: &str = "als/lidarforfuel_2_bas_lig.laz";
 
 fn scenario(out: &Path, extra: &[&str]) -> String {
     let tile = data(TILE);
-    let mut args = vec![
-        "scenario",
-        "--als",
-        tile.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ];
+    let mut args = vec!["scenario", "--als", tile.to_str().unwrap(), "--out", out.to_str().unwrap()];
     args.extend_from_slice(extra);
     let (ok, _, err) = gedisim(&args);
     assert!(ok, "{err}");
@@ -36,36 +30,11 @@ fn truth(out: &Path) -> serde_json::Value {
 fn ingest(world: &Path, ds: &Path) -> usize {
     let gedi = world.join("gedi");
     let g = gedi.to_str().unwrap();
-    let (ok, _, err) = gedisim(&[
-        "ingest",
-        "gedi",
-        "--l1b",
-        g,
-        "--l2a",
-        g,
-        "--out",
-        ds.to_str().unwrap(),
-        "--strict-join",
-    ]);
+    let (ok, _, err) = gedisim(&["ingest", "gedi", "--l1b", g, "--l2a", g, "--out", ds.to_str().unwrap(), "--strict-join"]);
     assert!(ok, "{err}");
     assert!(!err.contains("warning"), "{err}");
-    let shots = err
-        .lines()
-        .filter_map(|l| {
-            l.split(": ")
-                .nth(1)?
-                .strip_suffix(" shots")?
-                .parse::<usize>()
-                .ok()
-        })
-        .sum();
-    let (ok, _, err) = gedisim(&[
-        "ingest",
-        "als",
-        world.join("als").to_str().unwrap(),
-        "--out",
-        ds.to_str().unwrap(),
-    ]);
+    let shots = err.lines().filter_map(|l| l.split(": ").nth(1)?.strip_suffix(" shots")?.parse::<usize>().ok()).sum();
+    let (ok, _, err) = gedisim(&["ingest", "als", world.join("als").to_str().unwrap(), "--out", ds.to_str().unwrap()]);
     assert!(ok, "{err}");
     shots
 }
@@ -79,11 +48,7 @@ fn median_ground_offset(ds: &Path) -> (usize, f64) {
     let (ok, out, err) = gedisim(&["sql", "--dataset", ds.to_str().unwrap(), q]);
     assert!(ok, "{err}");
     let row = out.lines().nth(3).unwrap();
-    let cells: Vec<&str> = row
-        .split('|')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .collect();
+    let cells: Vec<&str> = row.split('|').map(str::trim).filter(|s| !s.is_empty()).collect();
     (cells[0].parse().unwrap(), cells[1].parse().unwrap())
 }
 
@@ -94,46 +59,22 @@ fn none_and_datum_worlds_ingest_and_show_the_planted_datum() {
     for (effect, dz) in [("none", 0.0), ("datum", 2.0)] {
         let world = tmp.path().join(effect);
         // `none` ignores the magnitude.
-        scenario(
-            &world,
-            &[
-                "--effect",
-                effect,
-                "--magnitude",
-                "4",
-                "--passes",
-                "4",
-                "--seed",
-                "3",
-            ],
-        );
+        scenario(&world, &["--effect", effect, "--magnitude", "4", "--passes", "4", "--seed", "3"]);
         let t = truth(&world);
         assert_eq!(t["effect"], effect);
         assert_eq!(t["datum_dz_m"].as_f64().unwrap(), dz);
         assert_eq!(t["geoid"]["dataset"], "geophys_corr/geoid");
         let planned = t["n_shots"].as_u64().unwrap() as usize;
         assert!(planned >= 20, "{planned} shots");
-        let per_track: u64 = t["tracks"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|x| x["n_shots"].as_u64().unwrap())
-            .sum();
+        let per_track: u64 = t["tracks"].as_array().unwrap().iter().map(|x| x["n_shots"].as_u64().unwrap()).sum();
         assert_eq!(per_track as usize, planned);
         assert_eq!(files_with_suffix(&world.join("als"), ".laz").len(), 1);
 
         let ds = tmp.path().join(format!("{effect}_ds"));
-        assert_eq!(
-            ingest(&world, &ds),
-            planned,
-            "every planned shot is ingested"
-        );
+        assert_eq!(ingest(&world, &ds), planned, "every planned shot is ingested");
         let (n, med) = median_ground_offset(&ds);
         assert!(n >= planned * 2 / 3, "{n} valid shots of {planned}");
-        assert!(
-            (med - dz).abs() < 0.5,
-            "{effect}: median GEDI ground − geoid − ALS ground {med:.3} m, planted {dz} m"
-        );
+        assert!((med - dz).abs() < 0.5, "{effect}: median GEDI ground − geoid − ALS ground {med:.3} m, planted {dz} m");
         medians.push(med);
     }
     // Same seed: the worlds differ by the datum alone.
@@ -145,10 +86,7 @@ fn same_seed_gives_identical_granules_and_another_seed_does_not() {
     let tmp = tempfile::tempdir().unwrap();
     let run = |name: &str, seed: &str| {
         let world = tmp.path().join(name);
-        scenario(
-            &world,
-            &["--effect", "noise", "--passes", "2", "--seed", seed],
-        );
+        scenario(&world, &["--effect", "noise", "--passes", "2", "--seed", seed]);
         files_with_suffix(&world.join("gedi"), ".h5")
     };
     let (a, b, c) = (run("a", "9"), run("b", "9"), run("c", "10"));
@@ -156,100 +94,43 @@ fn same_seed_gives_identical_granules_and_another_seed_does_not() {
     assert!(!a.is_empty());
     for (x, y) in a.iter().zip(&b) {
         assert_eq!(x.file_name(), y.file_name());
-        assert!(
-            std::fs::read(x).unwrap() == std::fs::read(y).unwrap(),
-            "{} differs",
-            x.display()
-        );
+        assert!(std::fs::read(x).unwrap() == std::fs::read(y).unwrap(), "{} differs", x.display());
     }
-    assert_eq!(
-        std::fs::read(tmp.path().join("a/truth.json")).unwrap(),
-        std::fs::read(tmp.path().join("b/truth.json")).unwrap()
-    );
+    assert_eq!(std::fs::read(tmp.path().join("a/truth.json")).unwrap(), std::fs::read(tmp.path().join("b/truth.json")).unwrap());
     let waves = |files: &[std::path::PathBuf]| {
-        let l1b: Vec<_> = files
-            .iter()
-            .filter(|f| f.to_string_lossy().contains("GEDI01_B"))
-            .cloned()
-            .collect();
+        let l1b: Vec<_> = files.iter().filter(|f| f.to_string_lossy().contains("GEDI01_B")).cloned().collect();
         let (batches, _) = read_gedi(&l1b, &[], &GediOptions::default()).unwrap();
-        batches
-            .iter()
-            .map(|b| format!("{:?}", b.column_by_name("rx_waveform").unwrap()))
-            .collect::<String>()
+        batches.iter().map(|b| format!("{:?}", b.column_by_name("rx_waveform").unwrap())).collect::<String>()
     };
     assert_ne!(waves(&a), waves(&c), "another seed draws other waveforms");
     // A world is not silently overwritten.
     let world = tmp.path().join("a");
     let tile = data(TILE);
-    let (ok, _, err) = gedisim(&[
-        "scenario",
-        "--effect",
-        "none",
-        "--als",
-        tile.to_str().unwrap(),
-        "--out",
-        world.to_str().unwrap(),
-    ]);
-    assert!(
-        !ok && err.contains("--force") && err.trim().lines().count() == 1,
-        "{err}"
-    );
+    let (ok, _, err) = gedisim(&["scenario", "--effect", "none", "--als", tile.to_str().unwrap(), "--out", world.to_str().unwrap()]);
+    assert!(!ok && err.contains("--force") && err.trim().lines().count() == 1, "{err}");
 }
 
 #[test]
 fn pair_effect_is_planted_and_recorded() {
     let tmp = tempfile::tempdir().unwrap();
     let world = tmp.path().join("w");
-    let err = scenario(
-        &world,
-        &[
-            "--effect",
-            "datum+ground_detection",
-            "--param",
-            "dz_m=-1",
-            "--param",
-            "algorithm=2",
-            "--passes",
-            "2",
-        ],
-    );
+    let err = scenario(&world, &["--effect", "datum+ground_detection", "--param", "dz_m=-1", "--param", "algorithm=2", "--passes", "2"]);
     assert!(err.contains("datum+ground_detection"), "{err}");
     let t = truth(&world);
     assert_eq!(t["effect"], "datum+ground_detection");
     assert_eq!(t["effects"][0]["params"]["dz_m"].as_f64(), Some(-1.0));
     assert_eq!(t["effects"][1]["params"]["algorithm"].as_f64(), Some(2.0));
-    assert_eq!(
-        t["ground_detection_offset_m"],
-        serde_json::json!([0.0, 0.5, 0.0, 0.0, 0.0, 0.0])
-    );
+    assert_eq!(t["ground_detection_offset_m"], serde_json::json!([0.0, 0.5, 0.0, 0.0, 0.0, 0.0]));
     // The stored products: a2's ground is 0.5 m above a1's wherever both found the same mode.
     let files = files_with_suffix(&world.join("gedi"), ".h5");
-    let (l1b, l2a): (Vec<_>, Vec<_>) = files
-        .into_iter()
-        .partition(|f| f.to_string_lossy().contains("GEDI01_B"));
+    let (l1b, l2a): (Vec<_>, Vec<_>) = files.into_iter().partition(|f| f.to_string_lossy().contains("GEDI01_B"));
     let (batches, _) = read_gedi(&l1b, &l2a, &GediOptions::default()).unwrap();
     let mut diffs = Vec::new();
     for b in &batches {
-        let col = |n: &str| {
-            b.column_by_name(n)
-                .unwrap()
-                .as_any()
-                .downcast_ref::<Float64Array>()
-                .unwrap()
-                .clone()
-        };
+        let col = |n: &str| b.column_by_name(n).unwrap().as_any().downcast_ref::<Float64Array>().unwrap().clone();
         let (a1, a2) = (col("elev_lowestmode_a1"), col("elev_lowestmode_a2"));
         let geoid = col("geoid");
-        assert!(
-            b.column_by_name("beam_type")
-                .unwrap()
-                .as_any()
-                .downcast_ref::<StringArray>()
-                .unwrap()
-                .null_count()
-                == 0
-        );
+        assert!(b.column_by_name("beam_type").unwrap().as_any().downcast_ref::<StringArray>().unwrap().null_count() == 0);
         for i in 0..b.num_rows() {
             assert!((geoid.value(i) - 49.0).abs() < 1e-5);
             diffs.push(a2.value(i) - a1.value(i));
@@ -266,28 +147,13 @@ fn bad_effects_and_parameters_are_one_line_errors_naming_the_field() {
     let o = out.to_str().unwrap();
     for (args, needle) in [
         (vec!["--effect", "bogus"], "unknown effect 'bogus'"),
-        (
-            vec!["--effect", "datum", "--param", "dz_m=abc"],
-            "--param dz_m",
-        ),
+        (vec!["--effect", "datum", "--param", "dz_m=abc"], "--param dz_m"),
         (vec!["--effect", "datum", "--param", "dz_m"], "--param dz_m"),
-        (
-            vec!["--effect", "datum", "--param", "fsigma_m=7"],
-            "--param fsigma_m",
-        ),
-        (
-            vec!["--effect", "footprint", "--param", "fsigma_m=-1"],
-            "--param fsigma_m",
-        ),
-        (
-            vec!["--effect", "weighting", "--param", "method=magic"],
-            "--param method",
-        ),
+        (vec!["--effect", "datum", "--param", "fsigma_m=7"], "--param fsigma_m"),
+        (vec!["--effect", "footprint", "--param", "fsigma_m=-1"], "--param fsigma_m"),
+        (vec!["--effect", "weighting", "--param", "method=magic"], "--param method"),
         (vec!["--effect", "datum+datum"], "twice"),
-        (
-            vec!["--effect", "pulse", "--magnitude", "nan"],
-            "--magnitude",
-        ),
+        (vec!["--effect", "pulse", "--magnitude", "nan"], "--magnitude"),
         (vec!["--effect", "none", "--passes", "0"], "--passes"),
     ] {
         let mut a = vec!["scenario", "--out", o];
@@ -298,19 +164,8 @@ fn bad_effects_and_parameters_are_one_line_errors_naming_the_field() {
         assert!(err.contains(needle), "{args:?}: {err}");
     }
     assert!(!out.join("truth.json").exists());
-    let (ok, _, err) = gedisim(&[
-        "scenario",
-        "--effect",
-        "none",
-        "--als",
-        "/nonexistent/tile.laz",
-        "--out",
-        o,
-    ]);
-    assert!(
-        !ok && err.trim().lines().count() == 1 && err.contains("/nonexistent/tile.laz"),
-        "{err}"
-    );
+    let (ok, _, err) = gedisim(&["scenario", "--effect", "none", "--als", "/nonexistent/tile.laz", "--out", o]);
+    assert!(!ok && err.trim().lines().count() == 1 && err.contains("/nonexistent/tile.laz"), "{err}");
 }
 
 /// The constants the worlds use are the medians of the shared real granule, per beam type.
@@ -321,32 +176,13 @@ fn scenario_constants_match_the_real_granule() {
     let median = |mut v: Vec<f64>| {
         v.sort_by(f64::total_cmp);
         let n = v.len();
-        if n % 2 == 1 {
-            v[n / 2]
-        } else {
-            (v[n / 2 - 1] + v[n / 2]) / 2.0
-        }
+        if n % 2 == 1 { v[n / 2] } else { (v[n / 2 - 1] + v[n / 2]) / 2.0 }
     };
-    for (kind, rec) in [
-        ("coverage", real::COVERAGE),
-        ("full_power", real::FULL_POWER),
-    ] {
+    for (kind, rec) in [("coverage", real::COVERAGE), ("full_power", real::FULL_POWER)] {
         let (mut sd, mut mean) = (Vec::new(), Vec::new());
         for b in &batches {
-            let bt = b
-                .column_by_name("beam_type")
-                .unwrap()
-                .as_any()
-                .downcast_ref::<StringArray>()
-                .unwrap();
-            let col = |n: &str| {
-                b.column_by_name(n)
-                    .unwrap()
-                    .as_any()
-                    .downcast_ref::<Float64Array>()
-                    .unwrap()
-                    .clone()
-            };
+            let bt = b.column_by_name("beam_type").unwrap().as_any().downcast_ref::<StringArray>().unwrap();
+            let col = |n: &str| b.column_by_name(n).unwrap().as_any().downcast_ref::<Float64Array>().unwrap().clone();
             let (s, m) = (col("noise_stddev_corrected"), col("noise_mean_corrected"));
             for i in 0..b.num_rows() {
                 if bt.value(i) == kind {

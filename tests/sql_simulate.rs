@@ -17,29 +17,15 @@ use gedisim::sim::{self, Footprint, Profile, SimConfig, Weighting};
 fn dataset() -> (tempfile::TempDir, Dataset, Vec<Footprint>) {
     let tmp = tempfile::tempdir().unwrap();
     let ds = Dataset::create(tmp.path()).unwrap();
-    ingest_tiles(
-        &ds,
-        &[data("als/lidarforfuel_2_bas_lig.laz")],
-        &AlsOptions::default(),
-        &|_| {},
-    )
-    .unwrap();
+    ingest_tiles(&ds, &[data("als/lidarforfuel_2_bas_lig.laz")], &AlsOptions::default(), &|_| {}).unwrap();
     let mut fps = Vec::new();
     for i in 0..4 {
         for j in 0..3 {
             let id = 19_640_500_100_108_424u64 + (i * 3 + j) as u64;
-            fps.push(Footprint {
-                id: id.to_string(),
-                x: 368500.0 + 18.0 * i as f64,
-                y: 6807430.0 + 22.0 * j as f64,
-            });
+            fps.push(Footprint { id: id.to_string(), x: 368500.0 + 18.0 * i as f64, y: 6807430.0 + 22.0 * j as f64 });
         }
     }
-    fps.push(Footprint {
-        id: "19640500100109999".into(),
-        x: 360000.0,
-        y: 6800000.0,
-    });
+    fps.push(Footprint { id: "19640500100109999".into(), x: 360000.0, y: 6800000.0 });
     let schema = Arc::new(Schema::new(vec![
         Field::new("shot_number", DataType::UInt64, false),
         Field::new("x", DataType::Float64, true),
@@ -48,17 +34,9 @@ fn dataset() -> (tempfile::TempDir, Dataset, Vec<Footprint>) {
     let batch = RecordBatch::try_new(
         schema.clone(),
         vec![
-            Arc::new(UInt64Array::from(
-                fps.iter()
-                    .map(|f| f.id.parse::<u64>().unwrap())
-                    .collect::<Vec<_>>(),
-            )),
-            Arc::new(Float64Array::from(
-                fps.iter().map(|f| f.x).collect::<Vec<_>>(),
-            )),
-            Arc::new(Float64Array::from(
-                fps.iter().map(|f| f.y).collect::<Vec<_>>(),
-            )),
+            Arc::new(UInt64Array::from(fps.iter().map(|f| f.id.parse::<u64>().unwrap()).collect::<Vec<_>>())),
+            Arc::new(Float64Array::from(fps.iter().map(|f| f.x).collect::<Vec<_>>())),
+            Arc::new(Float64Array::from(fps.iter().map(|f| f.y).collect::<Vec<_>>())),
         ],
     )
     .unwrap();
@@ -70,11 +48,7 @@ fn dataset() -> (tempfile::TempDir, Dataset, Vec<Footprint>) {
 #[test]
 fn sql_query_matches_the_direct_path_and_the_kernels() {
     let (_tmp, ds, fps) = dataset();
-    let query = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/queries/simulated_rh.sql"
-    ))
-    .unwrap();
+    let query = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/queries/simulated_rh.sql")).unwrap();
     let rt = tokio::runtime::Runtime::new().unwrap();
     let batches = rt.block_on(async {
         let ctx = gedisim::sql::session(&ds).await.unwrap();
@@ -84,8 +58,7 @@ fn sql_query_matches_the_direct_path_and_the_kernels() {
     assert_eq!(rows, fps.len() * 3);
 
     // Direct path: every point of the tile minus the classes ingest drops, default profile.
-    let points =
-        gedisim::ingest::las::read_points(&data("als/lidarforfuel_2_bas_lig.laz")).unwrap();
+    let points = gedisim::ingest::las::read_points(&data("als/lidarforfuel_2_bas_lig.laz")).unwrap();
     let points = gedisim::simulate::drop_ingest_classes(&points);
     let direct = sim::simulate(&points, &fps, &SimConfig::new(Profile::Default)).unwrap();
 
@@ -94,19 +67,12 @@ fn sql_query_matches_the_direct_path_and_the_kernels() {
         let shot = b.column_by_name("shot").unwrap().as_string::<i32>();
         let weighting = b.column_by_name("weighting").unwrap().as_string::<i32>();
         let status = b.column_by_name("status").unwrap().as_string::<i32>();
-        let ground = b
-            .column_by_name("als_ground")
-            .unwrap()
-            .as_primitive::<Float64Type>();
+        let ground = b.column_by_name("als_ground").unwrap().as_primitive::<Float64Type>();
         let rh = b.column_by_name("rh").unwrap().as_list::<i32>();
         let rh2 = b.column_by_name("rh_from_wave").unwrap().as_list::<i32>();
         for i in 0..b.num_rows() {
             let k = fps.iter().position(|f| f.id == shot.value(i)).unwrap();
-            let w = Weighting::ALL
-                .iter()
-                .copied()
-                .find(|w| w.name() == weighting.value(i))
-                .unwrap();
+            let w = Weighting::ALL.iter().copied().find(|w| w.name() == weighting.value(i)).unwrap();
             match &direct[k] {
                 Err(_) => assert_ne!(status.value(i), "ok", "{}", shot.value(i)),
                 Ok(s) => {
@@ -115,28 +81,14 @@ fn sql_query_matches_the_direct_path_and_the_kernels() {
                     assert_eq!(Some(ground.value(i)), ww.truth.als_ground);
                     let sql_rh = rh.value(i);
                     let sql_rh: Vec<f32> = sql_rh.as_primitive::<Float32Type>().values().to_vec();
-                    assert_eq!(
-                        sql_rh,
-                        ww.rh.unwrap().to_vec(),
-                        "{} {}",
-                        shot.value(i),
-                        w.name()
-                    );
+                    assert_eq!(sql_rh, ww.rh.unwrap().to_vec(), "{} {}", shot.value(i), w.name());
                     let from_wave = rh2.value(i);
-                    assert_eq!(
-                        from_wave.as_primitive::<Float32Type>().values().to_vec(),
-                        sql_rh,
-                        "gedi_rh agrees with the kernel"
-                    );
+                    assert_eq!(from_wave.as_primitive::<Float32Type>().values().to_vec(), sql_rh, "gedi_rh agrees with the kernel");
                     compared += 1;
                 }
             }
         }
     }
     println!("{compared} simulated rows compared (SQL vs direct path vs gedi_rh)");
-    assert_eq!(
-        compared,
-        12 * 3,
-        "the 12 shots on the tile are simulated, the off-tile one is not"
-    );
+    assert_eq!(compared, 12 * 3, "the 12 shots on the tile are simulated, the off-tile one is not");
 }

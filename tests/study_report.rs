@@ -26,30 +26,20 @@ fn full_dataset(dir: &Path) -> Dataset {
 }
 
 fn s(b: &RecordBatch, name: &str) -> Vec<String> {
-    let c = b
-        .column_by_name(name)
-        .unwrap_or_else(|| panic!("no column {name}"));
+    let c = b.column_by_name(name).unwrap_or_else(|| panic!("no column {name}"));
     let c = c.as_string::<i32>();
     (0..c.len()).map(|i| c.value(i).to_string()).collect()
 }
 
 fn f(b: &RecordBatch, name: &str) -> Vec<f64> {
-    let c = b
-        .column_by_name(name)
-        .unwrap_or_else(|| panic!("no column {name}"));
+    let c = b.column_by_name(name).unwrap_or_else(|| panic!("no column {name}"));
     let c = arrow::compute::cast(c, &DataType::Float64).unwrap();
     let c = c.as_primitive::<Float64Type>();
-    (0..c.len())
-        .map(|i| if c.is_null(i) { f64::NAN } else { c.value(i) })
-        .collect()
+    (0..c.len()).map(|i| if c.is_null(i) { f64::NAN } else { c.value(i) }).collect()
 }
 
 fn columns(b: &RecordBatch) -> Vec<(String, DataType)> {
-    b.schema()
-        .fields()
-        .iter()
-        .map(|f| (f.name().clone(), f.data_type().clone()))
-        .collect()
+    b.schema().fields().iter().map(|f| (f.name().clone(), f.data_type().clone())).collect()
 }
 
 /// The results table as read back: per row (weighting, algorithm, group, rh_aligned, rh_sim, ground diff).
@@ -68,19 +58,10 @@ fn results_rows(ds: &Dataset) -> Vec<Row> {
     let b = study::read(&ds.root().join("results/part-0.parquet"));
     let list = |name: &str, i: usize| -> Vec<f64> {
         let l = b.column_by_name(name).unwrap().as_list::<i32>().value(i);
-        l.as_primitive::<Float32Type>()
-            .values()
-            .iter()
-            .map(|&v| v as f64)
-            .collect()
+        l.as_primitive::<Float32Type>().values().iter().map(|&v| v as f64).collect()
     };
-    let (w, a, g, ft, ph) = (
-        s(&b, "weighting"),
-        s(&b, "algorithm"),
-        s(&b, "sensitivity_group"),
-        s(&b, "forest_type"),
-        s(&b, "phenology"),
-    );
+    let (w, a, g, ft, ph) =
+        (s(&b, "weighting"), s(&b, "algorithm"), s(&b, "sensitivity_group"), s(&b, "forest_type"), s(&b, "phenology"));
     let (gg, ag) = (f(&b, "gedi_ground"), f(&b, "als_ground"));
     (0..b.num_rows())
         .map(|i| Row {
@@ -109,10 +90,7 @@ fn report_tables_contracts_and_msd_identity() {
     let out = ds.root().join("report");
     assert_eq!(summary.dir, out);
     assert!(summary.skipped.is_empty(), "{:?}", summary.skipped);
-    assert!(
-        steps.borrow().iter().any(|s| s == "query msd"),
-        "progress names each query"
-    );
+    assert!(steps.borrow().iter().any(|s| s == "query msd"), "progress names each query");
     let rows = results_rows(&ds);
     assert_eq!(rows.len(), N_SHOTS * 3 * 7);
 
@@ -129,12 +107,7 @@ fn report_tables_contracts_and_msd_identity() {
         ]
     );
     assert_eq!(gd.num_rows(), 7 * 3);
-    let (ga, gg, gb, gr) = (
-        s(&gd, "algorithm"),
-        s(&gd, "sensitivity_group"),
-        f(&gd, "bias"),
-        f(&gd, "rmse"),
-    );
+    let (ga, gg, gb, gr) = (s(&gd, "algorithm"), s(&gd, "sensitivity_group"), f(&gd, "bias"), f(&gd, "rmse"));
     let gn = gd.column_by_name("n").unwrap().as_primitive::<Int64Type>();
     assert_eq!(&ga[..3], ["default", "default", "default"]);
     assert_eq!(&gg[..3], ["low", "high", "all"]);
@@ -147,60 +120,25 @@ fn report_tables_contracts_and_msd_identity() {
         assert_eq!(gn.value(i) as usize, d.len(), "{} {}", ga[i], gg[i]);
         let bias = d.iter().sum::<f64>() / d.len() as f64;
         let rmse = (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt();
-        assert!(
-            (gb[i] - bias).abs() < 1e-9 && (gr[i] - rmse).abs() < 1e-9,
-            "{} {}: {} vs {bias}",
-            ga[i],
-            gg[i],
-            gb[i]
-        );
+        assert!((gb[i] - bias).abs() < 1e-9 && (gr[i] - rmse).abs() < 1e-9, "{} {}: {} vs {bias}", ga[i], gg[i], gb[i]);
     }
     // The planted ground error of a3 (−0.5 m, noise 0.3 m) shows in its bias over all shots.
-    let a3 = (0..gd.num_rows())
-        .find(|&i| ga[i] == "a3" && gg[i] == "all")
-        .unwrap();
+    let a3 = (0..gd.num_rows()).find(|&i| ga[i] == "a3" && gg[i] == "all").unwrap();
     assert!((gb[a3] + 0.5).abs() < 0.15, "a3 bias {}", gb[a3]);
 
     // msd: exact contract, identity, and equality with the direct mean of (y − ŷ)² over RH1..RH99.
     let msd = study::read(&out.join("msd.parquet"));
     let names: Vec<String> = columns(&msd).into_iter().map(|c| c.0).collect();
-    assert_eq!(
-        names,
-        [
-            "weighting",
-            "algorithm",
-            "sensitivity_group",
-            "sb",
-            "sdsd",
-            "lcs",
-            "msd",
-            "n"
-        ]
-    );
+    assert_eq!(names, ["weighting", "algorithm", "sensitivity_group", "sb", "sdsd", "lcs", "msd", "n"]);
     for c in ["sb", "sdsd", "lcs", "msd"] {
-        assert_eq!(
-            msd.schema().field_with_name(c).unwrap().data_type(),
-            &DataType::Float64
-        );
+        assert_eq!(msd.schema().field_with_name(c).unwrap().data_type(), &DataType::Float64);
     }
     assert_eq!(msd.num_rows(), 3 * 7 * 3);
-    let (mw, ma, mg) = (
-        s(&msd, "weighting"),
-        s(&msd, "algorithm"),
-        s(&msd, "sensitivity_group"),
-    );
-    let (sb, sdsd, lcs, m, mn) = (
-        f(&msd, "sb"),
-        f(&msd, "sdsd"),
-        f(&msd, "lcs"),
-        f(&msd, "msd"),
-        f(&msd, "n"),
-    );
+    let (mw, ma, mg) = (s(&msd, "weighting"), s(&msd, "algorithm"), s(&msd, "sensitivity_group"));
+    let (sb, sdsd, lcs, m, mn) = (f(&msd, "sb"), f(&msd, "sdsd"), f(&msd, "lcs"), f(&msd, "msd"), f(&msd, "n"));
     for i in 0..msd.num_rows() {
-        let sel: Vec<&Row> = rows
-            .iter()
-            .filter(|r| r.weighting == mw[i] && r.algorithm == ma[i] && in_group(r, &mg[i]))
-            .collect();
+        let sel: Vec<&Row> =
+            rows.iter().filter(|r| r.weighting == mw[i] && r.algorithm == ma[i] && in_group(r, &mg[i])).collect();
         assert!(!sel.is_empty());
         let mut total = 0.0;
         for r in &sel {
@@ -224,35 +162,21 @@ fn report_tables_contracts_and_msd_identity() {
     // The per-percentile table obeys the identity too, percentile by percentile (checked at RH50:
     // RH k is element k of the 0-based list, `rh[k + 1]` in SQL).
     let prof = study::read(&out.join("msd_profile.parquet"));
-    let (pw, pa, pg, pp) = (
-        s(&prof, "weighting"),
-        s(&prof, "algorithm"),
-        s(&prof, "sensitivity_group"),
-        f(&prof, "percentile"),
-    );
+    let (pw, pa, pg, pp) =
+        (s(&prof, "weighting"), s(&prof, "algorithm"), s(&prof, "sensitivity_group"), f(&prof, "percentile"));
     let (psb, psd, plc) = (f(&prof, "sb"), f(&prof, "sdsd"), f(&prof, "lcs"));
     assert_eq!(prof.num_rows(), 3 * 7 * 3 * 99);
     let mut checked = 0;
     for i in (0..prof.num_rows()).filter(|&i| pp[i] == 50.0) {
-        let sel: Vec<&Row> = rows
-            .iter()
-            .filter(|r| r.weighting == pw[i] && r.algorithm == pa[i] && in_group(r, &pg[i]))
-            .collect();
-        let direct = sel
-            .iter()
-            .map(|r| (r.y[50] - r.yhat[50]).powi(2))
-            .sum::<f64>()
-            / sel.len() as f64;
+        let sel: Vec<&Row> =
+            rows.iter().filter(|r| r.weighting == pw[i] && r.algorithm == pa[i] && in_group(r, &pg[i])).collect();
+        let direct = sel.iter().map(|r| (r.y[50] - r.yhat[50]).powi(2)).sum::<f64>() / sel.len() as f64;
         assert!((psb[i] + psd[i] + plc[i] - direct).abs() < 1e-9);
         // and matches the library's own kernel
         let y: Vec<f64> = sel.iter().map(|r| r.y[50]).collect();
         let yh: Vec<f64> = sel.iter().map(|r| r.yhat[50]).collect();
         let k = gedisim::study::msd::msd_split(&y, &yh).unwrap();
-        assert!(
-            (k.sb - psb[i]).abs() < 1e-9
-                && (k.sdsd - psd[i]).abs() < 1e-9
-                && (k.lcs - plc[i]).abs() < 1e-9
-        );
+        assert!((k.sb - psb[i]).abs() < 1e-9 && (k.sdsd - psd[i]).abs() < 1e-9 && (k.lcs - plc[i]).abs() < 1e-9);
         checked += 1;
     }
     assert_eq!(checked, 63);
@@ -271,17 +195,12 @@ fn report_tables_contracts_and_msd_identity() {
     let sel = |ft: &str, g: &str| -> Vec<&Row> {
         rows.iter()
             .filter(|r| {
-                r.weighting == "count"
-                    && r.algorithm == "default"
-                    && (ft == "all" || r.forest == ft)
-                    && in_group(r, g)
+                r.weighting == "count" && r.algorithm == "default" && (ft == "all" || r.forest == ft) && in_group(r, g)
             })
             .collect()
     };
     let profile: Vec<usize> = (0..bp.num_rows())
-        .filter(|&i| {
-            bw[i] == "count" && ba[i] == "default" && bf[i] == "coniferous" && bg[i] == "high"
-        })
+        .filter(|&i| bw[i] == "count" && ba[i] == "default" && bf[i] == "coniferous" && bg[i] == "high")
         .collect();
     assert_eq!(profile.len(), 99);
     let rs = sel("coniferous", "high");
@@ -289,25 +208,14 @@ fn report_tables_contracts_and_msd_identity() {
     for &i in &profile {
         let k = bpp[i] as usize;
         let direct = rs.iter().map(|r| r.yhat[k] - r.y[k]).sum::<f64>() / rs.len() as f64;
-        assert!(
-            (bb[i] - direct).abs() < 1e-9,
-            "RH{k}: {} vs {direct}",
-            bb[i]
-        );
+        assert!((bb[i] - direct).abs() < 1e-9, "RH{k}: {} vs {direct}", bb[i]);
         abs_sum += direct.abs();
     }
     assert!((bm[profile[0]] - abs_sum / 99.0).abs() < 1e-9);
     let forests: std::collections::BTreeSet<&str> = bf.iter().map(String::as_str).collect();
     assert_eq!(
         forests.into_iter().collect::<Vec<_>>(),
-        [
-            "all",
-            "broadleaf",
-            "coniferous",
-            "mixed",
-            "other",
-            "unknown"
-        ]
+        ["all", "broadleaf", "coniferous", "mixed", "other", "unknown"]
     );
 
     // phenology: both settings, the three phenologies, R² within [0, 1], bias against a direct mean.
@@ -322,78 +230,41 @@ fn report_tables_contracts_and_msd_identity() {
     );
     assert_eq!(ph.num_rows(), 3 * 2 * 99);
     assert!(qr.iter().all(|r| (0.0..=1.0).contains(r)));
-    let i = (0..ph.num_rows())
-        .find(|&i| qp[i] == "leaf_off" && qw[i] == "int" && qa[i] == "a3" && qk[i] == 90.0)
-        .unwrap();
-    let rs: Vec<&Row> = rows
-        .iter()
-        .filter(|r| r.phenology == "leaf_off" && r.weighting == "int" && r.algorithm == "a3")
-        .collect();
+    let i =
+        (0..ph.num_rows()).find(|&i| qp[i] == "leaf_off" && qw[i] == "int" && qa[i] == "a3" && qk[i] == 90.0).unwrap();
+    let rs: Vec<&Row> =
+        rows.iter().filter(|r| r.phenology == "leaf_off" && r.weighting == "int" && r.algorithm == "a3").collect();
     let direct = rs.iter().map(|r| r.yhat[90] - r.y[90]).sum::<f64>() / rs.len() as f64;
     assert!((qb[i] - direct).abs() < 1e-9);
     // The planted leaf-off effect (real RH 1 m lower) makes leaf-off bias higher than leaf-on.
-    let on = (0..ph.num_rows())
-        .find(|&i| qp[i] == "leaf_on" && qw[i] == "int" && qa[i] == "a3" && qk[i] == 90.0)
-        .unwrap();
-    assert!(
-        qb[i] - qb[on] > 0.5,
-        "leaf-off {} leaf-on {}",
-        qb[i],
-        qb[on]
-    );
+    let on =
+        (0..ph.num_rows()).find(|&i| qp[i] == "leaf_on" && qw[i] == "int" && qa[i] == "a3" && qk[i] == 90.0).unwrap();
+    assert!(qb[i] - qb[on] > 0.5, "leaf-off {} leaf-on {}", qb[i], qb[on]);
 
     // dataset summary: shot counts, leaf-off share, a1 share.
     let ds_sum = study::read(&out.join("dataset_summary.parquet"));
-    let (sf, sbt, sn) = (
-        s(&ds_sum, "forest_type"),
-        s(&ds_sum, "beam_type"),
-        f(&ds_sum, "n_shots"),
-    );
+    let (sf, sbt, sn) = (s(&ds_sum, "forest_type"), s(&ds_sum, "beam_type"), f(&ds_sum, "n_shots"));
     let (leaf, a1) = (f(&ds_sum, "leaf_off_pct"), f(&ds_sum, "a1_selected_pct"));
-    let total = (0..ds_sum.num_rows())
-        .find(|&i| sf[i] == "all" && sbt[i] == "all")
-        .unwrap();
+    let total = (0..ds_sum.num_rows()).find(|&i| sf[i] == "all" && sbt[i] == "all").unwrap();
     assert_eq!(sn[total] as usize, N_SHOTS);
-    assert!(
-        (leaf[total] - 50.0).abs() < 1e-9,
-        "leaf-off share among known: {}",
-        leaf[total]
-    );
-    assert!(
-        (a1[total] - 80.0).abs() < 1e-9,
-        "a1 selected: {}",
-        a1[total]
-    );
-    let mixed: f64 = (0..ds_sum.num_rows())
-        .filter(|&i| sf[i] == "mixed" && sbt[i] != "all")
-        .map(|i| sn[i])
-        .sum();
-    assert_eq!(
-        mixed as usize,
-        (0..N_SHOTS).filter(|i| i % 9 != 0 && i % 4 == 2).count()
-    );
+    assert!((leaf[total] - 50.0).abs() < 1e-9, "leaf-off share among known: {}", leaf[total]);
+    assert!((a1[total] - 80.0).abs() < 1e-9, "a1 selected: {}", a1[total]);
+    let mixed: f64 = (0..ds_sum.num_rows()).filter(|&i| sf[i] == "mixed" && sbt[i] != "all").map(|i| sn[i]).sum();
+    assert_eq!(mixed as usize, (0..N_SHOTS).filter(|i| i % 9 != 0 && i % 4 == 2).count());
 
     // collocation tables from offsets.
     let col = study::read(&out.join("collocation.parquet"));
     let (cl, cb, cn) = (s(&col, "level"), s(&col, "beam"), f(&col, "n_segments"));
-    let all = (0..col.num_rows())
-        .find(|&i| cl[i] == "beam" && cb[i] == "all")
-        .unwrap();
+    let all = (0..col.num_rows()).find(|&i| cl[i] == "beam" && cb[i] == "all").unwrap();
     assert_eq!(cn[all], 12.0);
     assert!(f(&col, "mean_gain")[all] > 0.0);
-    assert_eq!(
-        study::read(&out.join("collocation_segments.parquet")).num_rows(),
-        12
-    );
+    assert_eq!(study::read(&out.join("collocation_segments.parquet")).num_rows(), 12);
 
     // Waveform examples: 3 shots × (GEDI + 3 weightings).
     let wf = study::read(&out.join("waveform_examples.parquet"));
     assert_eq!(wf.num_rows(), 12);
     let sources: std::collections::BTreeSet<String> = s(&wf, "source").into_iter().collect();
-    assert_eq!(
-        sources.into_iter().collect::<Vec<_>>(),
-        ["count", "frac", "gedi", "int"]
-    );
+    assert_eq!(sources.into_iter().collect::<Vec<_>>(), ["count", "frac", "gedi", "int"]);
 
     // Every table also as CSV with the same rows (header + rows).
     for (name, n) in &summary.tables {
@@ -424,24 +295,12 @@ fn figures_html_and_geoparquet() {
             std::fs::copy(e.path(), keep.join(e.file_name())).unwrap();
         }
     }
-    for name in [
-        "msd_bars",
-        "bias_profiles",
-        "phenology",
-        "collocation",
-        "waveforms",
-    ] {
+    for name in ["msd_bars", "bias_profiles", "phenology", "collocation", "waveforms"] {
         let png = out.join(format!("{name}.png"));
-        let decoder =
-            png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
+        let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
         let reader = decoder.read_info().unwrap();
         let info = reader.info();
-        assert!(
-            info.width >= 600 && info.height >= 300,
-            "{name}: {}×{}",
-            info.width,
-            info.height
-        );
+        assert!(info.width >= 600 && info.height >= 300, "{name}: {}×{}", info.width, info.height);
         let svg = std::fs::read_to_string(out.join(format!("{name}.svg"))).unwrap();
         assert!(svg.starts_with("<svg") && svg.contains("</svg>"), "{name}");
         assert!(
@@ -451,57 +310,28 @@ fn figures_html_and_geoparquet() {
     }
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert_eq!(html.matches("data:image/png;base64,").count(), 5);
-    for t in [
-        "ground_detection",
-        "msd",
-        "bias_summary",
-        "phenology",
-        "dataset_summary",
-        "collocation",
-    ] {
+    for t in ["ground_detection", "msd", "bias_summary", "phenology", "dataset_summary", "collocation"] {
         assert!(html.contains(&format!("href=\"{t}.csv\"")), "{t}");
     }
-    assert!(
-        !html.contains("src=\"http"),
-        "readable offline: nothing fetched"
-    );
+    assert!(!html.contains("src=\"http"), "readable offline: nothing fetched");
 
     // GeoParquet: `geo` metadata, WKB points at the shots' positions, bbox covering, all rows.
     for (table, rows) in [("shots", N_SHOTS), ("results", N_SHOTS * 21)] {
         let path = out.join(format!("{table}.geoparquet"));
         let file = std::fs::File::open(&path).unwrap();
-        let builder =
-            parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap();
-        let kv = builder
-            .metadata()
-            .file_metadata()
-            .key_value_metadata()
-            .unwrap()
-            .clone();
-        let geo = kv
-            .iter()
-            .find(|k| k.key == "geo")
-            .and_then(|k| k.value.clone())
-            .expect("geo metadata");
+        let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap();
+        let kv = builder.metadata().file_metadata().key_value_metadata().unwrap().clone();
+        let geo = kv.iter().find(|k| k.key == "geo").and_then(|k| k.value.clone()).expect("geo metadata");
         let geo: serde_json::Value = serde_json::from_str(&geo).unwrap();
         assert_eq!(geo["version"], "1.1.0");
         assert_eq!(geo["columns"]["geometry"]["encoding"], "WKB");
-        assert_eq!(
-            geo["columns"]["geometry"]["covering"]["bbox"]["ymax"][1],
-            "ymax"
-        );
+        assert_eq!(geo["columns"]["geometry"]["covering"]["bbox"]["ymax"][1], "ymax");
         let b = study::read(&path);
         assert_eq!(b.num_rows(), rows, "{table}");
-        let sn = b
-            .column_by_name("shot_number")
-            .unwrap()
-            .as_primitive::<UInt64Type>();
+        let sn = b.column_by_name("shot_number").unwrap().as_primitive::<UInt64Type>();
         let wkb = b.column_by_name("geometry").unwrap().as_binary::<i32>();
         let bbox = b.column_by_name("bbox").unwrap().as_struct();
-        let xmin = bbox
-            .column_by_name("xmin")
-            .unwrap()
-            .as_primitive::<Float64Type>();
+        let xmin = bbox.column_by_name("xmin").unwrap().as_primitive::<Float64Type>();
         for i in [0, rows - 1] {
             let shot = (sn.value(i) - study::FIRST_SHOT) as f64;
             let g = wkb.value(i);
@@ -542,16 +372,9 @@ fn figures_html_and_geoparquet() {
     assert!(!ok && err.contains("--table sim"), "{err}");
 
     // `gedisim sql` still works on a dataset holding a report (report/ is not a table).
-    let (ok, out_sql, err) = common::gedisim(&[
-        "sql",
-        "--dataset",
-        ds.root().to_str().unwrap(),
-        "select count(*) as n from results",
-    ]);
-    assert!(
-        ok && out_sql.contains(&format!("{}", N_SHOTS * 21)),
-        "{err}"
-    );
+    let (ok, out_sql, err) =
+        common::gedisim(&["sql", "--dataset", ds.root().to_str().unwrap(), "select count(*) as n from results"]);
+    assert!(ok && out_sql.contains(&format!("{}", N_SHOTS * 21)), "{err}");
 }
 
 #[test]
@@ -572,20 +395,14 @@ fn results_alone_skips_what_needs_other_tables() {
     assert!(out.join("msd.parquet").exists() && out.join("report.html").exists());
     assert!(summary.geoparquet.is_empty());
     assert!(
-        summary
-            .figure_notes
-            .iter()
-            .any(|n| n.contains("phenology") && n.contains("unknown")),
+        summary.figure_notes.iter().any(|n| n.contains("phenology") && n.contains("unknown")),
         "{:?}",
         summary.figure_notes
     );
     let ph = study::read(&out.join("phenology.parquet"));
     assert!(s(&ph, "phenology").iter().all(|p| p == "unknown"));
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
-    assert!(
-        html.contains("no offsets table"),
-        "the page says why a table is missing"
-    );
+    assert!(html.contains("no offsets table"), "the page says why a table is missing");
 }
 
 #[test]
@@ -595,14 +412,7 @@ fn no_results_table_is_a_one_line_error() {
     let (ok, _, err) = common::gedisim(&["report", "--dataset", ds.root().to_str().unwrap()]);
     assert!(!ok);
     assert_eq!(err.trim().lines().count(), 1, "{err}");
-    assert!(
-        err.contains("results") && err.contains("gedisim run"),
-        "{err}"
-    );
-    let (ok, _, err) = common::gedisim(&[
-        "report",
-        "--dataset",
-        dir.path().join("nope").to_str().unwrap(),
-    ]);
+    assert!(err.contains("results") && err.contains("gedisim run"), "{err}");
+    let (ok, _, err) = common::gedisim(&["report", "--dataset", dir.path().join("nope").to_str().unwrap()]);
     assert!(!ok && err.contains("nope"), "{err}");
 }

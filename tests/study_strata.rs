@@ -39,18 +39,10 @@ fn dataset_with_shots(dir: &Path) -> Dataset {
         f("lat_lastbin"),
         f("lon_lastbin"),
     ]));
-    let lowest = |i: usize, lat: bool| {
-        if i == 0 {
-            None
-        } else {
-            SHOTS[i].1.map(|(lo, la)| if lat { la } else { lo })
-        }
-    };
-    let bin =
-        |i: usize, lat: bool, d: f64| SHOTS[i].1.map(|(lo, la)| if lat { la + d } else { lo + d });
+    let lowest = |i: usize, lat: bool| if i == 0 { None } else { SHOTS[i].1.map(|(lo, la)| if lat { la } else { lo }) };
+    let bin = |i: usize, lat: bool, d: f64| SHOTS[i].1.map(|(lo, la)| if lat { la + d } else { lo + d });
     let n = SHOTS.len();
-    let col =
-        |g: &dyn Fn(usize) -> Option<f64>| Arc::new((0..n).map(g).collect::<Float64Array>()) as _;
+    let col = |g: &dyn Fn(usize) -> Option<f64>| Arc::new((0..n).map(g).collect::<Float64Array>()) as _;
     let batch = RecordBatch::try_new(
         schema.clone(),
         vec![
@@ -64,13 +56,7 @@ fn dataset_with_shots(dir: &Path) -> Dataset {
         ],
     )
     .unwrap();
-    write_parquet(
-        &ds.table_file("shots", "s").unwrap(),
-        schema,
-        &[batch],
-        &Default::default(),
-    )
-    .unwrap();
+    write_parquet(&ds.table_file("shots", "s").unwrap(), schema, &[batch], &Default::default()).unwrap();
     ds
 }
 
@@ -82,10 +68,7 @@ type Layout = ((f64, f64), Vec<Option<(u32, u32)>>);
 fn layout() -> Layout {
     let p = Projector::new(3035).unwrap();
     let (sx, sy) = p.project(5.0, 45.0).unwrap();
-    let (x0, y0) = (
-        (sx / 100.0).floor() * 100.0 - 500.0,
-        (sy / 100.0).ceil() * 100.0 + 500.0,
-    );
+    let (x0, y0) = ((sx / 100.0).floor() * 100.0 - 500.0, (sy / 100.0).ceil() * 100.0 + 500.0);
     let pixels = SHOTS
         .iter()
         .map(|(_, pos)| {
@@ -112,16 +95,10 @@ fn write_grid_tiff(path: &Path, values: &[u8], fill: u8, geokeys: Option<&[u16]>
     let mut enc = TiffEncoder::new(std::fs::File::create(path).unwrap()).unwrap();
     let mut img = enc.new_image::<colortype::Gray8>(40, 30).unwrap();
     img.rows_per_strip(4).unwrap(); // several strips: only those holding a shot are decoded
-    img.encoder()
-        .write_tag(Tag::ModelPixelScaleTag, &[100.0f64, 100.0, 0.0][..])
-        .unwrap();
-    img.encoder()
-        .write_tag(Tag::ModelTiepointTag, &[0.0f64, 0.0, 0.0, x0, y0, 0.0][..])
-        .unwrap();
+    img.encoder().write_tag(Tag::ModelPixelScaleTag, &[100.0f64, 100.0, 0.0][..]).unwrap();
+    img.encoder().write_tag(Tag::ModelTiepointTag, &[0.0f64, 0.0, 0.0, x0, y0, 0.0][..]).unwrap();
     if let Some(keys) = geokeys {
-        img.encoder()
-            .write_tag(Tag::GeoKeyDirectoryTag, keys)
-            .unwrap();
+        img.encoder().write_tag(Tag::GeoKeyDirectoryTag, keys).unwrap();
     }
     img.encoder().write_tag(Tag::GdalNodata, "48").unwrap();
     img.write_data(&data).unwrap();
@@ -129,12 +106,10 @@ fn write_grid_tiff(path: &Path, values: &[u8], fill: u8, geokeys: Option<&[u16]>
 
 fn read_strata(ds: &Dataset) -> Vec<(u64, String, String, Option<u16>)> {
     let f = ds.table_file("strata", "strata").unwrap();
-    let r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(
-        std::fs::File::open(f).unwrap(),
-    )
-    .unwrap()
-    .build()
-    .unwrap();
+    let r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(std::fs::File::open(f).unwrap())
+        .unwrap()
+        .build()
+        .unwrap();
     let mut out = Vec::new();
     for b in r {
         let b = b.unwrap();
@@ -161,13 +136,7 @@ fn grid_code_raster_gives_forest_types_and_unknown_outside() {
     // The five positioned shots near (5°E, 45°N) fall in five different pixels of the raster.
     let inside: Vec<_> = pixels.iter().flatten().collect();
     assert_eq!(inside.len(), 5, "{pixels:?}");
-    assert!(
-        inside
-            .iter()
-            .collect::<std::collections::HashSet<_>>()
-            .len()
-            == 5
-    );
+    assert!(inside.iter().collect::<std::collections::HashSet<_>>().len() == 5);
 
     let dir = tempfile::tempdir().unwrap();
     let ds = dataset_with_shots(&dir.path().join("ds"));
@@ -184,23 +153,9 @@ fn grid_code_raster_gives_forest_types_and_unknown_outside() {
     assert_eq!((report.rows, report.outside, report.no_position), (7, 1, 1));
     let got = read_strata(&ds);
     let types: Vec<&str> = got.iter().map(|r| r.1.as_str()).collect();
-    assert_eq!(
-        types,
-        [
-            "broadleaf",
-            "coniferous",
-            "mixed",
-            "other",
-            "unknown",
-            "unknown",
-            "unknown"
-        ]
-    );
+    assert_eq!(types, ["broadleaf", "coniferous", "mixed", "other", "unknown", "unknown", "unknown"]);
     let codes: Vec<Option<u16>> = got.iter().map(|r| r.3).collect();
-    assert_eq!(
-        codes,
-        [Some(311), Some(312), Some(313), Some(211), None, None, None]
-    );
+    assert_eq!(codes, [Some(311), Some(312), Some(313), Some(211), None, None, None]);
     assert!(got.iter().all(|r| r.2 == "clc:clc.tif"));
 
     // Re-running replaces the table (atomically) rather than appending.
@@ -221,67 +176,34 @@ fn sixteen_bit_raster_holds_clc_codes() {
     let tif = dir.path().join("clc16.tiff");
     let mut enc = TiffEncoder::new(std::fs::File::create(&tif).unwrap()).unwrap();
     let mut img = enc.new_image::<colortype::Gray16>(40, 30).unwrap();
-    img.encoder()
-        .write_tag(Tag::ModelPixelScaleTag, &[100.0f64, 100.0, 0.0][..])
-        .unwrap();
-    img.encoder()
-        .write_tag(Tag::ModelTiepointTag, &[0.0f64, 0.0, 0.0, x0, y0, 0.0][..])
-        .unwrap();
-    img.encoder()
-        .write_tag(Tag::GeoKeyDirectoryTag, &GEOKEYS_3035[..])
-        .unwrap();
+    img.encoder().write_tag(Tag::ModelPixelScaleTag, &[100.0f64, 100.0, 0.0][..]).unwrap();
+    img.encoder().write_tag(Tag::ModelTiepointTag, &[0.0f64, 0.0, 0.0, x0, y0, 0.0][..]).unwrap();
+    img.encoder().write_tag(Tag::GeoKeyDirectoryTag, &GEOKEYS_3035[..]).unwrap();
     img.write_data(&data).unwrap();
     ingest_strata(&ds, &tif, &|_, _| {}).unwrap();
     let types: Vec<String> = read_strata(&ds).into_iter().map(|r| r.1).collect();
-    assert_eq!(
-        types,
-        [
-            "mixed",
-            "coniferous",
-            "broadleaf",
-            "other",
-            "other",
-            "unknown",
-            "unknown"
-        ]
-    );
+    assert_eq!(types, ["mixed", "coniferous", "broadleaf", "other", "other", "unknown", "unknown"]);
 }
 
 #[test]
 fn wrong_or_missing_crs_is_a_one_line_error_naming_file_and_field() {
     let dir = tempfile::tempdir().unwrap();
     let ds = dataset_with_shots(&dir.path().join("ds"));
-    let lambert = [
-        1u16, 1, 0, 3, 1024, 0, 1, 1, 1025, 0, 1, 1, 3072, 0, 1, 2154,
-    ];
+    let lambert = [1u16, 1, 0, 3, 1024, 0, 1, 1, 1025, 0, 1, 1, 3072, 0, 1, 2154];
     let tif = dir.path().join("lambert93.tif");
     write_grid_tiff(&tif, &[23; 7], 12, Some(&lambert));
-    let e = ingest_strata(&ds, &tif, &|_, _| {})
-        .unwrap_err()
-        .to_string();
-    assert!(
-        e.contains("lambert93.tif")
-            && e.contains("ProjectedCSTypeGeoKey")
-            && e.contains("EPSG:2154"),
-        "{e}"
-    );
+    let e = ingest_strata(&ds, &tif, &|_, _| {}).unwrap_err().to_string();
+    assert!(e.contains("lambert93.tif") && e.contains("ProjectedCSTypeGeoKey") && e.contains("EPSG:2154"), "{e}");
     assert!(!e.contains('\n'));
 
     let plain = dir.path().join("plain.tif");
     write_grid_tiff(&plain, &[23; 7], 12, None);
-    let e = ingest_strata(&ds, &plain, &|_, _| {})
-        .unwrap_err()
-        .to_string();
-    assert!(
-        e.contains("plain.tif") && e.contains("GeoKeyDirectory"),
-        "{e}"
-    );
+    let e = ingest_strata(&ds, &plain, &|_, _| {}).unwrap_err().to_string();
+    assert!(e.contains("plain.tif") && e.contains("GeoKeyDirectory"), "{e}");
 
     let junk = dir.path().join("junk.tif");
     std::fs::write(&junk, b"not a tiff").unwrap();
-    let e = ingest_strata(&ds, &junk, &|_, _| {})
-        .unwrap_err()
-        .to_string();
+    let e = ingest_strata(&ds, &junk, &|_, _| {}).unwrap_err().to_string();
     assert!(e.contains("junk.tif"), "{e}");
 
     // Nothing was written by the failed runs.
@@ -323,52 +245,27 @@ fn csv_strata_and_its_errors() {
     assert!(err.contains("not in the dataset"), "{err}");
     let got = read_strata(&ds);
     assert_eq!(got.len(), 3);
-    assert_eq!(
-        (got[0].0, got[0].1.as_str(), got[0].2.as_str()),
-        (42, "mixed", "csv:types.csv")
-    );
-    assert_eq!(
-        (got[1].0, got[1].1.as_str()),
-        (19640513500108370, "broadleaf")
-    );
-    assert_eq!(
-        (got[2].0, got[2].1.as_str()),
-        (19640513500108371, "coniferous")
-    );
+    assert_eq!((got[0].0, got[0].1.as_str(), got[0].2.as_str()), (42, "mixed", "csv:types.csv"));
+    assert_eq!((got[1].0, got[1].1.as_str()), (19640513500108370, "broadleaf"));
+    assert_eq!((got[2].0, got[2].1.as_str()), (19640513500108371, "coniferous"));
 
     let cases: [(&str, &[&str]); 5] = [
-        (
-            "shot_number,type\n1,mixed\n",
-            &["forest_type", "missing column"],
-        ),
+        ("shot_number,type\n1,mixed\n", &["forest_type", "missing column"]),
         ("forest_type\nmixed\n", &["shot_number", "missing column"]),
-        (
-            "shot_number,forest_type\n1,pine\n",
-            &["line 2: forest_type", "pine"],
-        ),
-        (
-            "shot_number,forest_type\n1.5e3,mixed\n",
-            &["line 2: shot_number"],
-        ),
-        (
-            "shot_number,forest_type\n1,mixed\n1,other\n",
-            &["line 3: shot_number", "twice"],
-        ),
+        ("shot_number,forest_type\n1,pine\n", &["line 2: forest_type", "pine"]),
+        ("shot_number,forest_type\n1.5e3,mixed\n", &["line 2: shot_number"]),
+        ("shot_number,forest_type\n1,mixed\n1,other\n", &["line 3: shot_number", "twice"]),
     ];
     for (text, needles) in cases {
         let bad = dir.path().join("bad.csv");
         std::fs::write(&bad, text).unwrap();
-        let e = ingest_strata(&ds, &bad, &|_, _| {})
-            .unwrap_err()
-            .to_string();
+        let e = ingest_strata(&ds, &bad, &|_, _| {}).unwrap_err().to_string();
         assert!(e.contains("bad.csv"), "{e}");
         for n in needles {
             assert!(e.contains(n), "{text:?}: {e}");
         }
     }
-    let e = ingest_strata(&ds, &dir.path().join("x.shp"), &|_, _| {})
-        .unwrap_err()
-        .to_string();
+    let e = ingest_strata(&ds, &dir.path().join("x.shp"), &|_, _| {}).unwrap_err().to_string();
     assert!(e.contains("x.shp") && e.contains("GeoTIFF"), "{e}");
 }
 
@@ -403,14 +300,8 @@ fn write_tiled_tiff(path: &Path, data: &[u8], (x0, y0): (f64, f64)) {
         at
     };
     let n_tiles = tiles.len() as u32;
-    let scale: Vec<u8> = [100.0f64, 100.0, 0.0]
-        .iter()
-        .flat_map(|v| v.to_le_bytes())
-        .collect();
-    let tie: Vec<u8> = [0.0f64, 0.0, 0.0, x0, y0, 0.0]
-        .iter()
-        .flat_map(|v| v.to_le_bytes())
-        .collect();
+    let scale: Vec<u8> = [100.0f64, 100.0, 0.0].iter().flat_map(|v| v.to_le_bytes()).collect();
+    let tie: Vec<u8> = [0.0f64, 0.0, 0.0, x0, y0, 0.0].iter().flat_map(|v| v.to_le_bytes()).collect();
     let keys: Vec<u8> = GEOKEYS_3035.iter().flat_map(|v| v.to_le_bytes()).collect();
     let scale_at = put(&scale);
     let tie_at = put(&tie);
@@ -470,9 +361,7 @@ fn tiled_raster_including_edge_tiles() {
     let ((x0, y0), pixels) = layout();
     // Every pixel gets a value from its position, so a wrong offset inside a tile shows.
     let grid = |c: u32, r: u32| [23u8, 24, 25, 12, 1][((c * 7 + r * 3) % 5) as usize];
-    let data: Vec<u8> = (0..30)
-        .flat_map(|r| (0..40).map(move |c| grid(c, r)))
-        .collect();
+    let data: Vec<u8> = (0..30).flat_map(|r| (0..40).map(move |c| grid(c, r))).collect();
     let dir = tempfile::tempdir().unwrap();
     let ds = dataset_with_shots(&dir.path().join("ds"));
     let tif = dir.path().join("tiled.tif");
@@ -492,9 +381,7 @@ fn tiled_raster_including_edge_tiles() {
     // Every pixel centre, including those of the partial right-hand and bottom tiles.
     let mut raster = gedisim::ingest::strata::LandCoverRaster::open(&tif).unwrap();
     let centres: Vec<(f64, f64)> = (0..30)
-        .flat_map(|r| {
-            (0..40).map(move |c| (x0 + 100.0 * c as f64 + 50.0, y0 - 100.0 * r as f64 - 50.0))
-        })
+        .flat_map(|r| (0..40).map(move |c| (x0 + 100.0 * c as f64 + 50.0, y0 - 100.0 * r as f64 - 50.0)))
         .collect();
     let samples = raster.sample_xy(&centres, &|_| {}).unwrap();
     let clc = |v: u8| gedisim::study::classes::clc_code_of_grid_code(v as u16).unwrap();
@@ -502,8 +389,6 @@ fn tiled_raster_including_edge_tiles() {
         let (c, r) = ((k % 40) as u32, (k / 40) as u32);
         assert_eq!(*s, PixelSample::Clc(clc(grid(c, r))), "pixel ({c}, {r})");
     }
-    let outside = raster
-        .sample_xy(&[(x0 - 1.0, y0 - 1.0), (x0 + 4000.5, y0 - 10.0)], &|_| {})
-        .unwrap();
+    let outside = raster.sample_xy(&[(x0 - 1.0, y0 - 1.0), (x0 + 4000.5, y0 - 10.0)], &|_| {}).unwrap();
     assert_eq!(outside, [PixelSample::Outside, PixelSample::Outside]);
 }

@@ -10,28 +10,15 @@ use std::time::Instant;
 
 /// Run the `gedisim` binary of this build and return its stdout (panics with its stderr on failure).
 pub fn run(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_gedisim"))
-        .args(args)
-        .output()
-        .expect("run gedisim");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = Command::new(env!("CARGO_BIN_EXE_gedisim")).args(args).output().expect("run gedisim");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
 /// The number printed just before `suffix` (e.g. "12.3" before " s,").
 pub fn field(line: &str, suffix: &str) -> f64 {
     let end = line.find(suffix).expect("figure in output");
-    line[..end]
-        .trim_end()
-        .rsplit(' ')
-        .next()
-        .unwrap()
-        .parse()
-        .expect("number")
+    line[..end].trim_end().rsplit(' ').next().unwrap().parse().expect("number")
 }
 
 /// The 25 M-point scene as LAZ, generated on first use.
@@ -43,18 +30,8 @@ pub fn scene_25m(root: &Path) -> PathBuf {
         return path;
     }
     let start = Instant::now();
-    let n = scene::replicated_tile(
-        &root.join("tests/data/als/lidarforfuel_2_bas_lig.laz"),
-        10,
-        10,
-        100.0,
-        &path,
-    );
-    println!(
-        "generated {} ({n} points) in {:.1} s",
-        path.display(),
-        start.elapsed().as_secs_f64()
-    );
+    let n = scene::replicated_tile(&root.join("tests/data/als/lidarforfuel_2_bas_lig.laz"), 10, 10, 100.0, &path);
+    println!("generated {} ({n} points) in {:.1} s", path.display(), start.elapsed().as_secs_f64());
     path
 }
 

@@ -24,10 +24,7 @@ pub struct LagWindow {
 impl LagWindow {
     /// The lags `centre − half … centre + half`.
     pub fn around(centre: i64, half: usize) -> LagWindow {
-        LagWindow {
-            first: centre - half as i64,
-            len: 2 * half + 1,
-        }
+        LagWindow { first: centre - half as i64, len: 2 * half + 1 }
     }
 
     /// Lag of index `i`.
@@ -63,9 +60,7 @@ impl SimulatedProfiles {
                 continue;
             }
             let first = (0..rows).find(|&r| waves.values[r * n + c] as f64 > thr);
-            let last = (0..rows)
-                .rev()
-                .find(|&r| waves.values[r * n + c] as f64 > thr);
+            let last = (0..rows).rev().find(|&r| waves.values[r * n + c] as f64 > thr);
             if let (Some(f), Some(l)) = (first, last) {
                 *e = Some((f, l));
             }
@@ -85,16 +80,8 @@ impl SimulatedProfiles {
             }
         }
         let first_bin = waves.first_bin;
-        let extent = extent
-            .into_iter()
-            .map(|e| e.map(|(f, l)| (first_bin + f as i64, first_bin + l as i64)))
-            .collect();
-        SimulatedProfiles {
-            waves,
-            extent,
-            sum,
-            sum_sq,
-        }
+        let extent = extent.into_iter().map(|e| e.map(|(f, l)| (first_bin + f as i64, first_bin + l as i64))).collect();
+        SimulatedProfiles { waves, extent, sum, sum_sq }
     }
 
     /// Number of offsets.
@@ -139,8 +126,7 @@ impl SimulatedProfiles {
         let mut r = vec![0f32; n * window.len];
         for c in 0..n {
             for li in 0..window.len {
-                r[c * window.len + li] =
-                    self.pearson(real, c, window.lag(li), cross[li * n + c] as f64) as f32;
+                r[c * window.len + li] = self.pearson(real, c, window.lag(li), cross[li * n + c] as f64) as f32;
             }
         }
         r
@@ -162,9 +148,7 @@ impl SimulatedProfiles {
 
     /// r from the cross sum at `lag` (0 for an empty simulated waveform or a constant window).
     fn pearson(&self, real: &GridProfile, c: usize, lag: i64, cross: f64) -> f64 {
-        let Some((s0, s1)) = self.extent[c] else {
-            return 0.0;
-        };
+        let Some((s0, s1)) = self.extent[c] else { return 0.0 };
         let (a0, a1) = (real.first_bin - lag, real.last_bin() - lag);
         let len = (a1.max(s1) - a0.min(s0) + 1) as f64;
         let (sa, sb) = (real.sum, self.sum[c]);
@@ -210,21 +194,8 @@ mod tests {
     #[test]
     fn lagged_r_is_the_pearson_r_on_the_union_window() {
         // One offset; simulated bump at bins 100..110, real bump at bins 103..115.
-        let sim: Vec<f32> = (0..40)
-            .map(|r| {
-                if (10..20).contains(&r) {
-                    1.0 + (r as f32 - 14.0).abs()
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        let waves = OffsetWaves {
-            first_bin: 90,
-            dz: 0.15,
-            n_offsets: 1,
-            values: sim.clone(),
-        };
+        let sim: Vec<f32> = (0..40).map(|r| if (10..20).contains(&r) { 1.0 + (r as f32 - 14.0).abs() } else { 0.0 }).collect();
+        let waves = OffsetWaves { first_bin: 90, dz: 0.15, n_offsets: 1, values: sim.clone() };
         let p = SimulatedProfiles::new(waves);
         let real_vals: Vec<f64> = (0..12).map(|k| 1.0 + ((k * 7) % 5) as f64).collect();
         let real = GridProfile::from_bins(103, &real_vals).unwrap();
@@ -237,28 +208,12 @@ mod tests {
             let a: Vec<f64> = (lo..=hi)
                 .map(|m| {
                     let k = m + lag - 103;
-                    if (0..12).contains(&k) {
-                        real.values[k as usize] as f64
-                    } else {
-                        0.0
-                    }
+                    if (0..12).contains(&k) { real.values[k as usize] as f64 } else { 0.0 }
                 })
                 .collect();
-            let b: Vec<f64> = (lo..=hi)
-                .map(|m| {
-                    if (90..130).contains(&m) {
-                        sim[(m - 90) as usize] as f64
-                    } else {
-                        0.0
-                    }
-                })
-                .collect();
+            let b: Vec<f64> = (lo..=hi).map(|m| if (90..130).contains(&m) { sim[(m - 90) as usize] as f64 } else { 0.0 }).collect();
             let want = pearson(&a, &b);
-            assert!(
-                (r[li] as f64 - want).abs() < 1e-5,
-                "lag {lag}: {} vs {want}",
-                r[li]
-            );
+            assert!((r[li] as f64 - want).abs() < 1e-5, "lag {lag}: {} vs {want}", r[li]);
             assert!((p.correlate_one(&real, 0, lag) - want).abs() < 1e-9);
         }
     }

@@ -47,15 +47,11 @@ impl OffsetGrid {
     /// 101 offsets per axis (a shot's raster holds every offset: 101² × its bins).
     pub fn new(max_shift: f64, step: f64) -> Result<OffsetGrid> {
         if !(step > 0.0) || !step.is_finite() || !(max_shift >= 0.0) || !max_shift.is_finite() {
-            return Err(Error::Usage(format!(
-                "--max-shift {max_shift} / --step {step}: need a shift ≥ 0 and a step > 0"
-            )));
+            return Err(Error::Usage(format!("--max-shift {max_shift} / --step {step}: need a shift ≥ 0 and a step > 0")));
         }
         let half = (max_shift / step + 1e-9).floor() as usize;
         if half > 50 {
-            return Err(Error::Usage(format!(
-                "--max-shift {max_shift} / --step {step}: more than 101 offsets per axis"
-            )));
+            return Err(Error::Usage(format!("--max-shift {max_shift} / --step {step}: more than 101 offsets per axis")));
         }
         Ok(OffsetGrid { step, half })
     }
@@ -145,25 +141,13 @@ impl CollocateConfig {
     pub fn validate(&self) -> Result<()> {
         let m = &self.model;
         let q = m.quirks;
-        if m.normalise_density
-            || m.clean_outliers
-            || m.pulse_timing != crate::sim::PulseTiming::AfterBinning
-            || q.batch_grid
-            || q.divide_by_taps
-        {
+        if m.normalise_density || m.clean_outliers || m.pulse_timing != crate::sim::PulseTiming::AfterBinning || q.batch_grid || q.divide_by_taps {
             return Err(Error::Usage(
                 "collocation model: density normalisation, cleaning, pulse-before-binning, batch grids and tap division are not supported".into(),
             ));
         }
-        if !(m.fsigma > 0.0)
-            || !(m.res > 0.0)
-            || !(self.vertical_half_window >= 0.0)
-            || !(self.tolerance > 0.0)
-        {
-            return Err(Error::Usage(
-                "collocation model: σ_f, bin size, vertical window and tolerance must be positive"
-                    .into(),
-            ));
+        if !(m.fsigma > 0.0) || !(m.res > 0.0) || !(self.vertical_half_window >= 0.0) || !(self.tolerance > 0.0) {
+            return Err(Error::Usage("collocation model: σ_f, bin size, vertical window and tolerance must be positive".into()));
         }
         Ok(())
     }
@@ -267,10 +251,7 @@ pub fn collocate_unit<E>(
     points_for: &mut dyn FnMut(&[usize]) -> std::result::Result<PointCloud, E>,
     on_shot: &(dyn Fn() + Sync),
 ) -> std::result::Result<UnitResult, E> {
-    let mut wanted: Vec<usize> = plans
-        .iter()
-        .flat_map(|p| p.support.iter().copied())
-        .collect();
+    let mut wanted: Vec<usize> = plans.iter().flat_map(|p| p.support.iter().copied()).collect();
     wanted.sort_unstable();
     wanted.dedup();
     let zero = cfg.grid.zero_column();
@@ -281,19 +262,12 @@ pub fn collocate_unit<E>(
         let index = CellGrid::from_xy(&cloud.x, &cloud.y, INDEX_CELL);
         // One raster per shot (all offsets); its zero-offset column serves r_before and the coarse
         // vertical search, which the first sub-batch with usable shots settles for the unit.
-        let rasters: Vec<_> = chunk
-            .par_iter()
-            .map(|&s| rasterise(&shots[s], &cloud, &index, cfg))
-            .collect();
+        let rasters: Vec<_> = chunk.par_iter().map(|&s| rasterise(&shots[s], &cloud, &index, cfg)).collect();
         drop((cloud, index));
         if window.is_none() {
-            let usable: Vec<(&GridProfile, &SimulatedProfiles)> = chunk
-                .iter()
-                .zip(&rasters)
-                .filter_map(|(&s, r)| r.as_ref().ok().map(|p| (&shots[s].real, p)))
-                .collect();
-            window = coarse_lag(&usable, zero, cfg.model.res)
-                .map(|c| LagWindow::around(c, cfg.lag_half()));
+            let usable: Vec<(&GridProfile, &SimulatedProfiles)> =
+                chunk.iter().zip(&rasters).filter_map(|(&s, r)| r.as_ref().ok().map(|p| (&shots[s].real, p))).collect();
+            window = coarse_lag(&usable, zero, cfg.model.res).map(|c| LagWindow::around(c, cfg.lag_half()));
         }
         let outcomes: Vec<ShotOutcome> = chunk
             .par_iter()
@@ -313,10 +287,7 @@ pub fn collocate_unit<E>(
         }
     }
 
-    let skips: Vec<Option<ShotSkip>> = states
-        .iter()
-        .map(|st| st.as_ref().and_then(|o| o.as_ref().err().copied()))
-        .collect();
+    let skips: Vec<Option<ShotSkip>> = states.iter().map(|st| st.as_ref().and_then(|o| o.as_ref().err().copied())).collect();
     let mut solutions = Vec::with_capacity(plans.len());
     for plan in plans {
         let used: Vec<usize> = plan
@@ -352,10 +323,7 @@ pub fn collocate_unit<E>(
             for chunk in used.chunks(SUB_BATCH) {
                 let cloud = points_for(chunk)?;
                 let index = CellGrid::from_xy(&cloud.x, &cloud.y, INDEX_CELL);
-                let rs: Vec<Option<Vec<f32>>> = chunk
-                    .par_iter()
-                    .map(|&s| shot_surface(&shots[s], &cloud, &index, w, cfg))
-                    .collect();
+                let rs: Vec<Option<Vec<f32>>> = chunk.par_iter().map(|&s| shot_surface(&shots[s], &cloud, &index, w, cfg)).collect();
                 for r in rs.into_iter().flatten() {
                     surface.add(&r);
                 }
@@ -365,11 +333,7 @@ pub fn collocate_unit<E>(
                 None => break,
             }
         }
-        solutions.push(Some(SegmentSolution {
-            optimum,
-            r_before,
-            used,
-        }));
+        solutions.push(Some(SegmentSolution { optimum, r_before, used }));
     }
     Ok((solutions, skips))
 }
@@ -383,29 +347,16 @@ const INDEX_CELL: f64 = 5.0;
 /// of every shot. On a segment of one or two shots a free vertical offset trades off against the
 /// horizontal one on slopes; a vertical reference shared by all segments pins it. `None` when no
 /// shot can be rasterised.
-pub fn horizontal_offset_at(
-    shots: &[ShotInput],
-    cloud: &PointCloud,
-    cfg: &CollocateConfig,
-    dz: f64,
-) -> Option<(f64, f64)> {
+pub fn horizontal_offset_at(shots: &[ShotInput], cloud: &PointCloud, cfg: &CollocateConfig, dz: f64) -> Option<(f64, f64)> {
     let index = CellGrid::from_xy(&cloud.x, &cloud.y, INDEX_CELL);
     let lag = (dz / cfg.model.res).round() as i64;
     let n = cfg.grid.n();
     let rs: Vec<Vec<f64>> = shots
         .par_iter()
-        .filter_map(|s| {
-            rasterise(s, cloud, &index, cfg).ok().map(|p| {
-                (0..n * n)
-                    .map(|c| p.correlate_one(&s.real, c, lag))
-                    .collect()
-            })
-        })
+        .filter_map(|s| rasterise(s, cloud, &index, cfg).ok().map(|p| (0..n * n).map(|c| p.correlate_one(&s.real, c, lag)).collect()))
         .collect();
     let first = rs.first()?;
-    let sum: Vec<f64> = (0..first.len())
-        .map(|c| rs.iter().map(|r| r[c]).sum())
-        .collect();
+    let sum: Vec<f64> = (0..first.len()).map(|c| rs.iter().map(|r| r[c]).sum()).collect();
     let best = (0..sum.len()).max_by(|&a, &b| sum[a].total_cmp(&sum[b]))?;
     Some((cfg.grid.offset(best / n), cfg.grid.offset(best % n)))
 }
@@ -425,12 +376,7 @@ fn candidates(cloud: &PointCloud, index: &CellGrid, (x0, y0): (f64, f64), half: 
 }
 
 /// Coverage check and the raster of every offset of one shot, cut to the signal extents.
-fn rasterise(
-    shot: &ShotInput,
-    cloud: &PointCloud,
-    index: &CellGrid,
-    cfg: &CollocateConfig,
-) -> std::result::Result<SimulatedProfiles, ShotSkip> {
+fn rasterise(shot: &ShotInput, cloud: &PointCloud, index: &CellGrid, cfg: &CollocateConfig) -> std::result::Result<SimulatedProfiles, ShotSkip> {
     let centre = (shot.x, shot.y);
     let radius = cfg.model.fsigma as f64;
     let near = candidates(cloud, index, centre, radius);
@@ -439,10 +385,7 @@ fn rasterise(
         return Err(ShotSkip::PartlyCovered { covered_fraction });
     }
     let cand = candidates(cloud, index, centre, cfg.support_half_width());
-    let waves = offset_waves(
-        &cloud.x, &cloud.y, &cloud.z, &cand, centre, &cfg.grid, &cfg.model,
-    )
-    .map_err(|e| match e {
+    let waves = offset_waves(&cloud.x, &cloud.y, &cloud.z, &cand, centre, &cfg.grid, &cfg.model).map_err(|e| match e {
         RasterError::NoReturns => ShotSkip::NoPoints,
         RasterError::HeightRange => ShotSkip::HeightRange,
     })?;
@@ -454,19 +397,10 @@ fn rasterise(
 }
 
 /// r over every offset × lag of `window` for one shot (`None` when nothing contributes).
-fn shot_surface(
-    shot: &ShotInput,
-    cloud: &PointCloud,
-    index: &CellGrid,
-    window: LagWindow,
-    cfg: &CollocateConfig,
-) -> Option<Vec<f32>> {
+fn shot_surface(shot: &ShotInput, cloud: &PointCloud, index: &CellGrid, window: LagWindow, cfg: &CollocateConfig) -> Option<Vec<f32>> {
     let centre = (shot.x, shot.y);
     let cand = candidates(cloud, index, centre, cfg.support_half_width());
-    let waves = offset_waves(
-        &cloud.x, &cloud.y, &cloud.z, &cand, centre, &cfg.grid, &cfg.model,
-    )
-    .ok()?;
+    let waves = offset_waves(&cloud.x, &cloud.y, &cloud.z, &cand, centre, &cfg.grid, &cfg.model).ok()?;
     Some(SimulatedProfiles::new(waves).correlate(&shot.real, window))
 }
 
@@ -474,16 +408,10 @@ fn shot_surface(
 fn covered_fraction(cloud: &PointCloud, near: &[u32], centre: (f64, f64), radius: f64) -> f32 {
     const CELL: f64 = 1.5;
     let n = (2.0 * radius / CELL).ceil() as usize + 1;
-    let origin = (
-        centre.0 - n as f64 * CELL / 2.0,
-        centre.1 - n as f64 * CELL / 2.0,
-    );
+    let origin = (centre.0 - n as f64 * CELL / 2.0, centre.1 - n as f64 * CELL / 2.0);
     let mut hit = vec![false; n * n];
     for &i in near {
-        let (cx, cy) = (
-            ((cloud.x[i as usize] - origin.0) / CELL).floor(),
-            ((cloud.y[i as usize] - origin.1) / CELL).floor(),
-        );
+        let (cx, cy) = (((cloud.x[i as usize] - origin.0) / CELL).floor(), ((cloud.y[i as usize] - origin.1) / CELL).floor());
         if cx >= 0.0 && cy >= 0.0 && (cx as usize) < n && (cy as usize) < n {
             hit[cy as usize * n + cx as usize] = true;
         }
@@ -491,21 +419,14 @@ fn covered_fraction(cloud: &PointCloud, near: &[u32], centre: (f64, f64), radius
     let (mut within, mut covered) = (0u32, 0u32);
     for j in 0..n {
         for i in 0..n {
-            let (dx, dy) = (
-                origin.0 + (i as f64 + 0.5) * CELL - centre.0,
-                origin.1 + (j as f64 + 0.5) * CELL - centre.1,
-            );
+            let (dx, dy) = (origin.0 + (i as f64 + 0.5) * CELL - centre.0, origin.1 + (j as f64 + 0.5) * CELL - centre.1);
             if dx * dx + dy * dy < radius * radius {
                 within += 1;
                 covered += u32::from(hit[j * n + i]);
             }
         }
     }
-    if within == 0 {
-        1.0
-    } else {
-        covered as f32 / within as f32
-    }
+    if within == 0 { 1.0 } else { covered as f32 / within as f32 }
 }
 
 /// Largest vertical offset (m) the coarse search considers, either way: far beyond any datum gap
@@ -515,11 +436,7 @@ pub const MAX_VERTICAL_OFFSET_M: f64 = 1000.0;
 /// The vertical lag (bins of `dz`) maximising the summed r of the shots at offset `column` over
 /// every lag at which any of them overlaps its simulation (within ±[`MAX_VERTICAL_OFFSET_M`]): the
 /// coarse full-range vertical search.
-pub fn coarse_lag(
-    shots: &[(&GridProfile, &SimulatedProfiles)],
-    column: usize,
-    dz: f64,
-) -> Option<i64> {
+pub fn coarse_lag(shots: &[(&GridProfile, &SimulatedProfiles)], column: usize, dz: f64) -> Option<i64> {
     let limit = (MAX_VERTICAL_OFFSET_M / dz).ceil() as i64;
     let ranges: Vec<(i64, i64)> = shots
         .iter()
@@ -529,20 +446,14 @@ pub fn coarse_lag(
         .collect();
     let lo = ranges.iter().map(|r| r.0).min()?;
     let hi = ranges.iter().map(|r| r.1).max()?;
-    let window = LagWindow {
-        first: lo,
-        len: (hi - lo + 1) as usize,
-    };
+    let window = LagWindow { first: lo, len: (hi - lo + 1) as usize };
     let mut sum = vec![0f64; window.len];
     for (real, sim) in shots {
         for (s, li) in sum.iter_mut().zip(0..window.len) {
             *s += sim.correlate_one(real, column, window.lag(li));
         }
     }
-    let best = sum
-        .iter()
-        .enumerate()
-        .fold(0, |b, (i, &v)| if v > sum[b] { i } else { b });
+    let best = sum.iter().enumerate().fold(0, |b, (i, &v)| if v > sum[b] { i } else { b });
     Some(window.lag(best))
 }
 

@@ -34,18 +34,10 @@ impl GridProfile {
         let thr = EXTENT_FRACTION * total;
         let start = values.iter().position(|&v| v > thr)?;
         let end = values.iter().rposition(|&v| v > thr)?;
-        let kept: Vec<f32> = values[start..=end]
-            .iter()
-            .map(|&v| (v.max(0.0) / total) as f32)
-            .collect();
+        let kept: Vec<f32> = values[start..=end].iter().map(|&v| (v.max(0.0) / total) as f32).collect();
         let sum = kept.iter().map(|&v| v as f64).sum();
         let sum_sq = kept.iter().map(|&v| (v as f64) * (v as f64)).sum();
-        Some(GridProfile {
-            first_bin: first_bin + start as i64,
-            values: kept,
-            sum,
-            sum_sq,
-        })
+        Some(GridProfile { first_bin: first_bin + start as i64, values: kept, sum, sum_sq })
     }
 
     /// Absolute bin of the last value.
@@ -74,30 +66,18 @@ pub enum ProfileError {
 /// A received waveform (counts, top to bottom) whose first sample is at orthometric height
 /// `z_top` and last at `z_bottom` (m), denoised and resampled onto bins of `dz` (linear
 /// interpolation at the bin centres).
-pub fn real_profile(
-    samples: &[f32],
-    z_top: f64,
-    z_bottom: f64,
-    dz: f64,
-) -> Result<GridProfile, ProfileError> {
+pub fn real_profile(samples: &[f32], z_top: f64, z_bottom: f64, dz: f64) -> Result<GridProfile, ProfileError> {
     let n = samples.len();
     if n < 2 || !(z_top > z_bottom) || !z_top.is_finite() || !z_bottom.is_finite() || !(dz > 0.0) {
         return Err(ProfileError::BadGeometry);
     }
     let spacing = (z_top - z_bottom) / (n - 1) as f64;
-    let denoised = denoise_leading_noise(samples, spacing, LeadingNoiseDenoise::COLLOCATE)
-        .map_err(|e| match e {
-            DenoiseError::TooShort => ProfileError::TooShort,
-            DenoiseError::NonFinite => ProfileError::NonFinite,
-        })?;
-    let first = denoised
-        .iter()
-        .position(|&v| v > 0.0)
-        .ok_or(ProfileError::NoSignal)?;
-    let last = denoised
-        .iter()
-        .rposition(|&v| v > 0.0)
-        .ok_or(ProfileError::NoSignal)?;
+    let denoised = denoise_leading_noise(samples, spacing, LeadingNoiseDenoise::COLLOCATE).map_err(|e| match e {
+        DenoiseError::TooShort => ProfileError::TooShort,
+        DenoiseError::NonFinite => ProfileError::NonFinite,
+    })?;
+    let first = denoised.iter().position(|&v| v > 0.0).ok_or(ProfileError::NoSignal)?;
+    let last = denoised.iter().rposition(|&v| v > 0.0).ok_or(ProfileError::NoSignal)?;
     // Sample k sits at z_top − k·spacing; the signal spans samples first−1 … last+1 (zeros at
     // both ends make the interpolation fall to 0 there).
     let (k0, k1) = (first.saturating_sub(1), (last + 1).min(n - 1));
@@ -136,32 +116,12 @@ mod tests {
             })
             .collect();
         let p = real_profile(&wave, z(0), z(799), 0.15).unwrap();
-        let peak = p
-            .values
-            .iter()
-            .enumerate()
-            .max_by(|a, b| a.1.total_cmp(b.1))
-            .unwrap()
-            .0 as i64
-            + p.first_bin;
-        assert!(
-            ((peak as f64 + 0.5) * 0.15 - 150.0).abs() <= 0.15,
-            "peak bin {peak}"
-        );
+        let peak = p.values.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).unwrap().0 as i64 + p.first_bin;
+        assert!(((peak as f64 + 0.5) * 0.15 - 150.0).abs() <= 0.15, "peak bin {peak}");
         assert!((p.sum - 1.0).abs() < 1e-6);
-        assert!(
-            p.values.len() < 60,
-            "cut to the signal extent: {}",
-            p.values.len()
-        );
+        assert!(p.values.len() < 60, "cut to the signal extent: {}", p.values.len());
         let flat = vec![50f32; 800];
-        assert_eq!(
-            real_profile(&flat, z(0), z(799), 0.15),
-            Err(ProfileError::NoSignal)
-        );
-        assert_eq!(
-            real_profile(&wave, z(799), z(0), 0.15),
-            Err(ProfileError::BadGeometry)
-        );
+        assert_eq!(real_profile(&flat, z(0), z(799), 0.15), Err(ProfileError::NoSignal));
+        assert_eq!(real_profile(&wave, z(799), z(0), 0.15), Err(ProfileError::BadGeometry));
     }
 }

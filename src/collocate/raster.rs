@@ -41,12 +41,7 @@ impl OffsetWaves {
 
     /// The waveform of offset column `c`, bottom to top (row order).
     pub fn column(&self, c: usize) -> Vec<f32> {
-        self.values
-            .iter()
-            .skip(c)
-            .step_by(self.n_offsets)
-            .copied()
-            .collect()
+        self.values.iter().skip(c).step_by(self.n_offsets).copied().collect()
     }
 }
 
@@ -139,19 +134,14 @@ pub fn offset_waves(
     let r_cut_sq = r_cut * r_cut;
     let d_sq_max = contributing_d_sq_max(model.fsigma);
     let reach = r_cut + grid.max_offset();
-    let centres: Vec<(f64, f64)> = (0..n)
-        .map(|i| (x0 + grid.offset(i), y0 + grid.offset(i)))
-        .collect();
+    let centres: Vec<(f64, f64)> = (0..n).map(|i| (x0 + grid.offset(i), y0 + grid.offset(i))).collect();
 
     // Returns that reach at least one offset, with their bins.
     let mut kept: Vec<(u32, i64)> = Vec::with_capacity(candidates.len());
     let (mut lo, mut hi) = (i64::MAX, i64::MIN);
     for &c in candidates {
         let p = c as usize;
-        let (ex, ey) = (
-            (x[p] - x0).abs() - grid.max_offset(),
-            (y[p] - y0).abs() - grid.max_offset(),
-        );
+        let (ex, ey) = ((x[p] - x0).abs() - grid.max_offset(), (y[p] - y0).abs() - grid.max_offset());
         let (ex, ey) = (ex.max(0.0), ey.max(0.0));
         let reaches = ex <= reach && ey <= reach && ex * ex + ey * ey <= r_cut_sq;
         if !reaches || !z[p].is_finite() {
@@ -220,10 +210,7 @@ pub fn offset_waves(
     // Pulse convolution on the absolute grid: the simulator's tap j moves a bin's energy
     // `offsets[j]` bins up (its bins count downwards: out[i] = Σⱼ in[i + offⱼ]·yⱼ).
     let offsets = tap_offsets(&model.pulse, model);
-    let (omin, omax) = (
-        *offsets.iter().min().unwrap_or(&0),
-        *offsets.iter().max().unwrap_or(&0),
-    );
+    let (omin, omax) = (*offsets.iter().min().unwrap_or(&0), *offsets.iter().max().unwrap_or(&0));
     // Row r of the output is absolute bin lo + omin + r.
     let rows = raw_rows + (omax - omin) as usize;
     let mut out = vec![0f32; rows * n_off];
@@ -238,12 +225,7 @@ pub fn offset_waves(
             }
         }
     }
-    Ok(OffsetWaves {
-        first_bin: lo + omin,
-        dz,
-        n_offsets: n_off,
-        values: out,
-    })
+    Ok(OffsetWaves { first_bin: lo + omin, dz, n_offsets: n_off, values: out })
 }
 
 #[cfg(test)]
@@ -260,14 +242,8 @@ mod tests {
         assert!(contributes(m, 5.5) && !contributes(f64::from_bits(m.to_bits() + 1), 5.5));
         // Monotone around the boundary: a thousand values either side agree with the comparison.
         for k in 1..1000u64 {
-            assert!(contributes(
-                f64::from_bits(m.to_bits() - k * 1_000_000),
-                5.5
-            ));
-            assert!(!contributes(
-                f64::from_bits(m.to_bits() + k * 1_000_000),
-                5.5
-            ));
+            assert!(contributes(f64::from_bits(m.to_bits() - k * 1_000_000), 5.5));
+            assert!(!contributes(f64::from_bits(m.to_bits() + k * 1_000_000), 5.5));
         }
     }
 
@@ -290,29 +266,13 @@ mod tests {
         let w = offset_waves(&[0.0], &[0.0], &[10.0], &[0], (0.0, 0.0), &grid, &model).unwrap();
         assert_eq!(w.n_offsets, 9);
         let centre = w.column(4);
-        let peak = centre
-            .iter()
-            .enumerate()
-            .max_by(|a, b| a.1.total_cmp(b.1))
-            .unwrap()
-            .0;
+        let peak = centre.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).unwrap().0;
         assert_eq!(w.first_bin + peak as i64, absolute_bin(10.0, 0.15));
         // The corner offsets (distance √2 m) weigh less than the centre.
         let corner = w.column(0);
         assert!(corner[peak] < centre[peak] && corner[peak] > 0.0);
-        assert_eq!(
-            offset_waves(&[100.0], &[0.0], &[10.0], &[0], (0.0, 0.0), &grid, &model),
-            Err(RasterError::NoReturns)
-        );
-        let far = offset_waves(
-            &[0.0, 0.0],
-            &[0.0, 0.0],
-            &[10.0, 5000.0],
-            &[0, 1],
-            (0.0, 0.0),
-            &grid,
-            &model,
-        );
+        assert_eq!(offset_waves(&[100.0], &[0.0], &[10.0], &[0], (0.0, 0.0), &grid, &model), Err(RasterError::NoReturns));
+        let far = offset_waves(&[0.0, 0.0], &[0.0, 0.0], &[10.0, 5000.0], &[0, 1], (0.0, 0.0), &grid, &model);
         assert_eq!(far, Err(RasterError::HeightRange));
     }
 }

@@ -65,12 +65,7 @@ pub struct ShortRun {
 /// sequence of covered shots at consecutive steps. Runs shorter than
 /// min(`segment`, `min_segment`) (default [`MIN_SEGMENT`]) are returned apart (beam and track
 /// levels).
-pub fn plan(
-    slots: &[Slot],
-    level: Level,
-    segment: usize,
-    min_segment: usize,
-) -> (Vec<SegmentPlan>, Vec<ShortRun>) {
+pub fn plan(slots: &[Slot], level: Level, segment: usize, min_segment: usize) -> (Vec<SegmentPlan>, Vec<ShortRun>) {
     let segment = segment.max(1);
     let min_len = segment.min(min_segment).max(1);
     let mut plans = Vec::new();
@@ -79,20 +74,10 @@ pub fn plan(
         match level {
             Level::Beam => {
                 let usable: Vec<usize> = run.into_iter().filter(|&i| slots[i].usable).collect();
-                cut(
-                    usable.len(),
-                    segment,
-                    min_len,
-                    &mut short,
-                    &usable,
-                    |range| {
-                        let s = usable[range].to_vec();
-                        plans.push(SegmentPlan {
-                            support: s.clone(),
-                            applies_to: s,
-                        });
-                    },
-                );
+                cut(usable.len(), segment, min_len, &mut short, &usable, |range| {
+                    let s = usable[range].to_vec();
+                    plans.push(SegmentPlan { support: s.clone(), applies_to: s });
+                });
             }
             Level::Track => {
                 // Cut by distinct steps; every usable shot of a step belongs to its segment.
@@ -104,20 +89,13 @@ pub fn plan(
                     }
                 }
                 let usable_of = |r: std::ops::Range<usize>| -> Vec<usize> {
-                    steps[r]
-                        .iter()
-                        .flat_map(|(_, v)| v.iter().copied())
-                        .filter(|&i| slots[i].usable)
-                        .collect()
+                    steps[r].iter().flat_map(|(_, v)| v.iter().copied()).filter(|&i| slots[i].usable).collect()
                 };
                 let all = usable_of(0..steps.len());
                 cut(steps.len(), segment, min_len, &mut short, &all, |range| {
                     let s = usable_of(range);
                     if !s.is_empty() {
-                        plans.push(SegmentPlan {
-                            support: s.clone(),
-                            applies_to: s,
-                        });
+                        plans.push(SegmentPlan { support: s.clone(), applies_to: s });
                     }
                 });
             }
@@ -126,10 +104,7 @@ pub fn plan(
                 for (k, &i) in usable.iter().enumerate() {
                     let lo = k.saturating_sub(SHOT_NEIGHBOURS);
                     let hi = (k + SHOT_NEIGHBOURS + 1).min(usable.len());
-                    plans.push(SegmentPlan {
-                        support: usable[lo..hi].to_vec(),
-                        applies_to: vec![i],
-                    });
+                    plans.push(SegmentPlan { support: usable[lo..hi].to_vec(), applies_to: vec![i] });
                 }
             }
         }
@@ -139,22 +114,13 @@ pub fn plan(
 
 /// Cuts `len` items into ranges of at most `segment`, a remainder under `min_len` joining the
 /// previous range; a total under `min_len` is a short run.
-fn cut(
-    len: usize,
-    segment: usize,
-    min_len: usize,
-    short: &mut Vec<ShortRun>,
-    shots: &[usize],
-    mut emit: impl FnMut(std::ops::Range<usize>),
-) {
+fn cut(len: usize, segment: usize, min_len: usize, short: &mut Vec<ShortRun>, shots: &[usize], mut emit: impl FnMut(std::ops::Range<usize>)) {
     if len == 0 {
         return;
     }
     if len < min_len {
         if !shots.is_empty() {
-            short.push(ShortRun {
-                shots: shots.to_vec(),
-            });
+            short.push(ShortRun { shots: shots.to_vec() });
         }
         return;
     }
@@ -191,15 +157,7 @@ mod tests {
     use super::*;
 
     fn beam(covered: &[bool]) -> Vec<Slot> {
-        covered
-            .iter()
-            .enumerate()
-            .map(|(i, &c)| Slot {
-                step: i as i64,
-                covered: c,
-                usable: c,
-            })
-            .collect()
+        covered.iter().enumerate().map(|(i, &c)| Slot { step: i as i64, covered: c, usable: c }).collect()
     }
 
     #[test]
@@ -216,10 +174,7 @@ mod tests {
         assert_eq!(short[0].shots, (96..108).collect::<Vec<_>>());
         // A run of 100 splits 40, 40, 20.
         let (plans, _) = plan(&beam(&[true; 100]), Level::Beam, 40, MIN_SEGMENT);
-        assert_eq!(
-            plans.iter().map(|p| p.support.len()).collect::<Vec<_>>(),
-            vec![40, 40, 20]
-        );
+        assert_eq!(plans.iter().map(|p| p.support.len()).collect::<Vec<_>>(), vec![40, 40, 20]);
     }
 
     #[test]
@@ -238,17 +193,9 @@ mod tests {
         // Two beams over steps 0..50; beam B uncovered for steps 20..25.
         let mut slots = Vec::new();
         for step in 0..50 {
-            slots.push(Slot {
-                step,
-                covered: true,
-                usable: true,
-            });
+            slots.push(Slot { step, covered: true, usable: true });
             let b = !(20..25).contains(&step);
-            slots.push(Slot {
-                step,
-                covered: b,
-                usable: b,
-            });
+            slots.push(Slot { step, covered: b, usable: b });
         }
         let (plans, short) = plan(&slots, Level::Track, 40, MIN_SEGMENT);
         assert!(short.is_empty());

@@ -40,13 +40,7 @@ impl Surface {
     /// An empty sum over `grid` × `window`.
     pub fn new(grid: OffsetGrid, window: LagWindow, dz: f64) -> Surface {
         let n = grid.n() * grid.n();
-        Surface {
-            grid,
-            window,
-            dz,
-            r: vec![0.0; n * window.len],
-            shots: 0,
-        }
+        Surface { grid, window, dz, r: vec![0.0; n * window.len], shots: 0 }
     }
 
     /// Adds one shot's r (`[offset][lag]`, from [`super::correlation::SimulatedProfiles::correlate`]).
@@ -129,11 +123,7 @@ impl Surface {
                                 continue;
                             }
                             let f = crossing(step(-1), v, w, thr);
-                            if dir < 0 {
-                                lo = at - f
-                            } else {
-                                hi = at + f
-                            }
+                            if dir < 0 { lo = at - f } else { hi = at + f }
                         }
                         ext[axis].0 = ext[axis].0.min(lo);
                         ext[axis].1 = ext[axis].1.max(hi);
@@ -159,11 +149,7 @@ impl Surface {
 /// the curve crosses `thr`: on the parabola through (−1, `before`), (0, v), (1, w) when the node's
 /// other neighbour exists, else on the line.
 fn crossing(before: Option<f64>, v: f64, w: f64, thr: f64) -> f64 {
-    let linear = if v > w {
-        ((v - thr) / (v - w)).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
+    let linear = if v > w { ((v - thr) / (v - w)).clamp(0.0, 1.0) } else { 0.0 };
     let Some(u) = before else { return linear };
     let (a, b, c) = ((w + u) / 2.0 - v, (w - u) / 2.0, v - thr);
     if a.abs() < 1e-12 {
@@ -174,11 +160,7 @@ fn crossing(before: Option<f64>, v: f64, w: f64, thr: f64) -> f64 {
         return linear;
     }
     let q = disc.sqrt();
-    [(-b + q) / (2.0 * a), (-b - q) / (2.0 * a)]
-        .into_iter()
-        .filter(|t| (0.0..=1.0).contains(t))
-        .fold(None, |m: Option<f64>, t| Some(m.map_or(t, |m| m.min(t))))
-        .unwrap_or(linear)
+    [(-b + q) / (2.0 * a), (-b - q) / (2.0 * a)].into_iter().filter(|t| (0.0..=1.0).contains(t)).fold(None, |m: Option<f64>, t| Some(m.map_or(t, |m| m.min(t)))).unwrap_or(linear)
 }
 
 /// Index of the largest value (first on ties; NaN never wins).
@@ -207,10 +189,7 @@ mod tests {
             for j in 0..n {
                 for l in 0..window.len {
                     let (x, y, z) = (grid.offset(i), grid.offset(j), window.lag(l) as f64 * 0.15);
-                    let r = 1.0
-                        - 0.01 * (x - 1.2).powi(2)
-                        - 0.02 * (y + 0.4).powi(2)
-                        - 0.5 * (z - 45.1).powi(2);
+                    let r = 1.0 - 0.01 * (x - 1.2).powi(2) - 0.02 * (y + 0.4).powi(2) - 0.5 * (z - 45.1).powi(2);
                     shot[(i * n + j) * window.len + l] = r as f32;
                 }
             }
@@ -220,23 +199,14 @@ mod tests {
         s.add(&shot);
         s.add(&shot);
         let o = s.optimum(0.005).unwrap();
-        assert!(
-            (o.dx - 1.2).abs() < 1e-3 && (o.dy + 0.4).abs() < 1e-3,
-            "{o:?}"
-        );
+        assert!((o.dx - 1.2).abs() < 1e-3 && (o.dy + 0.4).abs() < 1e-3, "{o:?}");
         assert!((o.dz - 45.1).abs() < 1e-3, "{o:?}");
         assert!(o.r > 0.9999 && !o.at_window_edge);
         // The best node is (1, 0, lag 301 = 45.15 m), 0.0036 + 0.00125 below the optimum r = 1;
         // it alone lies within 0.005, and the parabolas through it cross r = 0.995 exactly.
         let want = |penalty: f64, k: f64| ((0.005 - penalty) / k).sqrt();
-        assert!(
-            (o.dx_halfwidth - want(0.0032 + 0.00125, 0.01)).abs() < 1e-3,
-            "{o:?}"
-        );
-        assert!(
-            (o.dy_halfwidth - want(0.0004 + 0.00125, 0.02)).abs() < 1e-3,
-            "{o:?}"
-        );
+        assert!((o.dx_halfwidth - want(0.0032 + 0.00125, 0.01)).abs() < 1e-3, "{o:?}");
+        assert!((o.dy_halfwidth - want(0.0004 + 0.00125, 0.02)).abs() < 1e-3, "{o:?}");
         assert!((o.dz_halfwidth - want(0.0036, 0.5)).abs() < 1e-3, "{o:?}");
     }
 }

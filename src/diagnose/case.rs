@@ -160,10 +160,7 @@ pub struct ShotCase {
 impl ShotCase {
     /// The selected algorithm's products, if they pass the filter.
     pub fn selected(&self) -> Option<&RealAlgorithm> {
-        self.real
-            .algorithms
-            .get(usize::from(self.real.selected).wrapping_sub(1))?
-            .as_ref()
+        self.real.algorithms.get(usize::from(self.real.selected).wrapping_sub(1))?.as_ref()
     }
 }
 
@@ -182,19 +179,10 @@ pub fn nominal_noise_stddev(beam_type: BeamType) -> f64 {
 /// `noise` effect's to explain. Without usable reported σ a shot gets the nominal σ.
 pub fn set_nominal_noise(cases: &mut [ShotCase]) {
     for bt in [BeamType::Coverage, BeamType::FullPower] {
-        let mut sd: Vec<f64> = cases
-            .iter()
-            .filter(|c| c.real.beam_type == bt)
-            .map(|c| c.real.noise.stddev)
-            .filter(|v| v.is_finite() && *v > 0.0)
-            .collect();
+        let mut sd: Vec<f64> = cases.iter().filter(|c| c.real.beam_type == bt).map(|c| c.real.noise.stddev).filter(|v| v.is_finite() && *v > 0.0).collect();
         sd.sort_by(|a, b| a.total_cmp(b));
         let nominal = nominal_noise_stddev(bt);
-        let scale = if sd.is_empty() {
-            f64::NAN
-        } else {
-            nominal / sd[sd.len() / 2]
-        };
+        let scale = if sd.is_empty() { f64::NAN } else { nominal / sd[sd.len() / 2] };
         for c in cases.iter_mut().filter(|c| c.real.beam_type == bt) {
             let v = c.real.noise.stddev * scale;
             c.real.nominal_noise_stddev = if v.is_finite() && v > 0.0 { v } else { nominal };

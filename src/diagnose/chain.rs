@@ -16,13 +16,9 @@ use rayon::prelude::*;
 
 use super::case::{ShotCase, Site, FSIGMA_GRID};
 use crate::gedi::{N_ALGORITHMS, RH_LEN};
-use crate::process::l2a::{
-    AlgorithmSettings, L2aOutcome, L2aProcessor, Noise, WaveformGeolocation,
-};
+use crate::process::l2a::{AlgorithmSettings, L2aOutcome, L2aProcessor, Noise, WaveformGeolocation};
 use crate::process::noise_twin::{NoiseShape, ShotTwin, GEDI_BIN_M};
-use crate::scenario::effects::{
-    Effect, WaveParts, WeightMethod, NOMINAL_FSIGMA_M, NOMINAL_PULSE_SIGMA_M,
-};
+use crate::scenario::effects::{Effect, WaveParts, WeightMethod, NOMINAL_FSIGMA_M, NOMINAL_PULSE_SIGMA_M};
 use crate::scenario::EffectSet;
 use crate::sim::Weighting;
 
@@ -40,34 +36,22 @@ impl Model {
     pub fn with(&self, e: Effect) -> Model {
         let mut effects = self.effects.clone();
         effects.push(e);
-        Model {
-            effects,
-            placement: self.placement.clone(),
-        }
+        Model { effects, placement: self.placement.clone() }
     }
 
     /// These effects with the placement of `other`.
     pub fn placed_as(&self, other: &Model) -> Model {
-        Model {
-            effects: self.effects.clone(),
-            placement: other.placement.clone(),
-        }
+        Model { effects: self.effects.clone(), placement: other.placement.clone() }
     }
 
     /// The site at which this model simulates `case`.
     pub fn site<'a>(&self, case: &'a ShotCase) -> &'a Site {
-        let k = self
-            .placement
-            .get(&case.real.shot_number)
-            .copied()
-            .unwrap_or(0);
+        let k = self.placement.get(&case.real.shot_number).copied().unwrap_or(0);
         case.sim.sites.get(k).unwrap_or(&case.sim.sites[0])
     }
 
     fn set(&self) -> EffectSet {
-        EffectSet {
-            effects: self.effects.clone(),
-        }
+        EffectSet { effects: self.effects.clone() }
     }
 
     /// GEDI − ALS vertical offset (m) of the model's effects.
@@ -77,32 +61,12 @@ impl Model {
 
     /// Footprint σ (m).
     pub fn fsigma(&self) -> f64 {
-        self.effects
-            .iter()
-            .rev()
-            .find_map(|e| {
-                if let Effect::Footprint { fsigma_m } = e {
-                    Some(*fsigma_m)
-                } else {
-                    None
-                }
-            })
-            .unwrap_or(NOMINAL_FSIGMA_M)
+        self.effects.iter().rev().find_map(|e| if let Effect::Footprint { fsigma_m } = e { Some(*fsigma_m) } else { None }).unwrap_or(NOMINAL_FSIGMA_M)
     }
 
     /// Effective pulse σ (m, range).
     pub fn pulse_sigma(&self) -> f64 {
-        self.effects
-            .iter()
-            .rev()
-            .find_map(|e| {
-                if let Effect::Pulse { pulse_sigma_m } = e {
-                    Some(*pulse_sigma_m)
-                } else {
-                    None
-                }
-            })
-            .unwrap_or(NOMINAL_PULSE_SIGMA_M)
+        self.effects.iter().rev().find_map(|e| if let Effect::Pulse { pulse_sigma_m } = e { Some(*pulse_sigma_m) } else { None }).unwrap_or(NOMINAL_PULSE_SIGMA_M)
     }
 
     /// Weighting and ρg/ρv.
@@ -111,10 +75,7 @@ impl Model {
             .iter()
             .rev()
             .find_map(|e| match *e {
-                Effect::Weighting {
-                    method,
-                    rho_ground_over_veg,
-                } => Some((
+                Effect::Weighting { method, rho_ground_over_veg } => Some((
                     match method {
                         WeightMethod::Count | WeightMethod::Ratio => Weighting::Count,
                         WeightMethod::Frac => Weighting::Frac,
@@ -145,10 +106,7 @@ pub struct Scratch {
 
 impl Scratch {
     pub fn new() -> Scratch {
-        Scratch {
-            settings: AlgorithmSettings::all_gedi(),
-            ..Default::default()
-        }
+        Scratch { settings: AlgorithmSettings::all_gedi(), ..Default::default() }
     }
 }
 
@@ -163,21 +121,10 @@ fn noise_seed(shot_number: u64) -> u64 {
 fn parts_at(site: &Site, w: Weighting, fsigma: f64) -> (Vec<f64>, Vec<f64>) {
     let grid = &FSIGMA_GRID;
     let f = fsigma.clamp(grid[0], grid[grid.len() - 1]);
-    let i = grid
-        .windows(2)
-        .position(|p| f <= p[1])
-        .unwrap_or(grid.len() - 2);
+    let i = grid.windows(2).position(|p| f <= p[1]).unwrap_or(grid.len() - 2);
     let t = (f - grid[i]) / (grid[i + 1] - grid[i]);
-    let (a, b) = (
-        &site.variants[i].weightings[w as usize],
-        &site.variants[i + 1].weightings[w as usize],
-    );
-    let mix = |x: &[f32], y: &[f32]| -> Vec<f64> {
-        x.iter()
-            .zip(y)
-            .map(|(&p, &q)| (1.0 - t) * f64::from(p) + t * f64::from(q))
-            .collect()
-    };
+    let (a, b) = (&site.variants[i].weightings[w as usize], &site.variants[i + 1].weightings[w as usize]);
+    let mix = |x: &[f32], y: &[f32]| -> Vec<f64> { x.iter().zip(y).map(|(&p, &q)| (1.0 - t) * f64::from(p) + t * f64::from(q)).collect() };
     (mix(&a.ground, &b.ground), mix(&a.canopy, &b.canopy))
 }
 
@@ -187,9 +134,7 @@ pub fn gaussian_blur(x: &[f64], sigma: f64, dz: f64) -> Vec<f64> {
         return x.to_vec();
     }
     let half = (4.0 * sigma / dz).ceil() as isize;
-    let mut kernel: Vec<f64> = (-half..=half)
-        .map(|i| (-0.5 * (i as f64 * dz / sigma).powi(2)).exp())
-        .collect();
+    let mut kernel: Vec<f64> = (-half..=half).map(|i| (-0.5 * (i as f64 * dz / sigma).powi(2)).exp()).collect();
     let sum: f64 = kernel.iter().sum();
     kernel.iter_mut().for_each(|k| *k /= sum);
     let n = x.len() as isize;
@@ -257,11 +202,7 @@ fn correlation(case: &ShotCase, model: &Model, wave: &[f64], z0: f64, dz: f64) -
     }
     let cov = sxy - sx * sy / n;
     let var = (sxx - sx * sx / n) * (syy - sy * sy / n);
-    if n > 1.0 && var > 0.0 {
-        cov / var.sqrt()
-    } else {
-        f64::NAN
-    }
+    if n > 1.0 && var > 0.0 { cov / var.sqrt() } else { f64::NAN }
 }
 
 /// Re-place the shots of short collocation segments for `model`: each segment moves, as one, to
@@ -270,7 +211,7 @@ fn correlation(case: &ShotCase, model: &Model, wave: &[f64], z0: f64, dz: f64) -
 /// with the hypothesis instead of the nominal simulation. On tracks of one or two shots the
 /// nominal collocation fits each position to the nominal waveform and so absorbs much of a
 /// waveform-shape effect; re-placing gives every hypothesis the same freedom. Ties keep the
-/// collocated position. Other shots keep their placement in `model`.
+/// lowest site (the collocated position first). Other shots keep their placement in `model`.
 pub fn reposition(cases: &[&ShotCase], model: &Model) -> Model {
     let scores: Vec<Vec<f64>> = cases
         .par_iter()
@@ -278,65 +219,39 @@ pub fn reposition(cases: &[&ShotCase], model: &Model) -> Model {
             if c.sim.sites.len() < 2 {
                 return Vec::new();
             }
-            c.sim
-                .sites
+            c.sim.sites
                 .iter()
-                .map(|s| {
-                    if s.variants.is_empty() {
-                        f64::NAN
-                    } else {
-                        correlation(
-                            c,
-                            model,
-                            &simulated_wave_at(c.sim.dz, s, model),
-                            s.z0,
-                            c.sim.dz,
-                        )
-                    }
-                })
+                .map(|s| if s.variants.is_empty() { f64::NAN } else { correlation(c, model, &simulated_wave_at(c.sim.dz, s, model), s.z0, c.sim.dz) })
                 .collect()
         })
         .collect();
+    // Per segment: summed r per site (NaN once any shot lacks the site) and its shots.
     let mut segments: HashMap<&str, (Vec<f64>, Vec<u64>)> = HashMap::new();
     for (c, sc) in cases.iter().zip(&scores) {
         if sc.is_empty() {
             continue;
         }
-        let (sum, shots) = segments
-            .entry(c.real.segment.as_str())
-            .or_insert_with(|| (vec![0.0; sc.len()], Vec::new()));
-        if sum.len() != sc.len() {
-            // Shots of one segment simulated at different numbers of sites: keep them in place.
+        let (sum, shots) = segments.entry(c.real.segment.as_str()).or_insert_with(|| (vec![0.0; sc.len()], Vec::new()));
+        if sum.len() == sc.len() {
+            sum.iter_mut().zip(sc).for_each(|(a, b)| *a += b);
+        } else {
             sum.iter_mut().for_each(|v| *v = f64::NAN);
         }
-        sum.iter_mut().zip(sc).for_each(|(a, b)| *a += b);
         shots.push(c.real.shot_number);
     }
     let mut placement = (*model.placement).clone();
     for (sum, shots) in segments.into_values() {
-        let mut best = 0;
-        for (k, &v) in sum.iter().enumerate() {
-            if v > sum[best] || (sum[best].is_nan() && v.is_finite()) {
-                best = k;
-            }
-        }
+        let best = (0..sum.len()).filter(|&k| sum[k].is_finite()).fold(0, |b, k| if !sum[b].is_finite() || sum[k] > sum[b] { k } else { b });
         for s in shots {
             placement.insert(s, best);
         }
     }
-    Model {
-        effects: model.effects.clone(),
-        placement: Arc::new(placement),
-    }
+    Model { effects: model.effects.clone(), placement: Arc::new(placement) }
 }
 
 /// The GEDI-processed simulation of `case` under `model`: one entry per algorithm a1..a6
 /// (`None` where L2A finds no result or the twin cannot be made).
-pub fn predict(
-    case: &ShotCase,
-    model: &Model,
-    scratch: &mut Scratch,
-) -> [Option<Products>; N_ALGORITHMS] {
+pub fn predict(case: &ShotCase, model: &Model, scratch: &mut Scratch) -> [Option<Products>; N_ALGORITHMS] {
     let none = || std::array::from_fn(|_| None);
     let wave = simulated_wave(case, model);
     let max = wave.iter().cloned().fold(0.0, f64::max);
@@ -344,10 +259,7 @@ pub fn predict(
         return none();
     }
     let cut = max * 1e-9;
-    let (Some(first), Some(last)) = (
-        wave.iter().position(|&v| v > cut),
-        wave.iter().rposition(|&v| v > cut),
-    ) else {
+    let (Some(first), Some(last)) = (wave.iter().position(|&v| v > cut), wave.iter().rposition(|&v| v > cut)) else {
         return none();
     };
     let real = &case.real;
@@ -356,29 +268,17 @@ pub fn predict(
     let factor = model.set().noise_sigma_factor();
     let twin = ShotTwin {
         energy_total: real.energy,
-        noise: Noise {
-            mean: real.noise.mean,
-            stddev: real.nominal_noise_stddev * factor,
-        },
+        noise: Noise { mean: real.noise.mean, stddev: real.nominal_noise_stddev * factor },
         sample_count: real.sample_count,
         tx_pulse: None,
         quantum: 0.0,
         noise_shape: NoiseShape::GEDI_V1,
     };
-    let Ok(twin) = twin.apply(
-        &wave[first..=last],
-        case.sim.dz,
-        start,
-        noise_seed(real.shot_number),
-    ) else {
+    let Ok(twin) = twin.apply(&wave[first..=last], case.sim.dz, start, noise_seed(real.shot_number)) else {
         return none();
     };
     let geo = WaveformGeolocation::vertical(real.sample_count, real.bin0, real.lastbin);
-    let Scratch {
-        l2a,
-        outcomes,
-        settings,
-    } = scratch;
+    let Scratch { l2a, outcomes, settings } = scratch;
     l2a.process_all(&twin.wave, twin.noise, &geo, settings, outcomes);
     std::array::from_fn(|a| match outcomes.get(a) {
         Some(Ok(r)) if r.elev_lowestmode.is_finite() => Some(Products {
@@ -400,10 +300,7 @@ pub fn real_products(case: &ShotCase, model: &Model, alg: u8) -> Option<Products
     if r.rh.len() != RH_LEN {
         return None;
     }
-    Some(Products {
-        ground,
-        rh: std::array::from_fn(|k| (f64::from(r.rh[k]) + o) as f32),
-    })
+    Some(Products { ground, rh: std::array::from_fn(|k| (f64::from(r.rh[k]) + o) as f32) })
 }
 
 #[cfg(test)]
@@ -418,24 +315,13 @@ mod tests {
         assert!((y.iter().sum::<f64>() - 1.0).abs() < 1e-12);
         let mean: f64 = y.iter().enumerate().map(|(i, v)| i as f64 * v).sum();
         assert!((mean - 50.0).abs() < 1e-9);
-        let var: f64 = y
-            .iter()
-            .enumerate()
-            .map(|(i, v)| (i as f64 - 50.0).powi(2) * v)
-            .sum::<f64>()
-            * 0.15
-            * 0.15;
+        let var: f64 = y.iter().enumerate().map(|(i, v)| (i as f64 - 50.0).powi(2) * v).sum::<f64>() * 0.15 * 0.15;
         assert!((var.sqrt() - 0.955).abs() < 0.01, "{}", var.sqrt());
     }
 
     #[test]
     fn model_reads_its_effects() {
-        let m = Model::default()
-            .with(Effect::Footprint { fsigma_m: 7.0 })
-            .with(Effect::Weighting {
-                method: WeightMethod::Int,
-                rho_ground_over_veg: 0.5,
-            });
+        let m = Model::default().with(Effect::Footprint { fsigma_m: 7.0 }).with(Effect::Weighting { method: WeightMethod::Int, rho_ground_over_veg: 0.5 });
         assert_eq!(m.fsigma(), 7.0);
         assert_eq!(m.weighting(), (Weighting::Int, 0.5));
         assert_eq!(m.pulse_sigma(), NOMINAL_PULSE_SIGMA_M);

@@ -29,14 +29,7 @@ pub struct Moments {
 
 impl Default for Moments {
     fn default() -> Self {
-        Moments {
-            n: 0.0,
-            sy: [0.0; N_PCT],
-            sp: [0.0; N_PCT],
-            syy: [0.0; N_PCT],
-            spp: [0.0; N_PCT],
-            syp: [0.0; N_PCT],
-        }
+        Moments { n: 0.0, sy: [0.0; N_PCT], sp: [0.0; N_PCT], syy: [0.0; N_PCT], spp: [0.0; N_PCT], syp: [0.0; N_PCT] }
     }
 }
 
@@ -77,12 +70,7 @@ impl Moments {
         let vp = (self.spp[k] / n - mp * mp).max(0.0);
         let cov = self.syp[k] / n - my * mp;
         let (sy, sp) = (vy.sqrt(), vp.sqrt());
-        MsdSplit {
-            sb: (my - mp).powi(2),
-            sdsd: (sy - sp).powi(2),
-            lcs: 2.0 * (sy * sp - cov),
-            n: n as usize,
-        }
+        MsdSplit { sb: (my - mp).powi(2), sdsd: (sy - sp).powi(2), lcs: 2.0 * (sy * sp - cov), n: n as usize }
     }
 }
 
@@ -136,10 +124,7 @@ impl GapSums {
         if n == 0.0 {
             return GapMetrics::default();
         }
-        let mut m = GapMetrics {
-            n_pairs: n as usize,
-            ..Default::default()
-        };
+        let mut m = GapMetrics { n_pairs: n as usize, ..Default::default() };
         for k in 0..N_PCT {
             let (br, ba) = (self.rh.bias(k), self.als.bias(k));
             m.bias_rh[k] = br;
@@ -221,12 +206,7 @@ mod tests {
     #[test]
     fn datum_offset_shows_in_the_als_frame_only() {
         let mut s = GapSums::default();
-        s.add(
-            &rh(|k| k as f32 * 0.2),
-            101.0,
-            &rh(|k| k as f32 * 0.2),
-            100.0,
-        );
+        s.add(&rh(|k| k as f32 * 0.2), 101.0, &rh(|k| k as f32 * 0.2), 100.0);
         let m = s.metrics();
         assert!(m.mean_abs_bias_rh.abs() < 1e-12);
         assert!((m.mean_abs_bias_als - 1.0).abs() < 1e-9);
@@ -238,12 +218,7 @@ mod tests {
     fn ground_detection_offset_shows_in_the_rh_frame_only() {
         // GEDI ground 0.5 m high, RH 0.5 m low: the RH points sit where the simulated ones do.
         let mut s = GapSums::default();
-        s.add(
-            &rh(|k| k as f32 * 0.2 - 0.5),
-            100.5,
-            &rh(|k| k as f32 * 0.2),
-            100.0,
-        );
+        s.add(&rh(|k| k as f32 * 0.2 - 0.5), 100.5, &rh(|k| k as f32 * 0.2), 100.0);
         let m = s.metrics();
         assert!((m.mean_abs_bias_rh - 0.5).abs() < 1e-6);
         assert!(m.mean_abs_bias_als.abs() < 1e-6);
@@ -256,12 +231,7 @@ mod tests {
         for i in 0..20 {
             let t = i as f32;
             let s = if i % 2 == 0 { &mut a } else { &mut b };
-            s.add(
-                &rh(|k| k as f32 * 0.1 + t * 0.3),
-                10.0 + t as f64 * 0.01,
-                &rh(|k| k as f32 * 0.11 + t * 0.2),
-                10.0,
-            );
+            s.add(&rh(|k| k as f32 * 0.1 + t * 0.3), 10.0 + t as f64 * 0.01, &rh(|k| k as f32 * 0.11 + t * 0.2), 10.0);
         }
         let mut all = a.clone();
         all.merge(&b);

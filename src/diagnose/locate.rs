@@ -56,26 +56,16 @@ pub struct Where {
 
 /// Baseline gap sums of one shot (selected algorithm vs the noise-free nominal simulation).
 pub fn baseline_sums(c: &ShotCase) -> GapSums {
-    let mut s = GapSums {
-        n_shots: 1.0,
-        ..Default::default()
-    };
+    let mut s = GapSums { n_shots: 1.0, ..Default::default() };
     if let Some(r) = c.selected() {
-        s.add(
-            &r.rh,
-            r.ground,
-            &c.sim.rh_nominal,
-            c.sim.collocated().als_ground,
-        );
+        s.add(&r.rh, r.ground, &c.sim.rh_nominal, c.sim.collocated().als_ground);
     }
     s
 }
 
 /// Squared error of one shot's RH1..RH99 (RH frame).
 fn squared_error(s: &GapSums) -> f64 {
-    (0..N_PCT)
-        .map(|k| s.rh.syy[k] - 2.0 * s.rh.syp[k] + s.rh.spp[k])
-        .sum()
+    (0..N_PCT).map(|k| s.rh.syy[k] - 2.0 * s.rh.syp[k] + s.rh.spp[k]).sum()
 }
 
 pub fn locate(cases: &[ShotCase]) -> Where {
@@ -120,12 +110,7 @@ pub fn locate(cases: &[ShotCase]) -> Where {
             share_of_squared_error: if total_se > 0.0 { se / total_se } else { 0.0 },
         })
         .collect();
-    Where {
-        overall,
-        percentiles,
-        strata,
-        waveform: residual(cases),
-    }
+    Where { overall, percentiles, strata, waveform: residual(cases) }
 }
 
 /// Mean of the real and simulated waveforms (each normalised to unit energy) on the height grid
@@ -137,10 +122,7 @@ pub fn residual(cases: &[ShotCase]) -> WaveResidual {
     let mut n = 0;
     let nominal = Model::default();
     for c in cases.iter().filter(|c| c.selected().is_some()) {
-        let (Some(r), Some(m)) = (
-            real_profile(c, c.sim.collocated(), 0.0),
-            simulated_profile(c, &nominal),
-        ) else {
+        let (Some(r), Some(m)) = (real_profile(c, c.sim.collocated(), 0.0), simulated_profile(c, &nominal)) else {
             continue;
         };
         n += 1;
@@ -148,9 +130,7 @@ pub fn residual(cases: &[ShotCase]) -> WaveResidual {
         sim.iter_mut().zip(&m).for_each(|(a, b)| *a += b);
     }
     let scale = if n > 0 { 1.0 / n as f64 } else { 0.0 };
-    real.iter_mut()
-        .chain(sim.iter_mut())
-        .for_each(|v| *v *= scale);
+    real.iter_mut().chain(sim.iter_mut()).for_each(|v| *v *= scale);
     WaveResidual {
         height: heights(),
         residual: real.iter().zip(&sim).map(|(a, b)| a - b).collect(),

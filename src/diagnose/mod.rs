@@ -50,15 +50,8 @@ pub fn diagnose(mut cases: Vec<ShotCase>, names: &[&str], on_step: &dyn Fn(&str)
         Some(t) => t.held_out.before.clone(),
         None => fit::total(&rank::State::nominal(&folds).gaps).metrics(),
     };
-    Diagnosis {
-        where_,
-        nominal,
-        ranking,
-        n_shots: cases.len(),
-        n_replaceable: cases.iter().filter(|c| c.sim.sites.len() > 1).count(),
-        n_tracks: folds.n_tracks,
-        mismatched,
-    }
+    let n_replaceable = cases.iter().filter(|c| c.sim.sites.len() > 1).count();
+    Diagnosis { where_, nominal, ranking, n_shots: cases.len(), n_replaceable, n_tracks: folds.n_tracks, mismatched }
 }
 
 /// A pair is a ground mismatch when its ground difference (real − nominal chain) lies more than

@@ -37,9 +37,7 @@ pub fn add_at_height(acc: &mut [f64], h: f64, v: f64) {
 
 /// Bin centres (m above the ALS ground).
 pub fn heights() -> Vec<f64> {
-    (0..PROFILE_BINS)
-        .map(|i| PROFILE_MIN_M + (i as f64 + 0.5) * PROFILE_BIN_M)
-        .collect()
+    (0..PROFILE_BINS).map(|i| PROFILE_MIN_M + (i as f64 + 0.5) * PROFILE_BIN_M).collect()
 }
 
 /// The real waveform of `case` (noise mean removed) on the height grid above the ALS ground of
@@ -49,11 +47,7 @@ pub fn real_profile(case: &ShotCase, site: &Site, vertical_offset_m: f64) -> Opt
     let g = site.als_ground + vertical_offset_m;
     let mut r = vec![0.0; PROFILE_BINS];
     for (s, &v) in case.real.wave.iter().enumerate() {
-        add_at_height(
-            &mut r,
-            case.real.bin0 - s as f64 * GEDI_BIN_M - g,
-            f64::from(v),
-        );
+        add_at_height(&mut r, case.real.bin0 - s as f64 * GEDI_BIN_M - g, f64::from(v));
     }
     normalised(r)
 }
@@ -63,11 +57,7 @@ pub fn simulated_profile(case: &ShotCase, model: &Model) -> Option<Vec<f64>> {
     let site = model.site(case);
     let mut m = vec![0.0; PROFILE_BINS];
     for (k, &v) in simulated_wave(case, model).iter().enumerate() {
-        add_at_height(
-            &mut m,
-            site.z0 - k as f64 * case.sim.dz - site.als_ground,
-            v,
-        );
+        add_at_height(&mut m, site.z0 - k as f64 * case.sim.dz - site.als_ground, v);
     }
     normalised(m)
 }
@@ -97,10 +87,7 @@ pub struct ShotProfile {
 pub fn shot_profile(case: &ShotCase, model: &Model) -> Option<ShotProfile> {
     let r = real_profile(case, model.site(case), model.vertical_offset_m())?;
     let m = simulated_profile(case, model)?;
-    Some(ShotProfile {
-        group: group(case),
-        diff: r.iter().zip(&m).map(|(a, b)| (a - b) as f32).collect(),
-    })
+    Some(ShotProfile { group: group(case), diff: r.iter().zip(&m).map(|(a, b)| (a - b) as f32).collect() })
 }
 
 /// Σd and Σd² per group and bin, and the shot counts.
@@ -113,11 +100,7 @@ pub struct ProfileSums {
 
 impl Default for ProfileSums {
     fn default() -> Self {
-        ProfileSums {
-            n: [0.0; PROFILE_GROUPS],
-            sd: vec![0.0; PROFILE_GROUPS * PROFILE_BINS],
-            sdd: vec![0.0; PROFILE_GROUPS * PROFILE_BINS],
-        }
+        ProfileSums { n: [0.0; PROFILE_GROUPS], sd: vec![0.0; PROFILE_GROUPS * PROFILE_BINS], sdd: vec![0.0; PROFILE_GROUPS * PROFILE_BINS] }
     }
 }
 
@@ -168,8 +151,7 @@ impl ProfileSums {
 /// The profile χ² of `model` on `cases` (in parallel).
 pub fn chi2(cases: &[&ShotCase], model: &Model) -> f64 {
     use rayon::prelude::*;
-    let profiles: Vec<Option<ShotProfile>> =
-        cases.par_iter().map(|c| shot_profile(c, model)).collect();
+    let profiles: Vec<Option<ShotProfile>> = cases.par_iter().map(|c| shot_profile(c, model)).collect();
     let mut s = ProfileSums::default();
     profiles.iter().flatten().for_each(|p| s.add(p));
     s.chi2()
@@ -195,16 +177,8 @@ mod tests {
         let mut off = ProfileSums::default();
         for i in 0..20 {
             let noise = |k: usize| ((i * 7 + k * 13) % 11) as f32 * 1e-4 - 5e-4;
-            same.add(&ShotProfile {
-                group: 0,
-                diff: (0..PROFILE_BINS).map(|k| noise(k) * 0.0).collect(),
-            });
-            off.add(&ShotProfile {
-                group: 0,
-                diff: (0..PROFILE_BINS)
-                    .map(|k| noise(k) + if k == 20 { 0.01 } else { 0.0 })
-                    .collect(),
-            });
+            same.add(&ShotProfile { group: 0, diff: (0..PROFILE_BINS).map(|k| noise(k) * 0.0).collect() });
+            off.add(&ShotProfile { group: 0, diff: (0..PROFILE_BINS).map(|k| noise(k) + if k == 20 { 0.01 } else { 0.0 }).collect() });
         }
         assert_eq!(same.chi2(), 0.0);
         let mut merged = ProfileSums::default();

@@ -62,12 +62,7 @@ impl<'a> Folds<'a> {
     }
 
     fn of(&self, f: usize) -> Vec<&'a ShotCase> {
-        self.cases
-            .iter()
-            .zip(&self.fold)
-            .filter(|(_, &g)| g == f)
-            .map(|(c, _)| *c)
-            .collect()
+        self.cases.iter().zip(&self.fold).filter(|(_, &g)| g == f).map(|(c, _)| *c).collect()
     }
 
     /// Evaluate each fold's cases with its own model, its shots re-placed for it; gaps in case
@@ -75,9 +70,7 @@ impl<'a> Folds<'a> {
     pub fn held_out(&self, models: &[Model; 2]) -> Vec<ShotGap> {
         let mut out: Vec<Option<ShotGap>> = vec![None; self.cases.len()];
         for f in 0..2 {
-            let idx: Vec<usize> = (0..self.cases.len())
-                .filter(|&i| self.fold[i] == f)
-                .collect();
+            let idx: Vec<usize> = (0..self.cases.len()).filter(|&i| self.fold[i] == f).collect();
             let cases: Vec<&ShotCase> = idx.iter().map(|&i| self.cases[i]).collect();
             let placed = reposition(&cases, &models[f]);
             for (i, g) in idx.into_iter().zip(evaluate(&cases, &placed)) {
@@ -102,13 +95,7 @@ impl<'a> Folds<'a> {
             return Vec::new();
         }
         let mut rng = Stream::new(0xB007, &["bootstrap", label]);
-        (0..BOOTSTRAP)
-            .map(|_| {
-                (0..n)
-                    .map(|_| ((rng.uniform() * n as f64) as usize).min(n - 1))
-                    .collect()
-            })
-            .collect()
+        (0..BOOTSTRAP).map(|_| (0..n).map(|_| ((rng.uniform() * n as f64) as usize).min(n - 1)).collect()).collect()
     }
 }
 
@@ -122,9 +109,7 @@ fn sum_of(t: &[GapSums], pick: &[usize]) -> GapSums {
 /// The waveform-level sums of a set of shot gaps.
 fn profile_sums(gaps: &[ShotGap]) -> ProfileSums {
     let mut s = ProfileSums::default();
-    gaps.iter()
-        .filter_map(|g| g.profile.as_ref())
-        .for_each(|p| s.add(p));
+    gaps.iter().filter_map(|g| g.profile.as_ref()).for_each(|p| s.add(p));
     s
 }
 
@@ -174,12 +159,7 @@ fn shrink_of(before: &GapMetrics, after: &GapMetrics) -> f64 {
 }
 
 /// Compare held-out gaps with a bootstrap over tracks (seeded: reproducible).
-pub fn compare(
-    folds: &Folds,
-    before: &[ShotGap],
-    after: &[ShotGap],
-    seed_label: &str,
-) -> Comparison {
+pub fn compare(folds: &Folds, before: &[ShotGap], after: &[ShotGap], seed_label: &str) -> Comparison {
     let (tb, ta) = (folds.per_track(before), folds.per_track(after));
     let all: Vec<usize> = (0..folds.n_tracks).collect();
     let (b, a) = (sum_of(&tb, &all).metrics(), sum_of(&ta, &all).metrics());
@@ -195,25 +175,13 @@ pub fn compare(
         }
     }
     let profile_chi2 = [profile_sums(before).chi2(), profile_sums(after).chi2()];
-    Comparison {
-        before: b,
-        after: a,
-        shrink,
-        ci95: interval(shrinks),
-        gain_ci95: interval(gains),
-        shrink_mean_abs_bias,
-        profile_chi2,
-    }
+    Comparison { before: b, after: a, shrink, ci95: interval(shrinks), gain_ci95: interval(gains), shrink_mean_abs_bias, profile_chi2 }
 }
 
 /// Order trials: those that explain first, each group by its held-out score
 /// ([`Comparison::score`]), best first.
 fn order(trials: &mut [Trial]) {
-    trials.sort_by(|a, b| {
-        b.explains()
-            .cmp(&a.explains())
-            .then(b.held_out.score().total_cmp(&a.held_out.score()))
-    });
+    trials.sort_by(|a, b| b.explains().cmp(&a.explains()).then(b.held_out.score().total_cmp(&a.held_out.score())));
 }
 
 fn interval(mut v: Vec<f64>) -> [f64; 2] {
@@ -257,11 +225,7 @@ impl State {
     pub fn nominal(folds: &Folds) -> State {
         let m = Model::default();
         let gaps = folds.held_out(&[m.clone(), m.clone()]);
-        State {
-            full: m.clone(),
-            folds: [m.clone(), m],
-            gaps,
-        }
+        State { full: m.clone(), folds: [m.clone(), m], gaps }
     }
 }
 
@@ -270,20 +234,14 @@ impl State {
 pub fn try_effect(folds: &Folds, state: &State, name: &str) -> Option<Trial> {
     let effect = fit(name, &state.full, &folds.cases)?;
     // Fold f is scored with the parameters fitted on fold 1 − f.
-    let fitted: [Option<Effect>; 2] =
-        std::array::from_fn(|f| fit(name, &state.folds[f], &folds.of(1 - f)));
+    let fitted: [Option<Effect>; 2] = std::array::from_fn(|f| fit(name, &state.folds[f], &folds.of(1 - f)));
     let models: [Model; 2] = std::array::from_fn(|f| match &fitted[f] {
         Some(e) => state.folds[f].with(e.clone()),
         None => state.folds[f].clone(),
     });
     let gaps = folds.held_out(&models);
     let held_out = compare(folds, &state.gaps, &gaps, name);
-    Some(Trial {
-        effect,
-        fold_effects: fitted,
-        held_out,
-        gaps,
-    })
+    Some(Trial { effect, fold_effects: fitted, held_out, gaps })
 }
 
 /// The ranking and the ladder.
@@ -334,11 +292,7 @@ pub fn rank(folds: &Folds, names: &[&str], on_step: &dyn Fn(&str)) -> Ranking {
             }
         }
     }
-    Ranking {
-        effects,
-        ladder,
-        unexplained,
-    }
+    Ranking { effects, ladder, unexplained }
 }
 
 fn advance(state: &State, t: &Trial) -> State {
@@ -358,9 +312,7 @@ mod tests {
 
     #[test]
     fn folds_are_stable_and_both_used() {
-        let n0 = (0..200)
-            .filter(|i| fold_of(&format!("g{i}/BEAM0101")) == 0)
-            .count();
+        let n0 = (0..200).filter(|i| fold_of(&format!("g{i}/BEAM0101")) == 0).count();
         assert!(n0 > 70 && n0 < 130, "{n0}");
         assert_eq!(fold_of("a/BEAM0000"), fold_of("a/BEAM0000"));
     }

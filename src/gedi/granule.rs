@@ -134,21 +134,14 @@ impl L2aShot {
     /// Set `selected_algorithm` to `alg` (1..=6) and copy that algorithm's values into the root
     /// fields, as NASA's L2A does (root `rh` = `rh_aN` / 100, etc.).
     pub fn select_algorithm(&mut self, alg: u8) {
-        let Some(a) = (alg as usize)
-            .checked_sub(1)
-            .and_then(|i| self.algorithms.get(i))
-        else {
+        let Some(a) = (alg as usize).checked_sub(1).and_then(|i| self.algorithms.get(i)) else {
             self.selected_algorithm = 0;
             return;
         };
         self.elev_lowestmode = a.elev_lowestmode;
         self.lat_lowestmode = a.lat_lowestmode;
         self.lon_lowestmode = a.lon_lowestmode;
-        self.rh = a
-            .rh_cm
-            .iter()
-            .map(|&cm| (f64::from(cm) / 100.0) as f32)
-            .collect();
+        self.rh = a.rh_cm.iter().map(|&cm| (f64::from(cm) / 100.0) as f32).collect();
         self.sensitivity = a.sensitivity;
         self.quality_flag = a.quality_flag;
         self.selected_algorithm = alg;
@@ -205,11 +198,7 @@ pub struct ExtraDataset {
 impl ExtraDataset {
     /// A 1-D dataset.
     pub fn new(path: impl Into<String>, values: Values) -> Self {
-        ExtraDataset {
-            path: path.into(),
-            values,
-            row_len: 1,
-        }
+        ExtraDataset { path: path.into(), values, row_len: 1 }
     }
 }
 
@@ -227,11 +216,7 @@ pub struct Beam<S> {
 impl<S> Beam<S> {
     /// A beam with shots and no extra datasets.
     pub fn new(name: impl Into<String>, shots: Vec<S>) -> Self {
-        Beam {
-            name: name.into(),
-            shots,
-            extra: Vec::new(),
-        }
+        Beam { name: name.into(), shots, extra: Vec::new() }
     }
 }
 
@@ -246,10 +231,7 @@ pub struct GranuleMeta {
 
 impl Default for GranuleMeta {
     fn default() -> Self {
-        GranuleMeta {
-            pge_version: "005".into(),
-            version_id: "002".into(),
-        }
+        GranuleMeta { pge_version: "005".into(), version_id: "002".into() }
     }
 }
 
@@ -292,26 +274,12 @@ fn write_granule<S>(
 fn time_datasets(prefix: &str, name: &str, delta_time: &[f64]) -> Vec<ExtraDataset> {
     let beam = beam_number(name).unwrap_or(0);
     vec![
-        ExtraDataset::new(
-            format!("{prefix}beam"),
-            Values::U16(vec![beam; delta_time.len()]),
-        ),
-        ExtraDataset::new(
-            format!("{prefix}channel"),
-            Values::U8(vec![0; delta_time.len()]),
-        ),
-        ExtraDataset::new(
-            format!("{prefix}delta_time"),
-            Values::F64(delta_time.to_vec()),
-        ),
+        ExtraDataset::new(format!("{prefix}beam"), Values::U16(vec![beam; delta_time.len()])),
+        ExtraDataset::new(format!("{prefix}channel"), Values::U8(vec![0; delta_time.len()])),
+        ExtraDataset::new(format!("{prefix}delta_time"), Values::F64(delta_time.to_vec())),
         ExtraDataset::new(
             format!("{prefix}master_int"),
-            Values::U32(
-                delta_time
-                    .iter()
-                    .map(|t| t.floor().max(0.0) as u32)
-                    .collect(),
-            ),
+            Values::U32(delta_time.iter().map(|t| t.floor().max(0.0) as u32).collect()),
         ),
         ExtraDataset::new(
             format!("{prefix}master_frac"),
@@ -321,19 +289,11 @@ fn time_datasets(prefix: &str, name: &str, delta_time: &[f64]) -> Vec<ExtraDatas
 }
 
 /// Flatten waveforms into (samples, counts as uint16, 1-based start indices as uint64).
-fn pack_waveforms(
-    path: &Path,
-    field: &str,
-    waves: impl Iterator<Item = (u64, Vec<f32>)>,
-) -> Result<[Values; 3]> {
+fn pack_waveforms(path: &Path, field: &str, waves: impl Iterator<Item = (u64, Vec<f32>)>) -> Result<[Values; 3]> {
     let (mut flat, mut count, mut start) = (Vec::new(), Vec::new(), Vec::new());
     for (shot, w) in waves {
         let n = u16::try_from(w.len()).map_err(|_| {
-            Error::field(
-                path,
-                field,
-                format!("shot {shot}: {} samples exceed the uint16 count", w.len()),
-            )
+            Error::field(path, field, format!("shot {shot}: {} samples exceed the uint16 count", w.len()))
         })?;
         // GEDI's start index is 1-based (gedi-products.md §1).
         start.push(flat.len() as u64 + 1);
@@ -349,23 +309,14 @@ fn l1b_datasets(path: &Path, beam: &Beam<L1bShot>) -> Result<Vec<ExtraDataset>> 
     let shot_number: Vec<u64> = s.iter().map(|x| x.shot_number).collect();
     let delta_time: Vec<f64> = s.iter().map(|x| x.delta_time).collect();
 
-    let mut out = vec![ExtraDataset::new(
-        "shot_number",
-        Values::U64(shot_number.clone()),
-    )];
+    let mut out = vec![ExtraDataset::new("shot_number", Values::U64(shot_number.clone()))];
     out.extend(time_datasets("", &beam.name, &delta_time));
     let field = format!("{}/rxwaveform", beam.name);
-    let [rx, rx_count, rx_start] = pack_waveforms(
-        path,
-        &field,
-        s.iter().map(|x| (x.shot_number, x.rx_waveform.clone())),
-    )?;
+    let [rx, rx_count, rx_start] =
+        pack_waveforms(path, &field, s.iter().map(|x| (x.shot_number, x.rx_waveform.clone())))?;
     let field = format!("{}/txwaveform", beam.name);
-    let [tx, tx_count, tx_start] = pack_waveforms(
-        path,
-        &field,
-        s.iter().map(|x| (x.shot_number, x.tx_waveform.clone())),
-    )?;
+    let [tx, tx_count, tx_start] =
+        pack_waveforms(path, &field, s.iter().map(|x| (x.shot_number, x.tx_waveform.clone())))?;
     out.extend([
         ExtraDataset::new("rxwaveform", rx),
         ExtraDataset::new("rx_sample_count", rx_count),
@@ -375,41 +326,23 @@ fn l1b_datasets(path: &Path, beam: &Beam<L1bShot>) -> Result<Vec<ExtraDataset>> 
         ExtraDataset::new("tx_sample_start_index", tx_start),
         ExtraDataset::new("noise_mean_corrected", f64s(|x| x.noise_mean_corrected)),
         ExtraDataset::new("noise_stddev_corrected", f64s(|x| x.noise_stddev_corrected)),
-        ExtraDataset::new(
-            "stale_return_flag",
-            Values::U8(s.iter().map(|x| x.stale_return_flag).collect()),
-        ),
-        ExtraDataset::new(
-            "ancillary/master_time_epoch",
-            Values::F64(vec![MASTER_TIME_EPOCH]),
-        ),
+        ExtraDataset::new("stale_return_flag", Values::U8(s.iter().map(|x| x.stale_return_flag).collect())),
+        ExtraDataset::new("ancillary/master_time_epoch", Values::F64(vec![MASTER_TIME_EPOCH])),
         ExtraDataset::new("geolocation/shot_number", Values::U64(shot_number)),
         ExtraDataset::new("geolocation/delta_time", Values::F64(delta_time.clone())),
         ExtraDataset::new("geolocation/elevation_bin0", f64s(|x| x.elevation_bin0)),
-        ExtraDataset::new(
-            "geolocation/elevation_lastbin",
-            f64s(|x| x.elevation_lastbin),
-        ),
+        ExtraDataset::new("geolocation/elevation_lastbin", f64s(|x| x.elevation_lastbin)),
         ExtraDataset::new("geolocation/latitude_bin0", f64s(|x| x.latitude_bin0)),
         ExtraDataset::new("geolocation/longitude_bin0", f64s(|x| x.longitude_bin0)),
         ExtraDataset::new("geolocation/latitude_lastbin", f64s(|x| x.latitude_lastbin)),
-        ExtraDataset::new(
-            "geolocation/longitude_lastbin",
-            f64s(|x| x.longitude_lastbin),
-        ),
-        ExtraDataset::new(
-            "geolocation/degrade",
-            Values::I8(s.iter().map(|x| x.degrade).collect()),
-        ),
+        ExtraDataset::new("geolocation/longitude_lastbin", f64s(|x| x.longitude_lastbin)),
+        ExtraDataset::new("geolocation/degrade", Values::I8(s.iter().map(|x| x.degrade).collect())),
         ExtraDataset::new(
             "geolocation/digital_elevation_model",
             Values::F32(s.iter().map(|x| x.digital_elevation_model).collect()),
         ),
         ExtraDataset::new("geophys_corr/delta_time", Values::F64(delta_time)),
-        ExtraDataset::new(
-            "geophys_corr/geoid",
-            Values::F32(s.iter().map(|x| x.geoid).collect()),
-        ),
+        ExtraDataset::new("geophys_corr/geoid", Values::F32(s.iter().map(|x| x.geoid).collect())),
     ]);
     Ok(out)
 }
@@ -424,11 +357,7 @@ fn flatten_rows<T: Copy>(
     let mut flat = Vec::new();
     for (shot, row) in rows {
         if row.len() != len {
-            return Err(Error::field(
-                path,
-                field,
-                format!("shot {shot}: {} values, expected {len}", row.len()),
-            ));
+            return Err(Error::field(path, field, format!("shot {shot}: {} values, expected {len}", row.len())));
         }
         flat.extend_from_slice(&row);
     }
@@ -440,50 +369,20 @@ fn l2a_datasets(path: &Path, beam: &Beam<L2aShot>) -> Result<Vec<ExtraDataset>> 
     let u8s = |f: fn(&L2aShot) -> u8| Values::U8(s.iter().map(f).collect());
     let delta_time: Vec<f64> = s.iter().map(|x| x.delta_time).collect();
 
-    let mut out = vec![ExtraDataset::new(
-        "shot_number",
-        Values::U64(s.iter().map(|x| x.shot_number).collect()),
-    )];
+    let mut out = vec![ExtraDataset::new("shot_number", Values::U64(s.iter().map(|x| x.shot_number).collect()))];
     out.extend(time_datasets("", &beam.name, &delta_time));
-    let rh = flatten_rows(
-        path,
-        &format!("{}/rh", beam.name),
-        s.iter().map(|x| (x.shot_number, x.rh.clone())),
-        RH_LEN,
-    )?;
+    let rh = flatten_rows(path, &format!("{}/rh", beam.name), s.iter().map(|x| (x.shot_number, x.rh.clone())), RH_LEN)?;
     out.extend([
         ExtraDataset::new("quality_flag", u8s(|x| x.quality_flag)),
         ExtraDataset::new("degrade_flag", u8s(|x| x.degrade_flag)),
-        ExtraDataset::new(
-            "sensitivity",
-            Values::F32(s.iter().map(|x| x.sensitivity).collect()),
-        ),
+        ExtraDataset::new("sensitivity", Values::F32(s.iter().map(|x| x.sensitivity).collect())),
         ExtraDataset::new("selected_algorithm", u8s(|x| x.selected_algorithm)),
-        ExtraDataset::new(
-            "elev_lowestmode",
-            Values::F32(s.iter().map(|x| x.elev_lowestmode).collect()),
-        ),
-        ExtraDataset::new(
-            "lat_lowestmode",
-            Values::F64(s.iter().map(|x| x.lat_lowestmode).collect()),
-        ),
-        ExtraDataset::new(
-            "lon_lowestmode",
-            Values::F64(s.iter().map(|x| x.lon_lowestmode).collect()),
-        ),
-        ExtraDataset {
-            path: "rh".into(),
-            values: Values::F32(rh),
-            row_len: RH_LEN,
-        },
-        ExtraDataset::new(
-            "energy_total",
-            Values::F32(s.iter().map(|x| x.energy_total).collect()),
-        ),
-        ExtraDataset::new(
-            "ancillary/l2a_alg_count",
-            Values::U8(vec![N_ALGORITHMS as u8]),
-        ),
+        ExtraDataset::new("elev_lowestmode", Values::F32(s.iter().map(|x| x.elev_lowestmode).collect())),
+        ExtraDataset::new("lat_lowestmode", Values::F64(s.iter().map(|x| x.lat_lowestmode).collect())),
+        ExtraDataset::new("lon_lowestmode", Values::F64(s.iter().map(|x| x.lon_lowestmode).collect())),
+        ExtraDataset { path: "rh".into(), values: Values::F32(rh), row_len: RH_LEN },
+        ExtraDataset::new("energy_total", Values::F32(s.iter().map(|x| x.energy_total).collect())),
+        ExtraDataset::new("ancillary/l2a_alg_count", Values::U8(vec![N_ALGORITHMS as u8])),
     ]);
     for a in 0..N_ALGORITHMS {
         let n = a + 1;
@@ -492,35 +391,17 @@ fn l2a_datasets(path: &Path, beam: &Beam<L2aShot>) -> Result<Vec<ExtraDataset>> 
         let rh_cm = flatten_rows(
             path,
             &format!("{}/geolocation/rh_a{n}", beam.name),
-            s.iter()
-                .zip(&algs)
-                .map(|(x, a)| (x.shot_number, a.rh_cm.clone())),
+            s.iter().zip(&algs).map(|(x, a)| (x.shot_number, a.rh_cm.clone())),
             RH_LEN,
         )?;
         let f32s = |f: fn(&L2aAlgorithm) -> f32| Values::F32(algs.iter().map(f).collect());
         let f64s = |f: fn(&L2aAlgorithm) -> f64| Values::F64(algs.iter().map(f).collect());
         out.extend([
-            ExtraDataset::new(
-                format!("geolocation/elev_lowestmode_a{n}"),
-                f32s(|a| a.elev_lowestmode),
-            ),
-            ExtraDataset::new(
-                format!("geolocation/lat_lowestmode_a{n}"),
-                f64s(|a| a.lat_lowestmode),
-            ),
-            ExtraDataset::new(
-                format!("geolocation/lon_lowestmode_a{n}"),
-                f64s(|a| a.lon_lowestmode),
-            ),
-            ExtraDataset {
-                path: format!("geolocation/rh_a{n}"),
-                values: Values::I16(rh_cm),
-                row_len: RH_LEN,
-            },
-            ExtraDataset::new(
-                format!("geolocation/sensitivity_a{n}"),
-                f32s(|a| a.sensitivity),
-            ),
+            ExtraDataset::new(format!("geolocation/elev_lowestmode_a{n}"), f32s(|a| a.elev_lowestmode)),
+            ExtraDataset::new(format!("geolocation/lat_lowestmode_a{n}"), f64s(|a| a.lat_lowestmode)),
+            ExtraDataset::new(format!("geolocation/lon_lowestmode_a{n}"), f64s(|a| a.lon_lowestmode)),
+            ExtraDataset { path: format!("geolocation/rh_a{n}"), values: Values::I16(rh_cm), row_len: RH_LEN },
+            ExtraDataset::new(format!("geolocation/sensitivity_a{n}"), f32s(|a| a.sensitivity)),
             ExtraDataset::new(
                 format!("geolocation/quality_flag_a{n}"),
                 Values::U8(algs.iter().map(|a| a.quality_flag).collect()),
@@ -539,14 +420,8 @@ fn l2a_datasets(path: &Path, beam: &Beam<L2aShot>) -> Result<Vec<ExtraDataset>> 
         ExtraDataset::new("land_cover_data/leaf_on_cycle", lc(|l| l.leaf_on_cycle)),
         ExtraDataset::new("land_cover_data/pft_class", lc(|l| l.pft_class)),
         ExtraDataset::new("land_cover_data/region_class", lc(|l| l.region_class)),
-        ExtraDataset::new(
-            "land_cover_data/urban_proportion",
-            lc(|l| l.urban_proportion),
-        ),
-        ExtraDataset::new(
-            "land_cover_data/landsat_water_persistence",
-            lc(|l| l.landsat_water_persistence),
-        ),
+        ExtraDataset::new("land_cover_data/urban_proportion", lc(|l| l.urban_proportion)),
+        ExtraDataset::new("land_cover_data/landsat_water_persistence", lc(|l| l.landsat_water_persistence)),
     ]);
     Ok(out)
 }
@@ -564,10 +439,7 @@ fn create_granule(path: &Path, short_name: &str, meta: &GranuleMeta) -> Result<F
         .create_group("METADATA")
         .and_then(|g| g.create_group("DatasetIdentification"))
         .map_err(h5err(path, "METADATA/DatasetIdentification"))?;
-    let file_name = path
-        .file_name()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
+    let file_name = path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     for (k, v) in [
         ("PGEVersion", meta.pge_version.as_str()),
         ("VersionID", meta.version_id.as_str()),
@@ -581,12 +453,8 @@ fn create_granule(path: &Path, short_name: &str, meta: &GranuleMeta) -> Result<F
 
 /// Write a scalar UTF-8 string attribute.
 pub fn write_str_attr(loc: &Location, name: &str, value: &str) -> hdf5::Result<()> {
-    let v =
-        VarLenUnicode::from_str(value).map_err(|e| hdf5::Error::from(e.to_string().as_str()))?;
-    loc.new_attr::<VarLenUnicode>()
-        .shape(())
-        .create(name)?
-        .write_scalar(&v)
+    let v = VarLenUnicode::from_str(value).map_err(|e| hdf5::Error::from(e.to_string().as_str()))?;
+    loc.new_attr::<VarLenUnicode>().shape(()).create(name)?.write_scalar(&v)
 }
 
 fn write_beam(path: &Path, file: &File, name: &str, sets: &[ExtraDataset]) -> Result<()> {
@@ -597,26 +465,16 @@ fn write_beam(path: &Path, file: &File, name: &str, sets: &[ExtraDataset]) -> Re
     for d in sets {
         let field = format!("{name}/{}", d.path);
         if d.row_len == 0 || d.values.len() % d.row_len != 0 {
-            return Err(Error::field(
-                path,
-                &field,
-                format!("{} values are not rows of {}", d.values.len(), d.row_len),
-            ));
+            return Err(Error::field(path, &field, format!("{} values are not rows of {}", d.values.len(), d.row_len)));
         }
-        write_values(&group, &d.path, &d.values, d.row_len)
-            .map_err(|e| Error::field(path, &field, e))?;
+        write_values(&group, &d.path, &d.values, d.row_len).map_err(|e| Error::field(path, &field, e))?;
     }
     Ok(())
 }
 
 /// Write one dataset (creating intermediate groups), 1-D when `row_len == 1`, else N×row_len.
 pub fn write_values(root: &Group, rel: &str, values: &Values, row_len: usize) -> hdf5::Result<()> {
-    fn typed<T: H5Type>(
-        parent: &Group,
-        name: &str,
-        data: &[T],
-        row_len: usize,
-    ) -> hdf5::Result<()> {
+    fn typed<T: H5Type>(parent: &Group, name: &str, data: &[T], row_len: usize) -> hdf5::Result<()> {
         let rows = data.len() / row_len.max(1);
         let builder = parent.new_dataset::<T>();
         let ds = if row_len == 1 {
@@ -648,11 +506,7 @@ fn parent_group<'a>(root: &Group, rel: &'a str) -> hdf5::Result<(Group, &'a str)
     let (dirs, name) = rel.rsplit_once('/').unwrap_or(("", rel));
     let mut g = root.clone();
     for part in dirs.split('/').filter(|p| !p.is_empty()) {
-        g = if g.link_exists(part) {
-            g.group(part)?
-        } else {
-            g.create_group(part)?
-        };
+        g = if g.link_exists(part) { g.group(part)? } else { g.create_group(part)? };
     }
     Ok((g, name))
 }

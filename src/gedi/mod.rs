@@ -6,9 +6,8 @@
 pub mod granule;
 
 /// The eight GEDI beam group names, coverage beams first.
-pub const BEAM_NAMES: [&str; 8] = [
-    "BEAM0000", "BEAM0001", "BEAM0010", "BEAM0011", "BEAM0101", "BEAM0110", "BEAM1000", "BEAM1011",
-];
+pub const BEAM_NAMES: [&str; 8] =
+    ["BEAM0000", "BEAM0001", "BEAM0010", "BEAM0011", "BEAM0101", "BEAM0110", "BEAM1000", "BEAM1011"];
 
 /// Number of relative-height values per shot (RH0..RH100 at 1 % steps).
 pub const RH_LEN: usize = 101;
@@ -61,7 +60,5 @@ pub fn is_beam_group(name: &str) -> bool {
 
 /// The per-shot `beam` number of a beam group: the decimal value of its binary suffix.
 pub fn beam_number(name: &str) -> Option<u16> {
-    is_beam_group(name)
-        .then(|| u16::from_str_radix(&name[4..], 2).ok())
-        .flatten()
+    is_beam_group(name).then(|| u16::from_str_radix(&name[4..], 2).ok()).flatten()
 }

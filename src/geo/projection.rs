@@ -54,9 +54,7 @@ pub struct Projector {
 
 impl std::fmt::Debug for Projector {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Projector")
-            .field("epsg", &self.epsg)
-            .finish()
+        f.debug_struct("Projector").field("epsg", &self.epsg).finish()
     }
 }
 
@@ -68,8 +66,7 @@ impl Projector {
                 "EPSG:{epsg} is not a supported projected CRS (supported: 2154, 3942-3950, 3035, 3857, 25828-25838, 32601-32660, 32701-32760)"
             ))
         })?;
-        let dst =
-            Proj::from_proj_string(&def).map_err(|e| Error::Usage(format!("EPSG:{epsg}: {e}")))?;
+        let dst = Proj::from_proj_string(&def).map_err(|e| Error::Usage(format!("EPSG:{epsg}: {e}")))?;
         let src = Proj::from_proj_string(WGS84).map_err(|e| Error::Usage(format!("WGS84: {e}")))?;
         Ok(Projector { epsg, src, dst })
     }
@@ -82,35 +79,18 @@ impl Projector {
     /// Project one point given in degrees; the error text says what failed (the caller adds the field).
     pub fn project(&self, lon_deg: f64, lat_deg: f64) -> std::result::Result<(f64, f64), String> {
         if !lon_deg.is_finite() || !lat_deg.is_finite() {
-            return Err(format!(
-                "non-finite coordinate (lon {lon_deg}, lat {lat_deg})"
-            ));
+            return Err(format!("non-finite coordinate (lon {lon_deg}, lat {lat_deg})"));
         }
         if !(-90.0..=90.0).contains(&lat_deg) || !(-540.0..=540.0).contains(&lon_deg) {
-            return Err(format!(
-                "coordinate out of range (lon {lon_deg}, lat {lat_deg})"
-            ));
+            return Err(format!("coordinate out of range (lon {lon_deg}, lat {lat_deg})"));
         }
         // proj4rs works in radians for geographic systems.
-        let (x, y) = transform_xy(
-            &self.src,
-            &self.dst,
-            lon_deg.to_radians(),
-            lat_deg.to_radians(),
-        )
-        .map_err(|e| {
-            format!(
-                "cannot project (lon {lon_deg}, lat {lat_deg}) to EPSG:{}: {e}",
-                self.epsg
-            )
-        })?;
+        let (x, y) = transform_xy(&self.src, &self.dst, lon_deg.to_radians(), lat_deg.to_radians())
+            .map_err(|e| format!("cannot project (lon {lon_deg}, lat {lat_deg}) to EPSG:{}: {e}", self.epsg))?;
         if x.is_finite() && y.is_finite() {
             Ok((x, y))
         } else {
-            Err(format!(
-                "(lon {lon_deg}, lat {lat_deg}) has no finite EPSG:{} coordinate",
-                self.epsg
-            ))
+            Err(format!("(lon {lon_deg}, lat {lat_deg}) has no finite EPSG:{} coordinate", self.epsg))
         }
     }
     /// Inverse of [`Projector::project`]: projected (x, y) to WGS84 (longitude, latitude) in degrees.
@@ -118,12 +98,8 @@ impl Projector {
         if !x.is_finite() || !y.is_finite() {
             return Err(format!("non-finite coordinate (x {x}, y {y})"));
         }
-        let (lon, lat) = transform_xy(&self.dst, &self.src, x, y).map_err(|e| {
-            format!(
-                "cannot unproject (x {x}, y {y}) from EPSG:{}: {e}",
-                self.epsg
-            )
-        })?;
+        let (lon, lat) = transform_xy(&self.dst, &self.src, x, y)
+            .map_err(|e| format!("cannot unproject (x {x}, y {y}) from EPSG:{}: {e}", self.epsg))?;
         let (lon, lat) = (lon.to_degrees(), lat.to_degrees());
         if lon.is_finite() && lat.is_finite() {
             Ok((lon, lat))
@@ -143,44 +119,29 @@ mod tests {
         let (lon, lat) = p.unproject(368528.1, 6807456.8).unwrap();
         let (x, y) = p.project(lon, lat).unwrap();
         // The inverse Lambert projection iterates on latitude: the round trip is within 10 µm.
-        assert!(
-            (x - 368528.1).abs() < 1e-5 && (y - 6807456.8).abs() < 1e-5,
-            "{x} {y}"
-        );
-        assert!(
-            (lon + 1.47).abs() < 0.01 && (lat - 48.28).abs() < 0.01,
-            "{lon} {lat}"
-        );
+        assert!((x - 368528.1).abs() < 1e-5 && (y - 6807456.8).abs() < 1e-5, "{x} {y}");
+        assert!((lon + 1.47).abs() < 0.01 && (lat - 48.28).abs() < 0.01, "{lon} {lat}");
     }
 
     #[test]
     fn lambert93_origin_is_exact() {
         let p = Projector::new(2154).unwrap();
         let (x, y) = p.project(3.0, 46.5).unwrap();
-        assert!(
-            (x - 700_000.0).abs() < 1e-6 && (y - 6_600_000.0).abs() < 1e-6,
-            "{x} {y}"
-        );
+        assert!((x - 700_000.0).abs() < 1e-6 && (y - 6_600_000.0).abs() < 1e-6, "{x} {y}");
     }
 
     #[test]
     fn laea_europe_origin_is_exact() {
         let p = Projector::new(3035).unwrap();
         let (x, y) = p.project(10.0, 52.0).unwrap();
-        assert!(
-            (x - 4_321_000.0).abs() < 1e-6 && (y - 3_210_000.0).abs() < 1e-6,
-            "{x} {y}"
-        );
+        assert!((x - 4_321_000.0).abs() < 1e-6 && (y - 3_210_000.0).abs() < 1e-6, "{x} {y}");
     }
 
     #[test]
     fn cc_zone_origin() {
         // CC46 (EPSG:3946): origin (3°E, 46°N) -> (1 700 000, 5 200 000).
         let (x, y) = Projector::new(3946).unwrap().project(3.0, 46.0).unwrap();
-        assert!(
-            (x - 1_700_000.0).abs() < 1e-6 && (y - 5_200_000.0).abs() < 1e-6,
-            "{x} {y}"
-        );
+        assert!((x - 1_700_000.0).abs() < 1e-6 && (y - 5_200_000.0).abs() < 1e-6, "{x} {y}");
     }
 
     #[test]
@@ -194,10 +155,7 @@ mod tests {
         let p = Projector::new(2154).unwrap();
         let (x, y) = p.project(4.4991, 45.23664).unwrap();
         let (lon, lat) = p.unproject(x, y).unwrap();
-        assert!(
-            (lon - 4.4991).abs() < 1e-9 && (lat - 45.23664).abs() < 1e-9,
-            "{lon} {lat}"
-        );
+        assert!((lon - 4.4991).abs() < 1e-9 && (lat - 45.23664).abs() < 1e-9, "{lon} {lat}");
         assert!(p.unproject(f64::NAN, 0.0).is_err());
     }
 

@@ -14,8 +14,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use arrow::array::{
-    ArrayRef, BooleanArray, Float32Array, Float64Array, StringArray, TimestampMicrosecondArray,
-    UInt16Array, UInt32Array, UInt64Array, UInt8Array,
+    ArrayRef, BooleanArray, Float32Array, Float64Array, StringArray, TimestampMicrosecondArray, UInt16Array,
+    UInt32Array, UInt64Array, UInt8Array,
 };
 use arrow::datatypes::{DataType, Field, Schema, SchemaRef, TimeUnit};
 use arrow::record_batch::RecordBatch;
@@ -56,11 +56,7 @@ pub struct AlsOptions {
 #[derive(Debug, Clone)]
 pub enum TileOutcome {
     /// Points written.
-    Ingested {
-        tile: String,
-        points: u64,
-        dropped: u64,
-    },
+    Ingested { tile: String, points: u64, dropped: u64 },
     /// The same content was ingested before (keyed by content hash).
     AlreadyIngested { tile: String },
 }
@@ -75,9 +71,7 @@ pub fn cell_key(x: f64, y: f64) -> u64 {
 
 /// Expand folders into the LAS/LAZ files they contain (sorted); files are kept as given.
 pub fn expand_inputs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
-    super::expand_inputs(inputs, |f| {
-        super::has_extension(f, "las") || super::has_extension(f, "laz")
-    })
+    super::expand_inputs(inputs, |f| super::has_extension(f, "las") || super::has_extension(f, "laz"))
 }
 
 /// Schema of the `als/` table.
@@ -149,17 +143,7 @@ pub fn ingest_tiles(
     let parallel_decode = files.len() == 1;
     files
         .par_iter()
-        .map(|f| {
-            ingest_tile(
-                f,
-                &als_dir,
-                &tiles_dir,
-                opts,
-                existing_epsg,
-                parallel_decode,
-                on_points,
-            )
-        })
+        .map(|f| ingest_tile(f, &als_dir, &tiles_dir, opts, existing_epsg, parallel_decode, on_points))
         .collect()
 }
 
@@ -170,51 +154,26 @@ pub fn dataset_epsg(dataset: &Dataset) -> Result<Option<u32>> {
         return Ok(None);
     }
     let files = dataset::table_files(&tiles_dir).map_err(|e| Error::file(&tiles_dir, e))?;
-    let Some(first) = files.first() else {
-        return Ok(None);
-    };
+    let Some(first) = files.first() else { return Ok(None) };
     let file = File::open(first).map_err(|e| Error::file(first, e))?;
-    let reader = parquet::file::serialized_reader::SerializedFileReader::new(file)
-        .map_err(|e| Error::table(first, e))?;
+    let reader = parquet::file::serialized_reader::SerializedFileReader::new(file).map_err(|e| Error::table(first, e))?;
     use parquet::file::reader::FileReader;
-    let kv = reader
-        .metadata()
-        .file_metadata()
-        .key_value_metadata()
-        .cloned()
-        .unwrap_or_default();
-    Ok(kv
-        .iter()
-        .find(|k| k.key == meta::EPSG)
-        .and_then(|k| k.value.as_deref()?.parse().ok()))
+    let kv = reader.metadata().file_metadata().key_value_metadata().cloned().unwrap_or_default();
+    Ok(kv.iter().find(|k| k.key == meta::EPSG).and_then(|k| k.value.as_deref()?.parse().ok()))
 }
 
 fn resolve_epsg(h: &TileHeader, opts: &AlsOptions, existing: Option<u32>) -> Result<u32> {
     let epsg = match (h.epsg, opts.epsg) {
         (Some(file), Some(given)) if file != given => {
-            return Err(Error::field(
-                &h.path,
-                "CRS",
-                format!("file says EPSG:{file} but --epsg {given} was given"),
-            ))
+            return Err(Error::field(&h.path, "CRS", format!("file says EPSG:{file} but --epsg {given} was given")))
         }
         (Some(file), _) => file,
         (None, Some(given)) => given,
-        (None, None) => {
-            return Err(Error::field(
-                &h.path,
-                "CRS",
-                "no WKT or GeoTIFF CRS record: pass --epsg",
-            ))
-        }
+        (None, None) => return Err(Error::field(&h.path, "CRS", "no WKT or GeoTIFF CRS record: pass --epsg")),
     };
     if let Some(ds) = existing {
         if ds != epsg {
-            return Err(Error::field(
-                &h.path,
-                "CRS",
-                format!("EPSG:{epsg} differs from the dataset's EPSG:{ds}"),
-            ));
+            return Err(Error::field(&h.path, "CRS", format!("EPSG:{epsg} differs from the dataset's EPSG:{ds}")));
         }
     }
     Ok(epsg)
@@ -233,14 +192,7 @@ impl TileStats {
     fn new() -> Self {
         TileStats {
             intensity_hist: vec![0; 1 << 16],
-            bounds: [
-                f64::INFINITY,
-                f64::INFINITY,
-                f64::INFINITY,
-                f64::NEG_INFINITY,
-                f64::NEG_INFINITY,
-                f64::NEG_INFINITY,
-            ],
+            bounds: [f64::INFINITY, f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY],
             gps: [f64::INFINITY, f64::NEG_INFINITY],
             kept: 0,
             dropped: 0,
@@ -282,12 +234,7 @@ impl TileStats {
 
     fn intensity_mean(&self) -> Option<f64> {
         (self.kept > 0).then(|| {
-            self.intensity_hist
-                .iter()
-                .enumerate()
-                .map(|(v, &c)| v as f64 * c as f64)
-                .sum::<f64>()
-                / self.kept as f64
+            self.intensity_hist.iter().enumerate().map(|(v, &c)| v as f64 * c as f64).sum::<f64>() / self.kept as f64
         })
     }
 }
@@ -316,11 +263,7 @@ fn ingest_tile(
 ) -> Result<TileOutcome> {
     let hash = dataset::content_hash(path)?;
     let key = &hash[..16];
-    let tile = path
-        .file_stem()
-        .and_then(|s| s.to_str())
-        .unwrap_or("tile")
-        .to_string();
+    let tile = path.file_stem().and_then(|s| s.to_str()).unwrap_or("tile").to_string();
     let tiles_file = tiles_dir.join(format!("{key}.parquet"));
     if tiles_file.exists() {
         return Ok(TileOutcome::AlreadyIngested { tile });
@@ -346,14 +289,7 @@ fn ingest_tile(
                 }
                 for (name, v) in [("x", chunk.x[i]), ("y", chunk.y[i]), ("z", chunk.z[i])] {
                     if !v.is_finite() {
-                        return Err(Error::field(
-                            path,
-                            name,
-                            format!(
-                                "non-finite coordinate {v} at point {}",
-                                stats.kept + stats.dropped
-                            ),
-                        ));
+                        return Err(Error::field(path, name, format!("non-finite coordinate {v} at point {}", stats.kept + stats.dropped)));
                     }
                 }
                 stats.add(&chunk, i);
@@ -369,10 +305,7 @@ fn ingest_tile(
         let mut metadata = HashMap::new();
         metadata.insert(meta::EPSG.to_string(), epsg.to_string());
         metadata.insert(meta::CELL_SIZE.to_string(), CELL_SIZE_M.to_string());
-        metadata.insert(
-            meta::VERTICAL.to_string(),
-            "as stored in the LAS file (IGN69 for LiDAR HD)".to_string(),
-        );
+        metadata.insert(meta::VERTICAL.to_string(), "as stored in the LAS file (IGN69 for LiDAR HD)".to_string());
         if let Some(wkt) = &header.crs_wkt {
             metadata.insert(meta::CRS_WKT.to_string(), wkt.clone());
         }
@@ -391,9 +324,7 @@ fn ingest_tile(
             let points = spill_reader.read_runs(&runs[start..end])?;
             let batch = als_batch(points, &tile, cell)?;
             for part in (0..batch.num_rows()).step_by(MAX_ROW_GROUP_ROWS) {
-                writer.write_row_group(
-                    &batch.slice(part, MAX_ROW_GROUP_ROWS.min(batch.num_rows() - part)),
-                )?;
+                writer.write_row_group(&batch.slice(part, MAX_ROW_GROUP_ROWS.min(batch.num_rows() - part)))?;
             }
             start = end;
         }
@@ -403,11 +334,7 @@ fn ingest_tile(
 
         let batch = tiles_batch(&header, &tile, &hash, epsg, &stats)?;
         dataset::write_parquet(&tiles_file, tiles_schema(), &[batch], &metadata)?;
-        Ok(TileOutcome::Ingested {
-            tile: tile.clone(),
-            points: stats.kept,
-            dropped: stats.dropped,
-        })
+        Ok(TileOutcome::Ingested { tile: tile.clone(), points: stats.kept, dropped: stats.dropped })
     })();
     if result.is_err() {
         let _ = std::fs::remove_file(&spill_path);
@@ -417,18 +344,14 @@ fn ingest_tile(
 
 /// The `als/` table's writer properties: the clustering declared so that readers may rely on it,
 /// and no dictionary for the columns whose values are nearly all distinct.
-fn als_writer_properties(
-    props: parquet::file::properties::WriterProperties,
-) -> parquet::file::properties::WriterProperties {
+fn als_writer_properties(props: parquet::file::properties::WriterProperties) -> parquet::file::properties::WriterProperties {
     use parquet::schema::types::ColumnPath;
     let cell_col = als_schema().index_of("cell").expect("cell column");
-    let mut builder = props.into_builder().set_sorting_columns(Some(vec![
-        parquet::file::metadata::SortingColumn {
-            column_idx: cell_col as i32,
-            descending: false,
-            nulls_first: false,
-        },
-    ]));
+    let mut builder = props.into_builder().set_sorting_columns(Some(vec![parquet::file::metadata::SortingColumn {
+        column_idx: cell_col as i32,
+        descending: false,
+        nulls_first: false,
+    }]));
     for col in ["x", "y", "z", "gps_time"] {
         builder = builder.set_column_dictionary_enabled(ColumnPath::from(col), false);
     }
@@ -456,13 +379,7 @@ fn als_batch(p: AlsPoints, tile: &str, cell: u64) -> Result<RecordBatch> {
     RecordBatch::try_new(als_schema(), cols).map_err(|e| Error::table(tile, e))
 }
 
-fn tiles_batch(
-    h: &TileHeader,
-    tile: &str,
-    hash: &str,
-    epsg: u32,
-    s: &TileStats,
-) -> Result<RecordBatch> {
+fn tiles_batch(h: &TileHeader, tile: &str, hash: &str, epsg: u32, s: &TileStats) -> Result<RecordBatch> {
     let has = s.kept > 0;
     let b = |i: usize| has.then_some(s.bounds[i]);
     let gps = |i: usize| (s.gps[0] <= s.gps[1]).then_some(s.gps[i]);
@@ -522,29 +439,13 @@ struct SpillFile {
 
 impl SpillFile {
     fn create(path: &Path) -> Result<Self> {
-        let f = File::create(path)
-            .map_err(|e| Error::file(path, format!("cannot create spill file: {e}")))?;
-        Ok(SpillFile {
-            path: path.to_path_buf(),
-            out: BufWriter::with_capacity(1 << 20, f),
-            offset: 0,
-            buf: Vec::new(),
-        })
+        let f = File::create(path).map_err(|e| Error::file(path, format!("cannot create spill file: {e}")))?;
+        Ok(SpillFile { path: path.to_path_buf(), out: BufWriter::with_capacity(1 << 20, f), offset: 0, buf: Vec::new() })
     }
 
     /// Append the points `order` (sorted by cell) of `chunk`, one run per cell, column by column.
-    fn write_runs(
-        &mut self,
-        chunk: &AlsPoints,
-        order: &[(u64, u32)],
-        runs: &mut Vec<Run>,
-    ) -> Result<()> {
-        fn put<T: Copy, const N: usize>(
-            buf: &mut Vec<u8>,
-            col: &[T],
-            idx: &[(u64, u32)],
-            bytes: impl Fn(T) -> [u8; N],
-        ) {
+    fn write_runs(&mut self, chunk: &AlsPoints, order: &[(u64, u32)], runs: &mut Vec<Run>) -> Result<()> {
+        fn put<T: Copy, const N: usize>(buf: &mut Vec<u8>, col: &[T], idx: &[(u64, u32)], bytes: impl Fn(T) -> [u8; N]) {
             for &(_, i) in idx {
                 buf.extend_from_slice(&bytes(col[i as usize]));
             }
@@ -556,11 +457,7 @@ impl SpillFile {
             let cell = order[start].0;
             let end = start + order[start..].partition_point(|&(c, _)| c == cell);
             let (idx, buf) = (&order[start..end], &mut self.buf);
-            runs.push(Run {
-                cell,
-                offset: self.offset + buf.len() as u64,
-                len: idx.len() as u32,
-            });
+            runs.push(Run { cell, offset: self.offset + buf.len() as u64, len: idx.len() as u32 });
             put(buf, &chunk.x, idx, f64::to_le_bytes);
             put(buf, &chunk.y, idx, f64::to_le_bytes);
             put(buf, &chunk.z, idx, f64::to_le_bytes);
@@ -573,17 +470,13 @@ impl SpillFile {
             put(buf, &chunk.classification, idx, |v: u8| [v]);
             start = end;
         }
-        self.out
-            .write_all(&self.buf)
-            .map_err(|e| Error::file(&self.path, format!("cannot write spill file: {e}")))?;
+        self.out.write_all(&self.buf).map_err(|e| Error::file(&self.path, format!("cannot write spill file: {e}")))?;
         self.offset += self.buf.len() as u64;
         Ok(())
     }
 
     fn finish(mut self) -> Result<PathBuf> {
-        self.out
-            .flush()
-            .map_err(|e| Error::file(&self.path, format!("cannot write spill file: {e}")))?;
+        self.out.flush().map_err(|e| Error::file(&self.path, format!("cannot write spill file: {e}")))?;
         Ok(self.path)
     }
 }
@@ -597,28 +490,14 @@ struct SpillReader {
 
 impl SpillReader {
     fn open(path: &Path) -> Result<Self> {
-        let file = File::open(path)
-            .map_err(|e| Error::file(path, format!("cannot open spill file: {e}")))?;
-        Ok(SpillReader {
-            path: path.to_path_buf(),
-            file,
-            buf: Vec::new(),
-        })
+        let file = File::open(path).map_err(|e| Error::file(path, format!("cannot open spill file: {e}")))?;
+        Ok(SpillReader { path: path.to_path_buf(), file, buf: Vec::new() })
     }
 
     fn read_runs(&mut self, runs: &[Run]) -> Result<AlsPoints> {
-        fn take<T, const N: usize>(
-            col: &mut Vec<T>,
-            bytes: &[u8],
-            at: &mut usize,
-            n: usize,
-            from: impl Fn([u8; N]) -> T,
-        ) {
+        fn take<T, const N: usize>(col: &mut Vec<T>, bytes: &[u8], at: &mut usize, n: usize, from: impl Fn([u8; N]) -> T) {
             let part = &bytes[*at..*at + n * N];
-            col.extend(
-                part.chunks_exact(N)
-                    .map(|c| from(c.try_into().expect("N bytes"))),
-            );
+            col.extend(part.chunks_exact(N).map(|c| from(c.try_into().expect("N bytes"))));
             *at += n * N;
         }
         let total: usize = runs.iter().map(|r| r.len as usize).sum();
@@ -663,10 +542,7 @@ mod tests {
         // 338993840.636 s adjusted GPS = 2022-06-11 14:43:42 UTC (provenance of lidarforfuel_1_42).
         let us = gps_to_utc_micros(338993840.636).unwrap();
         let dt = chrono::DateTime::from_timestamp_micros(us).unwrap();
-        assert_eq!(
-            dt.format("%Y-%m-%d %H:%M:%S").to_string(),
-            "2022-06-11 14:43:42"
-        );
+        assert_eq!(dt.format("%Y-%m-%d %H:%M:%S").to_string(), "2022-06-11 14:43:42");
         assert_eq!(gps_to_utc_micros(3600.0), None);
     }
 }

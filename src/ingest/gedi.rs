@@ -14,12 +14,10 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use arrow::array::{
-    ArrayRef, BooleanArray, Float32Builder, ListBuilder, PrimitiveArray, RecordBatch, StringArray,
-};
+use arrow::array::{ArrayRef, BooleanArray, Float32Builder, ListBuilder, PrimitiveArray, RecordBatch, StringArray};
 use arrow::datatypes::{
-    ArrowPrimitiveType, DataType, Field, Float64Type, Int16Type, Int8Type, Schema, SchemaRef,
-    UInt32Type, UInt64Type, UInt8Type,
+    ArrowPrimitiveType, DataType, Field, Float64Type, Int16Type, Int8Type, Schema, SchemaRef, UInt32Type, UInt64Type,
+    UInt8Type,
 };
 use hdf5::types::{FixedAscii, FixedUnicode, H5Type, TypeDescriptor, VarLenAscii, VarLenUnicode};
 use hdf5::{Dataset, File, Group, Location};
@@ -49,11 +47,7 @@ pub struct GediOptions {
 
 impl Default for GediOptions {
     fn default() -> Self {
-        GediOptions {
-            epsg: 2154,
-            geoid_offset: None,
-            strict_join: false,
-        }
+        GediOptions { epsg: 2154, geoid_offset: None, strict_join: false }
     }
 }
 
@@ -101,11 +95,7 @@ impl BeamReport {
 
     /// One line per anomaly, naming the file, the beam and the shot count.
     pub fn warnings(&self) -> Vec<String> {
-        let name = |p: &Option<PathBuf>| {
-            p.as_deref()
-                .map(|p| p.display().to_string())
-                .unwrap_or_default()
-        };
+        let name = |p: &Option<PathBuf>| p.as_deref().map(|p| p.display().to_string()).unwrap_or_default();
         let mut out = Vec::new();
         if let Some(&first) = self.l1b_only.first() {
             out.push(format!(
@@ -154,11 +144,7 @@ impl IngestReport {
 
     /// Every warning line (file-level notes first).
     pub fn warnings(&self) -> Vec<String> {
-        self.notes
-            .iter()
-            .cloned()
-            .chain(self.beams.iter().flat_map(BeamReport::warnings))
-            .collect()
+        self.notes.iter().cloned().chain(self.beams.iter().flat_map(BeamReport::warnings)).collect()
     }
 }
 
@@ -236,10 +222,7 @@ pub fn shots_schema(epsg: u32) -> SchemaRef {
     ]);
     let metadata = [
         ("gedisim:crs_epsg".to_string(), epsg.to_string()),
-        (
-            "gedisim:vertical_reference".to_string(),
-            VERTICAL_DATUM.to_string(),
-        ),
+        ("gedisim:vertical_reference".to_string(), VERTICAL_DATUM.to_string()),
     ];
     Arc::new(Schema::new(fields).with_metadata(metadata.into_iter().collect()))
 }
@@ -252,11 +235,7 @@ pub fn shots_schema(epsg: u32) -> SchemaRef {
 ///
 /// Granules are read in parallel (rayon) and the batches returned in input order. For large
 /// inputs prefer [`ingest_gedi`], which hands batches to a sink one beam at a time.
-pub fn read_gedi(
-    l1b: &[PathBuf],
-    l2a: &[PathBuf],
-    opts: &GediOptions,
-) -> Result<(Vec<RecordBatch>, IngestReport)> {
+pub fn read_gedi(l1b: &[PathBuf], l2a: &[PathBuf], opts: &GediOptions) -> Result<(Vec<RecordBatch>, IngestReport)> {
     let (pairs, notes) = pair_granules(l1b, l2a)?;
     let parts = pairs
         .par_iter()
@@ -269,10 +248,7 @@ pub fn read_gedi(
             Ok((batches, beams))
         })
         .collect::<Result<Vec<_>>>()?;
-    let mut report = IngestReport {
-        beams: Vec::new(),
-        notes,
-    };
+    let mut report = IngestReport { beams: Vec::new(), notes };
     let mut all = Vec::new();
     for (batches, beams) in parts {
         all.extend(batches);
@@ -289,10 +265,7 @@ pub fn ingest_gedi(
     mut sink: impl FnMut(RecordBatch) -> Result<()>,
 ) -> Result<IngestReport> {
     let (pairs, notes) = pair_granules(l1b, l2a)?;
-    let mut report = IngestReport {
-        beams: Vec::new(),
-        notes,
-    };
+    let mut report = IngestReport { beams: Vec::new(), notes };
     for pair in &pairs {
         report.beams.extend(read_granule(pair, opts, &mut sink)?);
     }
@@ -306,16 +279,12 @@ pub fn ingest_gedi(
 /// `2019108080338_O01964_T05337_02` (V2 names keep their sub-orbit field). A name that does not
 /// follow the convention is its own key.
 pub fn granule_key(path: &Path) -> String {
-    let stem = path
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     let tokens: Vec<&str> = stem.split('_').collect();
     let is_product = tokens.len() > 2 && tokens[0].starts_with("GEDI0") && tokens[1].len() == 1;
     if is_product {
-        let track = tokens.iter().position(|t| {
-            t.len() > 1 && t.starts_with('T') && t[1..].bytes().all(|b| b.is_ascii_digit())
-        });
+        let track =
+            tokens.iter().position(|t| t.len() > 1 && t.starts_with('T') && t[1..].bytes().all(|b| b.is_ascii_digit()));
         if let Some(t) = track.filter(|&t| t > 2 && t + 1 < tokens.len()) {
             return tokens[2..=t + 1].join("_");
         }
@@ -327,10 +296,7 @@ pub fn granule_key(path: &Path) -> String {
 /// `product` (GEDI's naming: `GEDI01_B…` for L1B, `GEDI02_A…` for L2A).
 pub fn expand_granule_inputs(inputs: &[PathBuf], product: &str) -> Result<Vec<PathBuf>> {
     super::expand_inputs(inputs, |f| {
-        super::has_extension(f, "h5")
-            && f.file_name()
-                .and_then(|n| n.to_str())
-                .is_some_and(|n| n.starts_with(product))
+        super::has_extension(f, "h5") && f.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with(product))
     })
 }
 
@@ -342,29 +308,17 @@ pub fn pair_granules(l1b: &[PathBuf], l2a: &[PathBuf]) -> Result<(Vec<GranulePai
     let mut l2a_by_key: BTreeMap<String, &PathBuf> = BTreeMap::new();
     for p in l2a {
         if let Some(other) = l2a_by_key.insert(granule_key(p), p) {
-            return Err(Error::Usage(format!(
-                "{} and {} are the same L2A granule",
-                other.display(),
-                p.display()
-            )));
+            return Err(Error::Usage(format!("{} and {} are the same L2A granule", other.display(), p.display())));
         }
     }
     let mut seen = BTreeMap::new();
     let mut pairs = Vec::new();
     let mut notes = Vec::new();
-    let stem = |p: &Path| {
-        p.file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default()
-    };
+    let stem = |p: &Path| p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     for p in l1b {
         let key = granule_key(p);
         if let Some(other) = seen.insert(key.clone(), p) {
-            return Err(Error::Usage(format!(
-                "{} and {} are the same L1B granule",
-                other.display(),
-                p.display()
-            )));
+            return Err(Error::Usage(format!("{} and {} are the same L1B granule", other.display(), p.display())));
         }
         let partner = l2a_by_key.remove(&key).cloned();
         if partner.is_none() && !l2a.is_empty() {
@@ -373,16 +327,9 @@ pub fn pair_granules(l1b: &[PathBuf], l2a: &[PathBuf]) -> Result<(Vec<GranulePai
                 p.display()
             ));
         }
-        pairs.push(GranulePair {
-            granule: stem(p),
-            l1b: Some(p.clone()),
-            l2a: partner,
-        });
+        pairs.push(GranulePair { granule: stem(p), l1b: Some(p.clone()), l2a: partner });
     }
-    for p in l2a
-        .iter()
-        .filter(|p| l2a_by_key.contains_key(&granule_key(p)))
-    {
+    for p in l2a.iter().filter(|p| l2a_by_key.contains_key(&granule_key(p))) {
         if !l1b.is_empty() {
             notes.push(format!(
                 "{}: no L1B file of granule {} was given; its shots have null L1B columns",
@@ -390,11 +337,7 @@ pub fn pair_granules(l1b: &[PathBuf], l2a: &[PathBuf]) -> Result<(Vec<GranulePai
                 granule_key(p)
             ));
         }
-        pairs.push(GranulePair {
-            granule: stem(p),
-            l1b: None,
-            l2a: Some(p.clone()),
-        });
+        pairs.push(GranulePair { granule: stem(p), l1b: None, l2a: Some(p.clone()) });
     }
     Ok((pairs, notes))
 }
@@ -407,16 +350,8 @@ pub fn read_granule(
 ) -> Result<Vec<BeamReport>> {
     let projector = Projector::new(opts.epsg)?;
     let schema = shots_schema(opts.epsg);
-    let l1b = pair
-        .l1b
-        .as_deref()
-        .map(|p| open_product(p, Product::L1b))
-        .transpose()?;
-    let l2a = pair
-        .l2a
-        .as_deref()
-        .map(|p| open_product(p, Product::L2a))
-        .transpose()?;
+    let l1b = pair.l1b.as_deref().map(|p| open_product(p, Product::L1b)).transpose()?;
+    let l2a = pair.l2a.as_deref().map(|p| open_product(p, Product::L2a)).transpose()?;
 
     let mut beams: Vec<String> = Vec::new();
     for f in l1b.iter().chain(l2a.iter()) {
@@ -428,32 +363,12 @@ pub fn read_granule(
     let mut reports = Vec::new();
     for beam in beams {
         let beam_type = BeamType::from_name(&beam).ok_or_else(|| {
-            let path = l1b
-                .as_ref()
-                .or(l2a.as_ref())
-                .map(|f| f.path)
-                .unwrap_or(Path::new(""));
-            Error::field(
-                path,
-                &beam,
-                "not one of the eight GEDI beams (BEAM0000..BEAM1011)",
-            )
+            let path = l1b.as_ref().or(l2a.as_ref()).map(|f| f.path).unwrap_or(Path::new(""));
+            Error::field(path, &beam, "not one of the eight GEDI beams (BEAM0000..BEAM1011)")
         })?;
         // Read one side, then the other: only this beam is in memory.
-        let l1b_beam = l1b
-            .as_ref()
-            .map(|f| f.beam(&beam))
-            .transpose()?
-            .flatten()
-            .map(|g| read_l1b(&g))
-            .transpose()?;
-        let l2a_beam = l2a
-            .as_ref()
-            .map(|f| f.beam(&beam))
-            .transpose()?
-            .flatten()
-            .map(|g| read_l2a(&g))
-            .transpose()?;
+        let l1b_beam = l1b.as_ref().map(|f| f.beam(&beam)).transpose()?.flatten().map(|g| read_l1b(&g)).transpose()?;
+        let l2a_beam = l2a.as_ref().map(|f| f.beam(&beam)).transpose()?.flatten().map(|g| read_l2a(&g)).transpose()?;
         let mut report = BeamReport {
             granule: pair.granule.clone(),
             beam: beam.clone(),
@@ -461,15 +376,7 @@ pub fn read_granule(
             l2a_file: pair.l2a.clone(),
             ..Default::default()
         };
-        let rows = join(
-            pair,
-            &beam,
-            l1b_beam.as_ref(),
-            l2a_beam.as_ref(),
-            opts,
-            &projector,
-            &mut report,
-        )?;
+        let rows = join(pair, &beam, l1b_beam.as_ref(), l2a_beam.as_ref(), opts, &projector, &mut report)?;
         let ctx = BatchContext {
             schema: &schema,
             granule: &pair.granule,
@@ -513,15 +420,10 @@ struct Granule<'a> {
 }
 
 fn open_product(path: &Path, product: Product) -> Result<Granule<'_>> {
-    let file =
-        File::open(path).map_err(|e| Error::file(path, format!("cannot open as HDF5: {e}")))?;
+    let file = File::open(path).map_err(|e| Error::file(path, format!("cannot open as HDF5: {e}")))?;
     // A swapped --l1b/--l2a would otherwise fail later with a confusing "missing dataset".
     if let Some(name) = read_str_attr(&file, "short_name") {
-        let other = if product == Product::L1b {
-            Product::L2a
-        } else {
-            Product::L1b
-        };
+        let other = if product == Product::L1b { Product::L2a } else { Product::L1b };
         if name.trim() == other.short_name() {
             return Err(Error::field(
                 path,
@@ -541,9 +443,7 @@ fn read_str_attr(loc: &Location, name: &str) -> Option<String> {
         TypeDescriptor::VarLenUnicode => r.read_raw::<VarLenUnicode>().ok()?.first()?.to_string(),
         TypeDescriptor::VarLenAscii => r.read_raw::<VarLenAscii>().ok()?.first()?.to_string(),
         TypeDescriptor::FixedAscii(_) => r.read_raw::<FixedAscii<256>>().ok()?.first()?.to_string(),
-        TypeDescriptor::FixedUnicode(_) => {
-            r.read_raw::<FixedUnicode<256>>().ok()?.first()?.to_string()
-        }
+        TypeDescriptor::FixedUnicode(_) => r.read_raw::<FixedUnicode<256>>().ok()?.first()?.to_string(),
         _ => return None,
     };
     Some(s)
@@ -551,10 +451,7 @@ fn read_str_attr(loc: &Location, name: &str) -> Option<String> {
 
 impl<'a> Granule<'a> {
     fn beams(&self) -> Result<Vec<String>> {
-        let names = self
-            .file
-            .member_names()
-            .map_err(|e| Error::file(self.path, format!("cannot list groups: {e}")))?;
+        let names = self.file.member_names().map_err(|e| Error::file(self.path, format!("cannot list groups: {e}")))?;
         Ok(names.into_iter().filter(|n| is_beam_group(n)).collect())
     }
 
@@ -562,16 +459,8 @@ impl<'a> Granule<'a> {
         if !self.file.link_exists(name) {
             return Ok(None);
         }
-        let group = self
-            .file
-            .group(name)
-            .map_err(|e| Error::field(self.path, name, e))?;
-        let mut g = BeamGroup {
-            path: self.path,
-            beam: name.to_string(),
-            group,
-            n: 0,
-        };
+        let group = self.file.group(name).map_err(|e| Error::field(self.path, name, e))?;
+        let mut g = BeamGroup { path: self.path, beam: name.to_string(), group, n: 0 };
         g.n = g.shot_numbers_len()?;
         Ok(Some(g))
     }
@@ -653,26 +542,19 @@ impl BeamGroup<'_> {
         };
         Err(self.err(
             rel,
-            format!(
-                "shape {dims:?} does not match {expected} ({}/shot_number has {} shots)",
-                self.beam, self.n
-            ),
+            format!("shape {dims:?} does not match {expected} ({}/shot_number has {} shots)", self.beam, self.n),
         ))
     }
 
     /// Read a numeric dataset into `Vec<T>` (row-major), converting from the file's dtype.
     fn read_ds<T: Numeric>(&self, rel: &str, ds: &Dataset, shape: Shape) -> Result<Vec<T>> {
         self.check_shape(rel, ds, shape)?;
-        let desc = ds
-            .dtype()
-            .and_then(|t| t.to_descriptor())
-            .map_err(|e| self.err(rel, e))?;
+        let desc = ds.dtype().and_then(|t| t.to_descriptor()).map_err(|e| self.err(rel, e))?;
         match desc {
             TypeDescriptor::Float(_) if !T::FLOAT => {
                 return Err(self.err(rel, format!("expected an integer dtype, found {desc}")));
             }
-            TypeDescriptor::Integer(_) | TypeDescriptor::Unsigned(_) | TypeDescriptor::Float(_) => {
-            }
+            TypeDescriptor::Integer(_) | TypeDescriptor::Unsigned(_) | TypeDescriptor::Float(_) => {}
             _ => return Err(self.err(rel, format!("expected a numeric dtype, found {desc}"))),
         }
         ds.read_raw::<T>().map_err(|e| self.err(rel, e))
@@ -686,9 +568,7 @@ impl BeamGroup<'_> {
 
     /// An optional dataset: `None` when absent, an error when present but malformed.
     fn optional<T: Numeric>(&self, rel: &str, shape: Shape) -> Result<Option<Vec<T>>> {
-        self.dataset(rel)?
-            .map(|ds| self.read_ds(rel, &ds, shape))
-            .transpose()
+        self.dataset(rel)?.map(|ds| self.read_ds(rel, &ds, shape)).transpose()
     }
 
     fn shot_numbers_len(&self) -> Result<usize> {
@@ -704,27 +584,19 @@ impl BeamGroup<'_> {
         let rel = "shot_number";
         let ds = self.require_dataset(rel)?;
         self.check_shape(rel, &ds, Shape::PerShot)?;
-        let desc = ds
-            .dtype()
-            .and_then(|t| t.to_descriptor())
-            .map_err(|e| self.err(rel, e))?;
+        let desc = ds.dtype().and_then(|t| t.to_descriptor()).map_err(|e| self.err(rel, e))?;
         match desc {
             TypeDescriptor::Unsigned(_) => ds.read_raw::<u64>().map_err(|e| self.err(rel, e)),
             TypeDescriptor::Integer(_) => {
                 let v = ds.read_raw::<i64>().map_err(|e| self.err(rel, e))?;
                 v.into_iter()
-                    .map(|s| {
-                        u64::try_from(s)
-                            .map_err(|_| self.err(rel, format!("negative shot number {s}")))
-                    })
+                    .map(|s| u64::try_from(s).map_err(|_| self.err(rel, format!("negative shot number {s}"))))
                     .collect()
             }
-            _ => Err(self.err(
-                rel,
-                format!(
-                    "expected an integer dtype (a float cannot hold shot numbers), found {desc}"
-                ),
-            )),
+            _ => {
+                Err(self
+                    .err(rel, format!("expected an integer dtype (a float cannot hold shot numbers), found {desc}")))
+            }
         }
     }
 }
@@ -748,19 +620,10 @@ impl Waveforms {
 
 /// Read `<wave>`, `<prefix>_sample_start_index` (1-based) and `<prefix>_sample_count`; `None`
 /// when any of the three is absent (the caller decides whether that is an error).
-fn read_waveforms(
-    g: &BeamGroup,
-    shots: &[u64],
-    wave: &str,
-    prefix: &str,
-) -> Result<Option<Waveforms>> {
+fn read_waveforms(g: &BeamGroup, shots: &[u64], wave: &str, prefix: &str) -> Result<Option<Waveforms>> {
     let start_rel = format!("{prefix}_sample_start_index");
     let count_rel = format!("{prefix}_sample_count");
-    let (w, s, c) = match (
-        g.dataset(wave)?,
-        g.dataset(&start_rel)?,
-        g.dataset(&count_rel)?,
-    ) {
+    let (w, s, c) = match (g.dataset(wave)?, g.dataset(&start_rel)?, g.dataset(&count_rel)?) {
         (Some(w), Some(s), Some(c)) => (w, s, c),
         _ => return Ok(None),
     };
@@ -771,10 +634,7 @@ fn read_waveforms(
     let mut spans = Vec::with_capacity(shots.len());
     for ((&shot, &s), &c) in shots.iter().zip(&start).zip(&count) {
         if s == 0 {
-            return Err(g.err(
-                &start_rel,
-                format!("shot {shot}: index 0, but GEDI's start index is 1-based"),
-            ));
+            return Err(g.err(&start_rel, format!("shot {shot}: index 0, but GEDI's start index is 1-based")));
         }
         // 1-based: the shot's samples are [s-1, s-1+c).
         let end = (s - 1).checked_add(c).filter(|&e| e <= len).ok_or_else(|| {
@@ -814,22 +674,14 @@ fn read_l1b(g: &BeamGroup) -> Result<L1bBeam> {
     // The coordinates are required: NaN or out-of-range values are an error naming the field.
     let coord = |rel: &str, limit: f64| -> Result<Vec<f64>> {
         let v = g.require::<f64>(rel, PerShot)?;
-        if let Some((i, x)) = v
-            .iter()
-            .enumerate()
-            .find(|(_, x)| !(x.is_finite() && x.abs() <= limit))
-        {
-            return Err(g.err(
-                rel,
-                format!("shot {}: invalid coordinate {x}", shot_number[i]),
-            ));
+        if let Some((i, x)) = v.iter().enumerate().find(|(_, x)| !(x.is_finite() && x.abs() <= limit)) {
+            return Err(g.err(rel, format!("shot {}: invalid coordinate {x}", shot_number[i])));
         }
         Ok(v)
     };
     Ok(L1bBeam {
         delta_time: g.optional("delta_time", PerShot)?,
-        rx: read_waveforms(g, &shot_number, "rxwaveform", "rx")?
-            .ok_or_else(|| g.err("rxwaveform", "missing"))?,
+        rx: read_waveforms(g, &shot_number, "rxwaveform", "rx")?.ok_or_else(|| g.err("rxwaveform", "missing"))?,
         tx: read_waveforms(g, &shot_number, "txwaveform", "tx")?,
         elevation_bin0: g.require("geolocation/elevation_bin0", PerShot)?,
         elevation_lastbin: g.require("geolocation/elevation_lastbin", PerShot)?,
@@ -1033,33 +885,15 @@ fn join(
                 "geolocation/latitude_bin0",
             ),
             (None, None) => {
-                rows.push(Row {
-                    shot_number,
-                    l1b: i1,
-                    l2a: i2,
-                    xy: None,
-                });
+                rows.push(Row { shot_number, l1b: i1, l2a: i2, xy: None });
                 continue;
             }
         };
         let (x, y) = projector.project(lon, lat).map_err(|e| {
-            let path = if matches!(source, XySource::LowestMode) {
-                pair.l2a.as_deref()
-            } else {
-                pair.l1b.as_deref()
-            };
-            Error::field(
-                path.unwrap_or(Path::new("")),
-                format!("{beam}/{field}"),
-                format!("shot {shot_number}: {e}"),
-            )
+            let path = if matches!(source, XySource::LowestMode) { pair.l2a.as_deref() } else { pair.l1b.as_deref() };
+            Error::field(path.unwrap_or(Path::new("")), format!("{beam}/{field}"), format!("shot {shot_number}: {e}"))
         })?;
-        rows.push(Row {
-            shot_number,
-            l1b: i1,
-            l2a: i2,
-            xy: Some((x, y, source)),
-        });
+        rows.push(Row { shot_number, l1b: i1, l2a: i2, xy: Some((x, y, source)) });
     }
 
     if opts.strict_join {
@@ -1145,31 +979,11 @@ impl BatchContext<'_> {
 
         let mut cols: Vec<(String, ArrayRef)> = vec![
             ("granule".into(), strings(rows, |_| Some(self.granule))),
-            (
-                "shot_number".into(),
-                prim::<UInt64Type>(rows, |r| Some(r.shot_number)),
-            ),
+            ("shot_number".into(), prim::<UInt64Type>(rows, |r| Some(r.shot_number))),
             ("beam".into(), strings(rows, |_| Some(self.beam))),
-            (
-                "beam_type".into(),
-                strings(rows, |_| Some(self.beam_type.as_str())),
-            ),
-            (
-                "in_l1b".into(),
-                Arc::new(
-                    rows.iter()
-                        .map(|r| Some(r.l1b.is_some()))
-                        .collect::<BooleanArray>(),
-                ),
-            ),
-            (
-                "in_l2a".into(),
-                Arc::new(
-                    rows.iter()
-                        .map(|r| Some(r.l2a.is_some()))
-                        .collect::<BooleanArray>(),
-                ),
-            ),
+            ("beam_type".into(), strings(rows, |_| Some(self.beam_type.as_str()))),
+            ("in_l1b".into(), Arc::new(rows.iter().map(|r| Some(r.l1b.is_some())).collect::<BooleanArray>())),
+            ("in_l2a".into(), Arc::new(rows.iter().map(|r| Some(r.l2a.is_some())).collect::<BooleanArray>())),
             (
                 "delta_time".into(),
                 f64s(rows, |r| {
@@ -1178,129 +992,40 @@ impl BatchContext<'_> {
                         .or_else(|| a2(r).and_then(|(b, i)| at(&b.delta_time, Some(i))))
                 }),
             ),
-            (
-                "lat_bin0".into(),
-                f64s(rows, |r| a1(r).map(|(b, i)| b.lat_bin0[i])),
-            ),
-            (
-                "lon_bin0".into(),
-                f64s(rows, |r| a1(r).map(|(b, i)| b.lon_bin0[i])),
-            ),
-            (
-                "lat_lastbin".into(),
-                f64s(rows, |r| a1(r).map(|(b, i)| b.lat_lastbin[i])),
-            ),
-            (
-                "lon_lastbin".into(),
-                f64s(rows, |r| a1(r).map(|(b, i)| b.lon_lastbin[i])),
-            ),
-            (
-                "lat_lowestmode".into(),
-                f64s(rows, |r| {
-                    a2(r).and_then(|(b, i)| b.lowestmode(i)).map(|p| p.0)
-                }),
-            ),
-            (
-                "lon_lowestmode".into(),
-                f64s(rows, |r| {
-                    a2(r).and_then(|(b, i)| b.lowestmode(i)).map(|p| p.1)
-                }),
-            ),
+            ("lat_bin0".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.lat_bin0[i]))),
+            ("lon_bin0".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.lon_bin0[i]))),
+            ("lat_lastbin".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.lat_lastbin[i]))),
+            ("lon_lastbin".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.lon_lastbin[i]))),
+            ("lat_lowestmode".into(), f64s(rows, |r| a2(r).and_then(|(b, i)| b.lowestmode(i)).map(|p| p.0))),
+            ("lon_lowestmode".into(), f64s(rows, |r| a2(r).and_then(|(b, i)| b.lowestmode(i)).map(|p| p.1))),
             ("x".into(), f64s(rows, |r| r.xy.map(|p| p.0))),
             ("y".into(), f64s(rows, |r| r.xy.map(|p| p.1))),
-            (
-                "xy_source".into(),
-                strings(rows, |r| r.xy.map(|p| p.2.as_str())),
-            ),
-            (
-                "elevation_bin0".into(),
-                f64s(rows, |r| a1(r).map(|(b, i)| b.elevation_bin0[i])),
-            ),
-            (
-                "elevation_lastbin".into(),
-                f64s(rows, |r| a1(r).map(|(b, i)| b.elevation_lastbin[i])),
-            ),
-            (
-                "rx_waveform".into(),
-                lists(rows, |r| a1(r).map(|(b, i)| b.rx.get(i))),
-            ),
-            (
-                "rx_sample_count".into(),
-                prim::<UInt32Type>(rows, |r| a1(r).map(|(b, i)| b.rx.spans[i].1 as u32)),
-            ),
-            (
-                "tx_waveform".into(),
-                lists(rows, |r| {
-                    a1(r).and_then(|(b, i)| Some(b.tx.as_ref()?.get(i)))
-                }),
-            ),
-            (
-                "noise_mean_corrected".into(),
-                f64s(rows, |r| {
-                    a1(r).and_then(|(b, i)| at(&b.noise_mean, Some(i)))
-                }),
-            ),
-            (
-                "noise_stddev_corrected".into(),
-                f64s(rows, |r| {
-                    a1(r).and_then(|(b, i)| at(&b.noise_stddev, Some(i)))
-                }),
-            ),
+            ("xy_source".into(), strings(rows, |r| r.xy.map(|p| p.2.as_str()))),
+            ("elevation_bin0".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.elevation_bin0[i]))),
+            ("elevation_lastbin".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.elevation_lastbin[i]))),
+            ("rx_waveform".into(), lists(rows, |r| a1(r).map(|(b, i)| b.rx.get(i)))),
+            ("rx_sample_count".into(), prim::<UInt32Type>(rows, |r| a1(r).map(|(b, i)| b.rx.spans[i].1 as u32))),
+            ("tx_waveform".into(), lists(rows, |r| a1(r).and_then(|(b, i)| Some(b.tx.as_ref()?.get(i))))),
+            ("noise_mean_corrected".into(), f64s(rows, |r| a1(r).and_then(|(b, i)| at(&b.noise_mean, Some(i))))),
+            ("noise_stddev_corrected".into(), f64s(rows, |r| a1(r).and_then(|(b, i)| at(&b.noise_stddev, Some(i))))),
             (
                 "stale_return_flag".into(),
-                prim::<UInt8Type>(rows, |r| {
-                    a1(r).and_then(|(b, i)| at(&b.stale_return_flag, Some(i)))
-                }),
+                prim::<UInt8Type>(rows, |r| a1(r).and_then(|(b, i)| at(&b.stale_return_flag, Some(i)))),
             ),
-            (
-                "degrade".into(),
-                prim::<Int8Type>(rows, |r| a1(r).and_then(|(b, i)| at(&b.degrade, Some(i)))),
-            ),
-            (
-                "geoid".into(),
-                f64s(rows, |r| a1(r).and_then(|(b, i)| at(&b.geoid, Some(i)))),
-            ),
+            ("degrade".into(), prim::<Int8Type>(rows, |r| a1(r).and_then(|(b, i)| at(&b.degrade, Some(i))))),
+            ("geoid".into(), f64s(rows, |r| a1(r).and_then(|(b, i)| at(&b.geoid, Some(i))))),
             (
                 "geoid_offset_used".into(),
-                f64s(rows, |r| {
-                    self.geoid_offset
-                        .or_else(|| a1(r).and_then(|(b, i)| at(&b.geoid, Some(i))))
-                }),
+                f64s(rows, |r| self.geoid_offset.or_else(|| a1(r).and_then(|(b, i)| at(&b.geoid, Some(i))))),
             ),
-            (
-                "vertical_datum".into(),
-                strings(rows, |_| Some(VERTICAL_DATUM)),
-            ),
-            (
-                "quality_flag".into(),
-                prim::<UInt8Type>(rows, |r| a2(r).map(|(b, i)| b.quality_flag[i])),
-            ),
-            (
-                "degrade_flag".into(),
-                prim::<UInt8Type>(rows, |r| a2(r).map(|(b, i)| b.degrade_flag[i])),
-            ),
-            (
-                "sensitivity".into(),
-                f64s(rows, |r| a2(r).map(|(b, i)| b.sensitivity[i])),
-            ),
-            (
-                "selected_algorithm".into(),
-                prim::<UInt8Type>(rows, |r| a2(r).map(|(b, i)| b.selected_algorithm[i])),
-            ),
-            (
-                "elev_lowestmode".into(),
-                f64s(rows, |r| a2(r).map(|(b, i)| b.elev_lowestmode[i])),
-            ),
-            (
-                "rh".into(),
-                lists(rows, |r| a2(r).map(|(b, i)| rh_row(&b.rh, i))),
-            ),
-            (
-                "energy_total".into(),
-                f64s(rows, |r| {
-                    a2(r).and_then(|(b, i)| at(&b.energy_total, Some(i)))
-                }),
-            ),
+            ("vertical_datum".into(), strings(rows, |_| Some(VERTICAL_DATUM))),
+            ("quality_flag".into(), prim::<UInt8Type>(rows, |r| a2(r).map(|(b, i)| b.quality_flag[i]))),
+            ("degrade_flag".into(), prim::<UInt8Type>(rows, |r| a2(r).map(|(b, i)| b.degrade_flag[i]))),
+            ("sensitivity".into(), f64s(rows, |r| a2(r).map(|(b, i)| b.sensitivity[i]))),
+            ("selected_algorithm".into(), prim::<UInt8Type>(rows, |r| a2(r).map(|(b, i)| b.selected_algorithm[i]))),
+            ("elev_lowestmode".into(), f64s(rows, |r| a2(r).map(|(b, i)| b.elev_lowestmode[i]))),
+            ("rh".into(), lists(rows, |r| a2(r).map(|(b, i)| rh_row(&b.rh, i)))),
+            ("energy_total".into(), f64s(rows, |r| a2(r).and_then(|(b, i)| at(&b.energy_total, Some(i))))),
         ];
         for a in 0..N_ALGORITHMS {
             let n = a + 1;
@@ -1308,40 +1033,17 @@ impl BatchContext<'_> {
             cols.extend([
                 (
                     format!("elev_lowestmode_a{n}"),
-                    f64s(rows, |r| {
-                        alg(r).and_then(|(g, i)| at(&g.elev_lowestmode, Some(i)))
-                    }),
+                    f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.elev_lowestmode, Some(i)))),
                 ),
-                (
-                    format!("rh_a{n}"),
-                    lists(rows, |r| {
-                        alg(r).and_then(|(g, i)| Some(rh_row(g.rh.as_ref()?, i)))
-                    }),
-                ),
-                (
-                    format!("sensitivity_a{n}"),
-                    f64s(rows, |r| {
-                        alg(r).and_then(|(g, i)| at(&g.sensitivity, Some(i)))
-                    }),
-                ),
+                (format!("rh_a{n}"), lists(rows, |r| alg(r).and_then(|(g, i)| Some(rh_row(g.rh.as_ref()?, i))))),
+                (format!("sensitivity_a{n}"), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.sensitivity, Some(i))))),
                 (
                     format!("quality_flag_a{n}"),
-                    prim::<UInt8Type>(rows, |r| {
-                        alg(r).and_then(|(g, i)| at(&g.quality_flag, Some(i)))
-                    }),
+                    prim::<UInt8Type>(rows, |r| alg(r).and_then(|(g, i)| at(&g.quality_flag, Some(i)))),
                 ),
-                (
-                    format!("toploc_a{n}"),
-                    f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.toploc, Some(i)))),
-                ),
-                (
-                    format!("botloc_a{n}"),
-                    f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.botloc, Some(i)))),
-                ),
-                (
-                    format!("zcross_a{n}"),
-                    f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.zcross, Some(i)))),
-                ),
+                (format!("toploc_a{n}"), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.toploc, Some(i))))),
+                (format!("botloc_a{n}"), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.botloc, Some(i))))),
+                (format!("zcross_a{n}"), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.zcross, Some(i))))),
             ]);
         }
         let u8_lc = |f: fn(&L2aBeam) -> &Option<Vec<u8>>| {
@@ -1357,10 +1059,7 @@ impl BatchContext<'_> {
             ("pft_class".into(), u8_lc(|b| &b.pft_class)),
             ("region_class".into(), u8_lc(|b| &b.region_class)),
             ("urban_proportion".into(), u8_lc(|b| &b.urban_proportion)),
-            (
-                "landsat_water_persistence".into(),
-                u8_lc(|b| &b.landsat_water_persistence),
-            ),
+            ("landsat_water_persistence".into(), u8_lc(|b| &b.landsat_water_persistence)),
         ]);
 
         // Order the columns by the schema, so the schema stays the single definition of order.
@@ -1369,11 +1068,7 @@ impl BatchContext<'_> {
             .schema
             .fields()
             .iter()
-            .map(|f| {
-                by_name
-                    .remove(f.name())
-                    .ok_or_else(|| Error::Usage(format!("internal: no column {}", f.name())))
-            })
+            .map(|f| by_name.remove(f.name()).ok_or_else(|| Error::Usage(format!("internal: no column {}", f.name()))))
             .collect::<Result<Vec<_>>>()?;
         RecordBatch::try_new(self.schema.clone(), arrays).map_err(|e| Error::table(self.granule, e))
     }
@@ -1425,34 +1120,20 @@ pub fn ingest_into_dataset(
     let results = pairs
         .par_iter()
         .map(|pair| -> Result<(GranuleOutcome, Vec<BeamReport>)> {
-            let key = granule_key(
-                pair.l1b
-                    .as_deref()
-                    .or(pair.l2a.as_deref())
-                    .expect("a pair has a file"),
-            );
+            let key = granule_key(pair.l1b.as_deref().or(pair.l2a.as_deref()).expect("a pair has a file"));
             let hash = |p: &Option<PathBuf>| p.as_deref().map(dataset::content_hash).transpose();
             let (h1, h2) = (hash(&pair.l1b)?, hash(&pair.l2a)?);
             let record = granules_dir.join(format!("{key}.parquet"));
             if previous_hashes(&record)? == Some((h1.clone(), h2.clone())) {
                 on_granule();
-                return Ok((
-                    GranuleOutcome::AlreadyIngested {
-                        granule: pair.granule.clone(),
-                    },
-                    Vec::new(),
-                ));
+                return Ok((GranuleOutcome::AlreadyIngested { granule: pair.granule.clone() }, Vec::new()));
             }
             let schema = shots_schema(opts.epsg);
             let mut metadata = std::collections::HashMap::new();
             metadata.insert("gedisim:crs_epsg".to_string(), opts.epsg.to_string());
-            metadata.insert(
-                "gedisim:vertical_reference".to_string(),
-                VERTICAL_DATUM.to_string(),
-            );
+            metadata.insert("gedisim:vertical_reference".to_string(), VERTICAL_DATUM.to_string());
             let props = dataset::writer_properties(&metadata, 1 << 16);
-            let mut writer =
-                AtomicParquet::create(&shots_dir.join(format!("{key}.parquet")), schema, props)?;
+            let mut writer = AtomicParquet::create(&shots_dir.join(format!("{key}.parquet")), schema, props)?;
             let beams = read_granule(pair, opts, &mut |b| writer.write(&b))?;
             writer.finish()?;
             let shots: usize = beams.iter().map(BeamReport::rows).sum();
@@ -1466,23 +1147,13 @@ pub fn ingest_into_dataset(
                 Arc::new(StringArray::from(vec![h2])),
                 Arc::new(UInt64Array::from(vec![shots as u64])),
             ];
-            let batch = RecordBatch::try_new(granules_schema(), cols)
-                .map_err(|e| Error::table(&record, e))?;
+            let batch = RecordBatch::try_new(granules_schema(), cols).map_err(|e| Error::table(&record, e))?;
             dataset::write_parquet(&record, granules_schema(), &[batch], &metadata)?;
             on_granule();
-            Ok((
-                GranuleOutcome::Ingested {
-                    granule: pair.granule.clone(),
-                    shots,
-                },
-                beams,
-            ))
+            Ok((GranuleOutcome::Ingested { granule: pair.granule.clone(), shots }, beams))
         })
         .collect::<Result<Vec<_>>>()?;
-    let mut report = IngestReport {
-        beams: Vec::new(),
-        notes,
-    };
+    let mut report = IngestReport { beams: Vec::new(), notes };
     let mut outcomes = Vec::new();
     for (o, beams) in results {
         outcomes.push(o);

@@ -48,13 +48,8 @@ impl TileReader {
 
     /// Open a file; `parallel` decodes LAZ chunks on the rayon pool.
     pub fn open_with(path: &Path, parallel: bool) -> Result<Self> {
-        let file = std::fs::File::open(path)
-            .map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
-        let laz_parallelism = if parallel {
-            las::LazParallelism::Yes
-        } else {
-            las::LazParallelism::No
-        };
+        let file = std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
+        let laz_parallelism = if parallel { las::LazParallelism::Yes } else { las::LazParallelism::No };
         let options = las::ReaderOptions::default().with_laz_parallelism(laz_parallelism);
         let reader = Reader::with_options(std::io::BufReader::with_capacity(1 << 20, file), options)
             .map_err(|e| {
@@ -66,12 +61,7 @@ impl TileReader {
             })?;
         let header = tile_header(path, reader.header())?;
         let buffer = PointDataBuilder::new().for_header(reader.header()).build();
-        Ok(TileReader {
-            header,
-            reader,
-            buffer,
-            read_so_far: 0,
-        })
+        Ok(TileReader { header, reader, buffer, read_so_far: 0 })
     }
 
     /// The header facts.
@@ -90,31 +80,24 @@ impl TileReader {
         }
         let want = n.min(left);
         let path = self.header.path.clone();
-        let got = self
-            .reader
-            .fill_points(want, &mut self.buffer)
-            .map_err(|e| {
-                Error::field(
-                    &path,
-                    "points",
-                    format!(
-                        "cannot decode points {}..{} (header number_of_points = {}): {}",
-                        self.read_so_far,
-                        self.read_so_far + want,
-                        self.header.number_of_points,
-                        crate::error::one_line(&e.to_string())
-                    ),
-                )
-            })?;
+        let got = self.reader.fill_points(want, &mut self.buffer).map_err(|e| {
+            Error::field(
+                &path,
+                "points",
+                format!(
+                    "cannot decode points {}..{} (header number_of_points = {}): {}",
+                    self.read_so_far,
+                    self.read_so_far + want,
+                    self.header.number_of_points,
+                    crate::error::one_line(&e.to_string())
+                ),
+            )
+        })?;
         if got < want {
             return Err(Error::field(
                 &path,
                 "number_of_points",
-                format!(
-                    "header announces {} points but the file holds {}",
-                    self.header.number_of_points,
-                    self.read_so_far + got
-                ),
+                format!("header announces {} points but the file holds {}", self.header.number_of_points, self.read_so_far + got),
             ));
         }
         self.read_so_far += got;
@@ -160,18 +143,11 @@ fn tile_header(path: &Path, h: &las::Header) -> Result<TileHeader> {
     let b = h.bounds();
     let crs_wkt = h
         .get_wkt_crs_bytes()
-        .map(|bytes| {
-            String::from_utf8_lossy(bytes)
-                .trim_end_matches('\0')
-                .trim()
-                .to_string()
-        })
+        .map(|bytes| String::from_utf8_lossy(bytes).trim_end_matches('\0').trim().to_string())
         .filter(|s| !s.is_empty());
     let mut epsg = crs_wkt.as_deref().and_then(epsg_from_wkt);
     if epsg.is_none() {
-        let geotiff = h
-            .get_geotiff_crs()
-            .map_err(|e| las_error(path, "GeoKeyDirectory", e))?;
+        let geotiff = h.get_geotiff_crs().map_err(|e| las_error(path, "GeoKeyDirectory", e))?;
         if let Some(g) = geotiff {
             epsg = g
                 .get_projected_crs_geo_key_value()
@@ -190,9 +166,7 @@ fn tile_header(path: &Path, h: &las::Header) -> Result<TileHeader> {
     Ok(TileHeader {
         path: path.to_path_buf(),
         version: format!("{}.{}", version.major, version.minor),
-        point_format: format
-            .to_u8()
-            .map_err(|e| las_error(path, "point_format", e))?,
+        point_format: format.to_u8().map_err(|e| las_error(path, "point_format", e))?,
         compressed: format.is_compressed,
         number_of_points: h.number_of_points(),
         bounds: [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z],
@@ -206,11 +180,7 @@ fn tile_header(path: &Path, h: &las::Header) -> Result<TileHeader> {
 /// Names of the extra-bytes dimensions in a LASF_Spec/4 record (192 bytes per dimension).
 fn extra_bytes_names(data: &[u8]) -> Vec<String> {
     data.chunks_exact(192)
-        .map(|d| {
-            String::from_utf8_lossy(&d[4..36])
-                .trim_end_matches('\0')
-                .to_string()
-        })
+        .map(|d| String::from_utf8_lossy(&d[4..36]).trim_end_matches('\0').to_string())
         .collect()
 }
 

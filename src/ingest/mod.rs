@@ -33,8 +33,5 @@ pub fn expand_inputs(inputs: &[PathBuf], wanted: impl Fn(&Path) -> bool) -> Resu
 
 /// Whether `path`'s extension is `ext` (case-insensitive).
 pub fn has_extension(path: &Path, ext: &str) -> bool {
-    path.extension()
-        .and_then(|e| e.to_str())
-        .map(|e| e.eq_ignore_ascii_case(ext))
-        .unwrap_or(false)
+    path.extension().and_then(|e| e.to_str()).map(|e| e.eq_ignore_ascii_case(ext)).unwrap_or(false)
 }

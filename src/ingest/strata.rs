@@ -67,27 +67,15 @@ pub struct StrataReport {
 /// Read `landcover` (`.tif`/`.tiff` GeoTIFF or `.csv`) and write `<dataset>/strata/strata.parquet`,
 /// replacing a previous one. `on_shots(done, total)` reports progress (raster input): `done`
 /// more shots of `total`.
-pub fn ingest_strata(
-    ds: &Dataset,
-    landcover: &Path,
-    on_shots: &dyn Fn(u64, u64),
-) -> Result<StrataReport> {
-    let ext = landcover
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase)
-        .unwrap_or_default();
+pub fn ingest_strata(ds: &Dataset, landcover: &Path, on_shots: &dyn Fn(u64, u64)) -> Result<StrataReport> {
+    let ext = landcover.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
     let mut report = StrataReport::default();
     let (strata, source) = match ext.as_str() {
         "csv" => {
             let strata = read_strata_csv(landcover)?;
             if ds.has_table(tables::SHOTS) {
-                let known: std::collections::HashSet<u64> =
-                    shot_positions(ds)?.into_iter().map(|s| s.0).collect();
-                report.not_in_dataset = strata
-                    .iter()
-                    .filter(|s| !known.contains(&s.shot_number))
-                    .count();
+                let known: std::collections::HashSet<u64> = shot_positions(ds)?.into_iter().map(|s| s.0).collect();
+                report.not_in_dataset = strata.iter().filter(|s| !known.contains(&s.shot_number)).count();
             }
             (strata, format!("csv:{}", file_name(landcover)))
         }
@@ -100,10 +88,7 @@ pub fn ingest_strata(
             (strata, format!("clc:{}", file_name(landcover)))
         }
         _ => {
-            return Err(Error::file(
-                landcover,
-                "land cover: expected a GeoTIFF (.tif, .tiff) or a CSV (.csv) file",
-            ));
+            return Err(Error::file(landcover, "land cover: expected a GeoTIFF (.tif, .tiff) or a CSV (.csv) file"));
         }
     };
     for s in &strata {
@@ -118,26 +103,14 @@ pub fn ingest_strata(
 }
 
 fn file_name(p: &Path) -> String {
-    p.file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default()
+    p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()
 }
 
 /// Strata rows as a record batch.
 pub fn strata_batch(strata: &[Stratum], source: &str) -> Result<RecordBatch> {
     let columns: Vec<ArrayRef> = vec![
-        Arc::new(
-            strata
-                .iter()
-                .map(|s| s.shot_number)
-                .collect::<UInt64Array>(),
-        ),
-        Arc::new(
-            strata
-                .iter()
-                .map(|s| Some(s.forest_type))
-                .collect::<StringArray>(),
-        ),
+        Arc::new(strata.iter().map(|s| s.shot_number).collect::<UInt64Array>()),
+        Arc::new(strata.iter().map(|s| Some(s.forest_type)).collect::<StringArray>()),
         Arc::new(StringArray::from(vec![source; strata.len()])),
         Arc::new(strata.iter().map(|s| s.clc_code).collect::<UInt16Array>()),
     ];
@@ -147,43 +120,24 @@ pub fn strata_batch(strata: &[Stratum], source: &str) -> Result<RecordBatch> {
 /// `shot_number, forest_type` rows of a CSV with a header naming both columns (any order, other
 /// columns ignored). Errors name the file, the line and the field.
 pub fn read_strata_csv(path: &Path) -> Result<Vec<Stratum>> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty());
-    let (_, header) = lines.next().ok_or_else(|| {
-        Error::file(
-            path,
-            "empty file (expected a header `shot_number,forest_type`)",
-        )
-    })?;
-    let names: Vec<String> = header
-        .split(',')
-        .map(|h| h.trim().trim_matches('"').to_ascii_lowercase())
-        .collect();
+    let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
+    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
+    let (_, header) =
+        lines.next().ok_or_else(|| Error::file(path, "empty file (expected a header `shot_number,forest_type`)"))?;
+    let names: Vec<String> = header.split(',').map(|h| h.trim().trim_matches('"').to_ascii_lowercase()).collect();
     let col = |name: &str| {
-        names.iter().position(|n| n == name).ok_or_else(|| {
-            Error::field(
-                path,
-                name,
-                format!("missing column (header: `{}`)", header.trim()),
-            )
-        })
+        names
+            .iter()
+            .position(|n| n == name)
+            .ok_or_else(|| Error::field(path, name, format!("missing column (header: `{}`)", header.trim())))
     };
     let (i_shot, i_type) = (col("shot_number")?, col("forest_type")?);
     let mut seen = std::collections::HashSet::new();
     let mut out = Vec::new();
     for (i, line) in lines {
-        let fields: Vec<&str> = line
-            .split(',')
-            .map(|f| f.trim().trim_matches('"'))
-            .collect();
+        let fields: Vec<&str> = line.split(',').map(|f| f.trim().trim_matches('"')).collect();
         let at = |k: usize, name: &str| {
-            fields.get(k).copied().ok_or_else(|| {
-                Error::field(path, format!("line {}: {name}", i + 1), "missing value")
-            })
+            fields.get(k).copied().ok_or_else(|| Error::field(path, format!("line {}: {name}", i + 1), "missing value"))
         };
         let shot_text = at(i_shot, "shot_number")?;
         let shot_number: u64 = shot_text.parse().map_err(|_| {
@@ -198,10 +152,7 @@ pub fn read_strata_csv(path: &Path) -> Result<Vec<Stratum>> {
             Error::field(
                 path,
                 format!("line {}: forest_type", i + 1),
-                format!(
-                    "`{type_text}` is not one of {}",
-                    classes::FOREST_TYPES.join(", ")
-                ),
+                format!("`{type_text}` is not one of {}", classes::FOREST_TYPES.join(", ")),
             )
         })?;
         if !seen.insert(shot_number) {
@@ -211,11 +162,7 @@ pub fn read_strata_csv(path: &Path) -> Result<Vec<Stratum>> {
                 format!("shot {shot_number} appears twice"),
             ));
         }
-        out.push(Stratum {
-            shot_number,
-            forest_type,
-            clc_code: None,
-        });
+        out.push(Stratum { shot_number, forest_type, clc_code: None });
     }
     Ok(out)
 }
@@ -227,52 +174,30 @@ pub type ShotPosition = (u64, Option<(f64, f64)>);
 /// the L1B bin0 and last bin; `None` when neither exists.
 pub fn shot_positions(ds: &Dataset) -> Result<Vec<ShotPosition>> {
     let dir = ds.root().join(tables::SHOTS);
-    let files = dataset::table_files(&dir).map_err(|e| {
-        Error::file(
-            &dir,
-            format!("no shots table ({e}): run `gedisim ingest gedi` first"),
-        )
-    })?;
+    let files = dataset::table_files(&dir)
+        .map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi` first")))?;
     if files.is_empty() {
-        return Err(Error::file(
-            &dir,
-            "no shots table: run `gedisim ingest gedi` first",
-        ));
+        return Err(Error::file(&dir, "no shots table: run `gedisim ingest gedi` first"));
     }
-    const COLUMNS: [&str; 7] = [
-        "shot_number",
-        "lat_lowestmode",
-        "lon_lowestmode",
-        "lat_bin0",
-        "lon_bin0",
-        "lat_lastbin",
-        "lon_lastbin",
-    ];
+    const COLUMNS: [&str; 7] =
+        ["shot_number", "lat_lowestmode", "lon_lowestmode", "lat_bin0", "lon_bin0", "lat_lastbin", "lon_lastbin"];
     let mut out = Vec::new();
     for f in files {
         let file = File::open(&f).map_err(|e| Error::file(&f, e))?;
         let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
             .map_err(|e| Error::table(&f, e))?;
         let mask = parquet::arrow::ProjectionMask::columns(builder.parquet_schema(), COLUMNS);
-        for b in builder
-            .with_projection(mask)
-            .build()
-            .map_err(|e| Error::table(&f, e))?
-        {
+        for b in builder.with_projection(mask).build().map_err(|e| Error::table(&f, e))? {
             let b = b.map_err(|e| Error::table(&f, e))?;
             let get = |n: &str| {
-                b.column_by_name(n)
-                    .cloned()
-                    .ok_or_else(|| Error::field(&f, n, "column missing from the shots table"))
+                b.column_by_name(n).cloned().ok_or_else(|| Error::field(&f, n, "column missing from the shots table"))
             };
             let sn = get("shot_number")?;
-            let sn = sn
-                .as_primitive_opt::<UInt64Type>()
-                .ok_or_else(|| Error::field(&f, "shot_number", "not uint64"))?;
+            let sn =
+                sn.as_primitive_opt::<UInt64Type>().ok_or_else(|| Error::field(&f, "shot_number", "not uint64"))?;
             let mut cols = Vec::new();
             for n in &COLUMNS[1..] {
-                let c = arrow::compute::cast(&get(n)?, &DataType::Float64)
-                    .map_err(|e| Error::field(&f, *n, e))?;
+                let c = arrow::compute::cast(&get(n)?, &DataType::Float64).map_err(|e| Error::field(&f, *n, e))?;
                 cols.push(c);
             }
             let v = |k: usize, i: usize| {
@@ -309,17 +234,9 @@ pub struct GeoTransform {
 impl GeoTransform {
     /// From ModelPixelScale (sx, sy, sz) and one ModelTiepoint (i, j, k, x, y, z); `pixel_is_point`
     /// (GTRasterTypeGeoKey = 2) moves the tie point from the pixel's centre to its corner.
-    pub fn from_tiepoint(
-        scale: &[f64],
-        tiepoint: &[f64],
-        pixel_is_point: bool,
-    ) -> std::result::Result<Self, String> {
+    pub fn from_tiepoint(scale: &[f64], tiepoint: &[f64], pixel_is_point: bool) -> std::result::Result<Self, String> {
         if scale.len() < 2 || tiepoint.len() < 6 {
-            return Err(format!(
-                "{} scale values and {} tie-point values (need 3 and 6)",
-                scale.len(),
-                tiepoint.len()
-            ));
+            return Err(format!("{} scale values and {} tie-point values (need 3 and 6)", scale.len(), tiepoint.len()));
         }
         let (sx, sy) = (scale[0], scale[1]);
         if !(sx.is_finite() && sy.is_finite() && sx > 0.0 && sy > 0.0) {
@@ -327,12 +244,7 @@ impl GeoTransform {
         }
         let half = if pixel_is_point { 0.5 } else { 0.0 };
         let (i, j) = (tiepoint[0] + half, tiepoint[1] + half);
-        Ok(GeoTransform {
-            x0: tiepoint[3] - i * sx,
-            y0: tiepoint[4] + j * sy,
-            sx,
-            sy,
-        })
+        Ok(GeoTransform { x0: tiepoint[3] - i * sx, y0: tiepoint[4] + j * sy, sx, sy })
     }
 
     /// From a ModelTransformation matrix (16 values, row-major) without rotation or shear.
@@ -343,19 +255,14 @@ impl GeoTransform {
         if m[1] != 0.0 || m[4] != 0.0 {
             return Err("rotated or sheared rasters are not supported".into());
         }
-        Self::from_tiepoint(
-            &[m[0], -m[5], 0.0],
-            &[0.0, 0.0, 0.0, m[3], m[7], 0.0],
-            pixel_is_point,
-        )
+        Self::from_tiepoint(&[m[0], -m[5], 0.0], &[0.0, 0.0, 0.0, m[3], m[7], 0.0], pixel_is_point)
     }
 
     /// The (column, row) holding (x, y), or `None` outside a `width` × `height` raster.
     pub fn pixel_of(&self, x: f64, y: f64, width: u32, height: u32) -> Option<(u32, u32)> {
         let c = ((x - self.x0) / self.sx).floor();
         let r = ((self.y0 - y) / self.sy).floor();
-        (c >= 0.0 && r >= 0.0 && c < width as f64 && r < height as f64)
-            .then_some((c as u32, r as u32))
+        (c >= 0.0 && r >= 0.0 && c < width as f64 && r < height as f64).then_some((c as u32, r as u32))
     }
 }
 
@@ -421,10 +328,7 @@ pub struct LandCoverRaster {
 
 impl std::fmt::Debug for LandCoverRaster {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("LandCoverRaster")
-            .field("path", &self.path)
-            .field("size", &(self.width, self.height))
-            .finish()
+        f.debug_struct("LandCoverRaster").field("path", &self.path).field("size", &(self.width, self.height)).finish()
     }
 }
 
@@ -433,14 +337,12 @@ impl LandCoverRaster {
     pub fn open(path: &Path) -> Result<Self> {
         let file = File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
         let terr = |field: &str, e: tiff::TiffError| Error::field(path, field, e);
-        let mut decoder = Decoder::new(BufReader::new(file))
-            .map_err(|e| Error::file(path, format!("not a readable TIFF: {e}")))?;
+        let mut decoder =
+            Decoder::new(BufReader::new(file)).map_err(|e| Error::file(path, format!("not a readable TIFF: {e}")))?;
         let (width, height) = decoder.dimensions().map_err(|e| terr("ImageWidth", e))?;
         let codes = match decoder.colortype().map_err(|e| terr("BitsPerSample", e))? {
             tiff::ColorType::Gray(8) | tiff::ColorType::Palette(8) => Codes::Grid,
-            tiff::ColorType::Gray(16)
-            | tiff::ColorType::Gray(32)
-            | tiff::ColorType::Palette(16) => Codes::Clc,
+            tiff::ColorType::Gray(16) | tiff::ColorType::Gray(32) | tiff::ColorType::Palette(16) => Codes::Clc,
             other => {
                 return Err(Error::field(
                     path,
@@ -449,43 +351,24 @@ impl LandCoverRaster {
                 ))
             }
         };
-        if let Some(fmt) = decoder
-            .find_tag_unsigned::<u16>(Tag::SampleFormat)
-            .map_err(|e| terr("SampleFormat", e))?
-        {
+        if let Some(fmt) = decoder.find_tag_unsigned::<u16>(Tag::SampleFormat).map_err(|e| terr("SampleFormat", e))? {
             if fmt == 3 {
-                return Err(Error::field(
-                    path,
-                    "SampleFormat",
-                    "floating-point samples: expected integer class codes",
-                ));
+                return Err(Error::field(path, "SampleFormat", "floating-point samples: expected integer class codes"));
             }
         }
-        let keys = match decoder
-            .find_tag(Tag::GeoKeyDirectoryTag)
-            .map_err(|e| terr("GeoKeyDirectory", e))?
-        {
+        let keys = match decoder.find_tag(Tag::GeoKeyDirectoryTag).map_err(|e| terr("GeoKeyDirectory", e))? {
             Some(v) => geokeys(&v.into_u16_vec().map_err(|e| terr("GeoKeyDirectory", e))?),
-            None => {
+            None => return Err(Error::field(path, "GeoKeyDirectory", "missing: not a GeoTIFF (expected EPSG:3035)")),
+        };
+        match (keys.get(&geokey::PROJECTED_CS_TYPE), keys.get(&geokey::GEOGRAPHIC_TYPE)) {
+            (Some(&LANDCOVER_EPSG), _) => {}
+            (Some(&code), _) => {
                 return Err(Error::field(
                     path,
-                    "GeoKeyDirectory",
-                    "missing: not a GeoTIFF (expected EPSG:3035)",
+                    "GeoKeyDirectory/ProjectedCSTypeGeoKey",
+                    format!("EPSG:{code}, expected EPSG:{LANDCOVER_EPSG} (Corine Land Cover's LAEA Europe)"),
                 ))
             }
-        };
-        match (
-            keys.get(&geokey::PROJECTED_CS_TYPE),
-            keys.get(&geokey::GEOGRAPHIC_TYPE),
-        ) {
-            (Some(&LANDCOVER_EPSG), _) => {}
-            (Some(&code), _) => return Err(Error::field(
-                path,
-                "GeoKeyDirectory/ProjectedCSTypeGeoKey",
-                format!(
-                    "EPSG:{code}, expected EPSG:{LANDCOVER_EPSG} (Corine Land Cover's LAEA Europe)"
-                ),
-            )),
             (None, Some(&code)) => {
                 return Err(Error::field(
                     path,
@@ -502,20 +385,15 @@ impl LandCoverRaster {
             }
         }
         let pixel_is_point = keys.get(&geokey::RASTER_TYPE) == Some(&2);
-        let f64s =
-            |d: &mut Decoder<BufReader<File>>, tag: Tag, name: &str| -> Result<Option<Vec<f64>>> {
-                match d.find_tag(tag).map_err(|e| terr(name, e))? {
-                    Some(v) => Ok(Some(v.into_f64_vec().map_err(|e| terr(name, e))?)),
-                    None => Ok(None),
-                }
-            };
+        let f64s = |d: &mut Decoder<BufReader<File>>, tag: Tag, name: &str| -> Result<Option<Vec<f64>>> {
+            match d.find_tag(tag).map_err(|e| terr(name, e))? {
+                Some(v) => Ok(Some(v.into_f64_vec().map_err(|e| terr(name, e))?)),
+                None => Ok(None),
+            }
+        };
         let scale = f64s(&mut decoder, Tag::ModelPixelScaleTag, "ModelPixelScale")?;
         let tie = f64s(&mut decoder, Tag::ModelTiepointTag, "ModelTiepoint")?;
-        let matrix = f64s(
-            &mut decoder,
-            Tag::ModelTransformationTag,
-            "ModelTransformation",
-        )?;
+        let matrix = f64s(&mut decoder, Tag::ModelTransformationTag, "ModelTransformation")?;
         let transform = match (scale, tie, matrix) {
             (Some(s), Some(t), _) => GeoTransform::from_tiepoint(&s, &t, pixel_is_point)
                 .map_err(|e| Error::field(path, "ModelPixelScale/ModelTiepoint", e))?,
@@ -529,10 +407,7 @@ impl LandCoverRaster {
                 ))
             }
         };
-        let nodata = match decoder
-            .find_tag(Tag::GdalNodata)
-            .map_err(|e| terr("GDAL_NODATA", e))?
-        {
+        let nodata = match decoder.find_tag(Tag::GdalNodata).map_err(|e| terr("GDAL_NODATA", e))? {
             Some(v) => {
                 let s = v.into_string().map_err(|e| terr("GDAL_NODATA", e))?;
                 let s = s.trim_matches(|c: char| c == '\0' || c.is_whitespace());
@@ -542,11 +417,7 @@ impl LandCoverRaster {
         };
         let chunk = decoder.chunk_dimensions();
         if chunk.0 == 0 || chunk.1 == 0 {
-            return Err(Error::field(
-                path,
-                "RowsPerStrip/TileWidth",
-                "zero-sized strips or tiles",
-            ));
+            return Err(Error::field(path, "RowsPerStrip/TileWidth", "zero-sized strips or tiles"));
         }
         let chunks_across = width.div_ceil(chunk.0);
         Ok(LandCoverRaster {
@@ -575,14 +446,8 @@ impl LandCoverRaster {
         on_shots: &dyn Fn(u64, u64),
     ) -> Result<(Vec<Stratum>, usize, usize)> {
         let projector = Projector::new(LANDCOVER_EPSG as u32)?;
-        let mut out: Vec<Stratum> = shots
-            .iter()
-            .map(|s| Stratum {
-                shot_number: s.0,
-                forest_type: UNKNOWN,
-                clc_code: None,
-            })
-            .collect();
+        let mut out: Vec<Stratum> =
+            shots.iter().map(|s| Stratum { shot_number: s.0, forest_type: UNKNOWN, clc_code: None }).collect();
         let mut no_position = 0;
         // (index in shots, projected position)
         let mut points: Vec<(usize, (f64, f64))> = Vec::with_capacity(shots.len());
@@ -612,11 +477,7 @@ impl LandCoverRaster {
 
     /// The CLC class at each EPSG:3035 point. Each strip or tile holding a point is decoded once;
     /// `on_points(n)` reports progress.
-    pub fn sample_xy(
-        &mut self,
-        points: &[(f64, f64)],
-        on_points: &dyn Fn(u64),
-    ) -> Result<Vec<PixelSample>> {
+    pub fn sample_xy(&mut self, points: &[(f64, f64)], on_points: &dyn Fn(u64)) -> Result<Vec<PixelSample>> {
         let mut out = vec![PixelSample::Outside; points.len()];
         // (index in points, chunk, offset within the chunk)
         let mut located: Vec<(usize, u32, usize)> = Vec::new();
@@ -636,16 +497,10 @@ impl LandCoverRaster {
             let end = k + located[k..].iter().take_while(|l| l.1 == chunk).count();
             for &(i, _, offset) in &located[k..end] {
                 let v = values.get(offset).copied();
-                let code = v
-                    .filter(|v| Some(*v) != self.nodata)
-                    .and_then(|v| match self.codes {
-                        Codes::Grid => u16::try_from(v)
-                            .ok()
-                            .and_then(classes::clc_code_of_grid_code),
-                        Codes::Clc => u16::try_from(v)
-                            .ok()
-                            .filter(|c| classes::CLC_CODES.contains(c)),
-                    });
+                let code = v.filter(|v| Some(*v) != self.nodata).and_then(|v| match self.codes {
+                    Codes::Grid => u16::try_from(v).ok().and_then(classes::clc_code_of_grid_code),
+                    Codes::Clc => u16::try_from(v).ok().filter(|c| classes::CLC_CODES.contains(c)),
+                });
                 out[i] = code.map(PixelSample::Clc).unwrap_or(PixelSample::NoData);
             }
             on_points((end - k) as u64);
@@ -656,10 +511,8 @@ impl LandCoverRaster {
 
     /// The samples of one strip or tile, row-major with the chunk's full width as stride.
     fn read_chunk(&mut self, chunk: u32) -> Result<Vec<i64>> {
-        let data = self
-            .decoder
-            .read_chunk(chunk)
-            .map_err(|e| Error::field(&self.path, format!("strip/tile {chunk}"), e))?;
+        let data =
+            self.decoder.read_chunk(chunk).map_err(|e| Error::field(&self.path, format!("strip/tile {chunk}"), e))?;
         // The decoder returns a chunk's data only: the last strip is shorter, and edge tiles are
         // narrower and shorter than the nominal tile.
         let values: Vec<i64> = match data {
@@ -669,13 +522,7 @@ impl LandCoverRaster {
             DecodingResult::I8(v) => v.into_iter().map(i64::from).collect(),
             DecodingResult::I16(v) => v.into_iter().map(i64::from).collect(),
             DecodingResult::I32(v) => v.into_iter().map(i64::from).collect(),
-            _ => {
-                return Err(Error::field(
-                    &self.path,
-                    "SampleFormat",
-                    "expected integer class codes",
-                ))
-            }
+            _ => return Err(Error::field(&self.path, "SampleFormat", "expected integer class codes")),
         };
         let (data_w, _) = self.decoder.chunk_data_dimensions(chunk);
         if data_w == self.chunk.0 {
@@ -698,24 +545,18 @@ mod tests {
 
     #[test]
     fn tiepoint_transform_maps_corners() {
-        let t = GeoTransform::from_tiepoint(
-            &[100.0, 100.0, 0.0],
-            &[0.0, 0.0, 0.0, 3_500_000.0, 2_600_000.0, 0.0],
-            false,
-        )
-        .unwrap();
+        let t =
+            GeoTransform::from_tiepoint(&[100.0, 100.0, 0.0], &[0.0, 0.0, 0.0, 3_500_000.0, 2_600_000.0, 0.0], false)
+                .unwrap();
         assert_eq!(t.pixel_of(3_500_000.0, 2_600_000.0, 10, 10), Some((0, 0)));
         assert_eq!(t.pixel_of(3_500_099.9, 2_599_900.1, 10, 10), Some((0, 0)));
         assert_eq!(t.pixel_of(3_500_100.0, 2_599_899.0, 10, 10), Some((1, 1)));
         assert_eq!(t.pixel_of(3_499_999.0, 2_599_999.0, 10, 10), None);
         assert_eq!(t.pixel_of(3_501_000.0, 2_599_999.0, 10, 10), None);
         // PixelIsPoint: the tie point is the centre of pixel (0, 0).
-        let p = GeoTransform::from_tiepoint(
-            &[100.0, 100.0, 0.0],
-            &[0.0, 0.0, 0.0, 3_500_050.0, 2_599_950.0, 0.0],
-            true,
-        )
-        .unwrap();
+        let p =
+            GeoTransform::from_tiepoint(&[100.0, 100.0, 0.0], &[0.0, 0.0, 0.0, 3_500_050.0, 2_599_950.0, 0.0], true)
+                .unwrap();
         assert_eq!((p.x0, p.y0), (3_500_000.0, 2_600_000.0));
     }
 
@@ -733,12 +574,7 @@ mod tests {
         m[7] = 200.0;
         assert_eq!(
             GeoTransform::from_matrix(&m, false).unwrap(),
-            GeoTransform {
-                x0: 100.0,
-                y0: 200.0,
-                sx: 10.0,
-                sy: 10.0
-            }
+            GeoTransform { x0: 100.0, y0: 200.0, sx: 10.0, sy: 10.0 }
         );
     }
 

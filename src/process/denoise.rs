@@ -78,11 +78,7 @@ pub struct LeadingNoiseDenoise {
 impl LeadingNoiseDenoise {
     /// collocateWaves' settings for real waveforms: noise over the first 12 m, μ + 4σ, features of
     /// at least 6 samples, noise tracking on.
-    pub const COLLOCATE: LeadingNoiseDenoise = LeadingNoiseDenoise {
-        stats_len_m: 12.0,
-        threshold_sigmas: 4.0,
-        min_width: 6,
-    };
+    pub const COLLOCATE: LeadingNoiseDenoise = LeadingNoiseDenoise { stats_len_m: 12.0, threshold_sigmas: 4.0, min_width: 6 };
 }
 
 /// Why a waveform cannot be denoised from its leading noise.
@@ -102,11 +98,7 @@ pub enum DenoiseError {
 /// `min_width` samples are extended both ways while the signal stays above μ (noise tracking), and
 /// their samples become max(w − μ, 0); everything else is 0. Unlike the reference, a feature that
 /// reaches the last sample is kept (§5 Q13).
-pub fn denoise_leading_noise(
-    wave: &[f32],
-    spacing_m: f64,
-    s: LeadingNoiseDenoise,
-) -> Result<Vec<f64>, DenoiseError> {
+pub fn denoise_leading_noise(wave: &[f32], spacing_m: f64, s: LeadingNoiseDenoise) -> Result<Vec<f64>, DenoiseError> {
     if wave.iter().any(|v| !v.is_finite()) {
         return Err(DenoiseError::NonFinite);
     }
@@ -120,11 +112,7 @@ pub fn denoise_leading_noise(
     let window = &wave[2..end];
     let n = window.len() as f64;
     let mean = window.iter().map(|&v| v as f64).sum::<f64>() / n;
-    let var = window
-        .iter()
-        .map(|&v| (v as f64 - mean).powi(2))
-        .sum::<f64>()
-        / n;
+    let var = window.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / n;
     let tau = mean + s.threshold_sigmas * var.sqrt();
     let w = |i: usize| wave[i] as f64;
     let mut out = vec![0.0; wave.len()];
@@ -162,9 +150,7 @@ mod tests {
     #[test]
     fn leading_noise_denoise_keeps_wide_features_only() {
         // Noise ±1 around 100 for 200 samples, a 10-sample bump and a 2-sample spike.
-        let mut wave: Vec<f32> = (0..300)
-            .map(|i| 100.0 + if i % 2 == 0 { 1.0 } else { -1.0 })
-            .collect();
+        let mut wave: Vec<f32> = (0..300).map(|i| 100.0 + if i % 2 == 0 { 1.0 } else { -1.0 }).collect();
         for (k, v) in wave[150..160].iter_mut().enumerate() {
             *v = 130.0 + k as f32;
         }
@@ -182,19 +168,11 @@ mod tests {
         // A feature running into the last sample is kept.
         let mut tail = wave.clone();
         tail[290..].iter_mut().for_each(|v| *v = 200.0);
-        assert!(
-            denoise_leading_noise(&tail, 0.15, LeadingNoiseDenoise::COLLOCATE).unwrap()[299] > 90.0
-        );
-        assert_eq!(
-            denoise_leading_noise(&wave[..50], 0.15, LeadingNoiseDenoise::COLLOCATE),
-            Err(DenoiseError::TooShort)
-        );
+        assert!(denoise_leading_noise(&tail, 0.15, LeadingNoiseDenoise::COLLOCATE).unwrap()[299] > 90.0);
+        assert_eq!(denoise_leading_noise(&wave[..50], 0.15, LeadingNoiseDenoise::COLLOCATE), Err(DenoiseError::TooShort));
         let mut bad = wave.clone();
         bad[3] = f32::NAN;
-        assert_eq!(
-            denoise_leading_noise(&bad, 0.15, LeadingNoiseDenoise::COLLOCATE),
-            Err(DenoiseError::NonFinite)
-        );
+        assert_eq!(denoise_leading_noise(&bad, 0.15, LeadingNoiseDenoise::COLLOCATE), Err(DenoiseError::NonFinite));
     }
 
     #[test]

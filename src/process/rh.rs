@@ -24,8 +24,7 @@ pub fn rh_profile(wave: &[f32], z0: f64, dz: f64, ground: f64) -> [f32; N_RH] {
 pub fn rh_profile_by(wave: &[f32], label: impl Fn(usize) -> f64, ground: f64) -> [f32; N_RH] {
     let total: f32 = wave.iter().sum();
     // Thresholds computed once: the f32 fraction of p/100, correctly rounded, times the total.
-    let thresholds: [f32; N_RH] =
-        std::array::from_fn(|p| ((p as f64 / 100.0) as f32 * total).min(total));
+    let thresholds: [f32; N_RH] = std::array::from_fn(|p| ((p as f64 / 100.0) as f32 * total).min(total));
     let mut rh = [f32::NAN; N_RH];
     let mut next = 0; // percentiles are reached in increasing order, so one cursor suffices
     let mut cumul = 0f32;

@@ -51,8 +51,7 @@ pub trait Figure {
 pub fn render(fig: &impl Figure, dir: &Path, name: &str) -> Result<[PathBuf; 2]> {
     register_font();
     let (w, h) = fig.size();
-    let fail =
-        |e: Box<dyn StdError>| Error::file(dir.join(name), format!("cannot draw figure: {e}"));
+    let fail = |e: Box<dyn StdError>| Error::file(dir.join(name), format!("cannot draw figure: {e}"));
     let mut rgb = vec![0u8; (w * h * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
@@ -65,9 +64,7 @@ pub fn render(fig: &impl Figure, dir: &Path, name: &str) -> Result<[PathBuf; 2]>
         enc.set_color(png::ColorType::Rgb);
         enc.set_depth(png::BitDepth::Eight);
         let mut writer = enc.write_header().map_err(|e| fail(Box::new(e)))?;
-        writer
-            .write_image_data(&rgb)
-            .map_err(|e| fail(Box::new(e)))?;
+        writer.write_image_data(&rgb).map_err(|e| fail(Box::new(e)))?;
     }
     let mut svg = String::new();
     {
@@ -84,15 +81,11 @@ pub fn render(fig: &impl Figure, dir: &Path, name: &str) -> Result<[PathBuf; 2]>
 
 /// Write `bytes` to `path` through a temporary name.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let mut name = path
-        .file_name()
-        .map(|n| n.to_os_string())
-        .unwrap_or_default();
+    let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
     name.push(format!(".{}.tmp", std::process::id()));
     let tmp = path.with_file_name(name);
     std::fs::write(&tmp, bytes).map_err(|e| Error::file(&tmp, format!("cannot write: {e}")))?;
-    std::fs::rename(&tmp, path)
-        .map_err(|e| Error::file(path, format!("cannot rename into place: {e}")))
+    std::fs::rename(&tmp, path).map_err(|e| Error::file(path, format!("cannot rename into place: {e}")))
 }
 
 /// The legend of a chart's labelled series, drawn the same way in every figure.
@@ -113,6 +106,7 @@ where
         .draw()?;
     Ok(())
 }
+
 
 fn font(size: u32) -> TextStyle<'static> {
     (FAMILY, size).into_font().color(&BLACK)
@@ -177,17 +171,8 @@ impl Figure for MsdBars {
         DB::ErrorType: 'static,
     {
         root.fill(&WHITE)?;
-        let root = root.titled(
-            "MSD of simulated vs real RH per percentile: SB + SDSD + LCS",
-            font(22),
-        )?;
-        let ymax = padded_range(
-            self.panels
-                .iter()
-                .flat_map(|p| p.bars.iter().map(|b| b.1 + b.2 + b.3)),
-            true,
-        )
-        .end;
+        let root = root.titled("MSD of simulated vs real RH per percentile: SB + SDSD + LCS", font(22))?;
+        let ymax = padded_range(self.panels.iter().flat_map(|p| p.bars.iter().map(|b| b.1 + b.2 + b.3)), true).end;
         let areas = root.split_evenly((self.panels.len().max(1), 1));
         for (panel, area) in self.panels.iter().zip(&areas) {
             let mut chart = ChartBuilder::on(area)
@@ -208,8 +193,7 @@ impl Figure for MsdBars {
                 .label_style(font(14))
                 .axis_desc_style(font(15))
                 .draw()?;
-            let parts: [(&str, RGBColor); 3] =
-                [("SB", COLORS[0]), ("SDSD", COLORS[1]), ("LCS", COLORS[2])];
+            let parts: [(&str, RGBColor); 3] = [("SB", COLORS[0]), ("SDSD", COLORS[1]), ("LCS", COLORS[2])];
             for (k, (label, color)) in parts.iter().enumerate() {
                 let rects = panel.bars.iter().map(|&(p, sb, sdsd, lcs)| {
                     let v = [sb, sdsd, lcs];
@@ -221,9 +205,7 @@ impl Figure for MsdBars {
                 chart
                     .draw_series(rects)?
                     .label(*label)
-                    .legend(move |(x, y)| {
-                        Rectangle::new([(x, y - 6), (x + 14, y + 6)], color.filled())
-                    });
+                    .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 14, y + 6)], color.filled()));
             }
             draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 14)?;
         }
@@ -265,23 +247,12 @@ impl Figure for LinePanels {
     {
         root.fill(&WHITE)?;
         let root = root.titled(&self.title, font(20))?;
-        let all = || {
-            self.panels
-                .iter()
-                .flat_map(|p| p.1.iter().flat_map(|s| s.1.iter()))
-        };
+        let all = || self.panels.iter().flat_map(|p| p.1.iter().flat_map(|s| s.1.iter()));
         let xr = padded_range(all().map(|p| p.0), false);
         let yr = padded_range(all().map(|p| p.1), self.zero_line);
         let areas = root.split_evenly((1, self.panels.len().max(1)));
         for ((title, series), area) in self.panels.iter().zip(&areas) {
-            let yr = if self.own_y {
-                padded_range(
-                    series.iter().flat_map(|s| s.1.iter()).map(|p| p.1),
-                    self.zero_line,
-                )
-            } else {
-                yr.clone()
-            };
+            let yr = if self.own_y { padded_range(series.iter().flat_map(|s| s.1.iter()).map(|p| p.1), self.zero_line) } else { yr.clone() };
             let mut chart = ChartBuilder::on(area)
                 .caption(title, font(16))
                 .margin(10)
@@ -299,19 +270,12 @@ impl Figure for LinePanels {
                 .axis_desc_style(font(14))
                 .draw()?;
             if self.zero_line {
-                chart.draw_series(LineSeries::new(
-                    [(xr.start, 0.0), (xr.end, 0.0)],
-                    BLACK.mix(0.5),
-                ))?;
+                chart.draw_series(LineSeries::new([(xr.start, 0.0), (xr.end, 0.0)], BLACK.mix(0.5)))?;
             }
             for (k, (label, pts)) in series.iter().enumerate() {
                 // The pooled series ("all …") in black and thicker, over the others.
                 let pooled = label.starts_with("all");
-                let color = if pooled {
-                    BLACK
-                } else {
-                    COLORS[k % (COLORS.len() - 1)]
-                };
+                let color = if pooled { BLACK } else { COLORS[k % (COLORS.len() - 1)] };
                 let color = color.stroke_width(if pooled { 3 } else { 2 });
                 chart
                     .draw_series(LineSeries::new(pts.iter().copied(), color))?
@@ -319,11 +283,7 @@ impl Figure for LinePanels {
                     .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], color));
             }
             if !series.is_empty() {
-                let corner = if self.legend_lower {
-                    SeriesLabelPosition::LowerLeft
-                } else {
-                    SeriesLabelPosition::UpperLeft
-                };
+                let corner = if self.legend_lower { SeriesLabelPosition::LowerLeft } else { SeriesLabelPosition::UpperLeft };
                 draw_legend(&mut chart, corner, 13)?;
             }
         }
@@ -348,16 +308,8 @@ impl Figure for PhenologyBands {
         DB::ErrorType: 'static,
     {
         root.fill(&WHITE)?;
-        let root = root.titled(
-            "Bias of simulated RH, leaf-on vs leaf-off (band: |ΔBias|)",
-            font(20),
-        )?;
-        let yr = padded_range(
-            self.panels
-                .iter()
-                .flat_map(|p| p.1.iter().chain(&p.2).map(|q| q.1)),
-            true,
-        );
+        let root = root.titled("Bias of simulated RH, leaf-on vs leaf-off (band: |ΔBias|)", font(20))?;
+        let yr = padded_range(self.panels.iter().flat_map(|p| p.1.iter().chain(&p.2).map(|q| q.1)), true);
         let areas = root.split_evenly((1, self.panels.len().max(1)));
         for ((title, on, off), area) in self.panels.iter().zip(&areas) {
             let mut chart = ChartBuilder::on(area)
@@ -379,33 +331,22 @@ impl Figure for PhenologyBands {
             chart.draw_series(LineSeries::new([(0.0, 0.0), (100.0, 0.0)], BLACK.mix(0.5)))?;
             // The band joins the two curves at the percentiles both have.
             let off_at = |p: f64| off.iter().find(|q| q.0 == p).map(|q| q.1);
-            let pairs: Vec<(f64, f64, f64)> = on
-                .iter()
-                .filter_map(|&(p, b)| off_at(p).map(|o| (p, b, o)))
-                .collect();
+            let pairs: Vec<(f64, f64, f64)> = on.iter().filter_map(|&(p, b)| off_at(p).map(|o| (p, b, o))).collect();
             if pairs.len() > 1 {
                 let mut poly: Vec<(f64, f64)> = pairs.iter().map(|&(p, a, _)| (p, a)).collect();
                 poly.extend(pairs.iter().rev().map(|&(p, _, b)| (p, b)));
                 chart
-                    .draw_series(std::iter::once(Polygon::new(
-                        poly,
-                        RGBColor(150, 150, 150).mix(0.35).filled(),
-                    )))?
+                    .draw_series(std::iter::once(Polygon::new(poly, RGBColor(150, 150, 150).mix(0.35).filled())))?
                     .label("|ΔBias|")
                     .legend(|(x, y)| {
-                        Rectangle::new(
-                            [(x, y - 6), (x + 14, y + 6)],
-                            RGBColor(150, 150, 150).mix(0.35).filled(),
-                        )
+                        Rectangle::new([(x, y - 6), (x + 14, y + 6)], RGBColor(150, 150, 150).mix(0.35).filled())
                     });
             }
             for (label, pts, color) in [("leaf-on", on, COLORS[2]), ("leaf-off", off, COLORS[5])] {
                 chart
                     .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))?
                     .label(label)
-                    .legend(move |(x, y)| {
-                        PathElement::new([(x, y), (x + 18, y)], color.stroke_width(2))
-                    });
+                    .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], color.stroke_width(2)));
             }
             draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 13)?;
         }
@@ -433,10 +374,7 @@ impl Figure for CollocationScatter {
         let r = padded_range(self.points.iter().flat_map(|p| [p.0, p.1]), false);
         let (lo, hi) = (r.start.max(-1.0), r.end.min(1.0));
         let mut chart = ChartBuilder::on(root)
-            .caption(
-                "Waveform correlation per segment, before vs after collocation",
-                font(18),
-            )
+            .caption("Waveform correlation per segment, before vs after collocation", font(18))
             .margin(15)
             .x_label_area_size(45)
             .y_label_area_size(60)
@@ -456,11 +394,7 @@ impl Figure for CollocationScatter {
             .label("1:1")
             .legend(|(x, y)| PathElement::new([(x, y), (x + 18, y)], BLACK.mix(0.6)));
         chart
-            .draw_series(
-                self.points
-                    .iter()
-                    .map(|&(a, b)| Circle::new((a, b), 4, COLORS[0].mix(0.8).filled())),
-            )?
+            .draw_series(self.points.iter().map(|&(a, b)| Circle::new((a, b), 4, COLORS[0].mix(0.8).filled())))?
             .label(format!("{} segments", self.points.len()))
             .legend(|(x, y)| Circle::new((x + 7, y), 4, COLORS[0].filled()));
         draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 13)?;
@@ -507,21 +441,12 @@ impl Figure for Waveforms {
                 .axis_desc_style(font(14))
                 .draw()?;
             for (k, (label, pts)) in series.iter().enumerate() {
-                let color = if label == "GEDI" {
-                    BLACK
-                } else {
-                    COLORS[k % COLORS.len()]
-                };
+                let color = if label == "GEDI" { BLACK } else { COLORS[k % COLORS.len()] };
                 let width = if label == "GEDI" { 3 } else { 2 };
                 chart
-                    .draw_series(LineSeries::new(
-                        pts.iter().copied(),
-                        color.stroke_width(width),
-                    ))?
+                    .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(width)))?
                     .label(label.as_str())
-                    .legend(move |(x, y)| {
-                        PathElement::new([(x, y), (x + 18, y)], color.stroke_width(2))
-                    });
+                    .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], color.stroke_width(2)));
             }
             draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 13)?;
         }

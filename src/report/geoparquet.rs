@@ -10,9 +10,7 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Arc;
 
-use arrow::array::{
-    Array, ArrayRef, AsArray, BinaryBuilder, Float64Array, RecordBatch, StructArray,
-};
+use arrow::array::{Array, ArrayRef, AsArray, BinaryBuilder, Float64Array, RecordBatch, StructArray};
 use arrow::datatypes::{DataType, Field, Fields, Float64Type, Schema, SchemaRef};
 use futures::StreamExt;
 
@@ -56,11 +54,7 @@ pub fn geo_metadata(bbox: Option<[f64; 4]>) -> String {
 }
 
 fn bbox_fields() -> Fields {
-    Fields::from(
-        ["xmin", "ymin", "xmax", "ymax"]
-            .map(|n| Field::new(n, DataType::Float64, false))
-            .to_vec(),
-    )
+    Fields::from(["xmin", "ymin", "xmax", "ymax"].map(|n| Field::new(n, DataType::Float64, false)).to_vec())
 }
 
 /// The SQL that reads `table` with its position (`__lon`, `__lat`).
@@ -91,14 +85,10 @@ pub async fn export(ds: &Dataset, table: &str, out: &Path, crs: GeoCrs) -> Resul
         }
     }
     let ctx = crate::sql::session(ds).await?;
-    let df = ctx
-        .sql(&sql)
-        .await
-        .map_err(|e| Error::field(ds.root().join(table), "GeoParquet export", e))?;
+    let df = ctx.sql(&sql).await.map_err(|e| Error::field(ds.root().join(table), "GeoParquet export", e))?;
     let in_schema: SchemaRef = super::plain_schema(df.schema().as_arrow());
-    let keep: Vec<usize> = (0..in_schema.fields().len())
-        .filter(|&i| !in_schema.field(i).name().starts_with("__"))
-        .collect();
+    let keep: Vec<usize> =
+        (0..in_schema.fields().len()).filter(|&i| !in_schema.field(i).name().starts_with("__")).collect();
     let mut fields: Vec<Field> = keep.iter().map(|&i| in_schema.field(i).clone()).collect();
     fields.push(Field::new("geometry", DataType::Binary, true));
     fields.push(Field::new("bbox", DataType::Struct(bbox_fields()), true));
@@ -106,15 +96,8 @@ pub async fn export(ds: &Dataset, table: &str, out: &Path, crs: GeoCrs) -> Resul
     meta.insert("geo".into(), geo_metadata(None));
     // The `geo` key goes to the file's key-value metadata (not the Arrow schema's, which would repeat it).
     let schema = Arc::new(Schema::new(fields));
-    let mut writer = AtomicParquet::create(
-        out,
-        schema.clone(),
-        dataset::writer_properties(&meta, 1 << 16),
-    )?;
-    let mut stream = df
-        .execute_stream()
-        .await
-        .map_err(|e| Error::table(out, e))?;
+    let mut writer = AtomicParquet::create(out, schema.clone(), dataset::writer_properties(&meta, 1 << 16))?;
+    let mut stream = df.execute_stream().await.map_err(|e| Error::table(out, e))?;
     let mut rows = 0u64;
     while let Some(batch) = stream.next().await {
         let batch = super::plain_batch(&batch.map_err(|e| Error::table(out, e))?, &in_schema)?;
@@ -125,10 +108,7 @@ pub async fn export(ds: &Dataset, table: &str, out: &Path, crs: GeoCrs) -> Resul
         let (mut xs, mut ys) = (Vec::with_capacity(n), Vec::with_capacity(n));
         let mut valid = Vec::with_capacity(n);
         for i in 0..n {
-            let ok = lon.is_valid(i)
-                && lat.is_valid(i)
-                && lon.value(i).is_finite()
-                && lat.value(i).is_finite();
+            let ok = lon.is_valid(i) && lat.is_valid(i) && lon.value(i).is_finite() && lat.value(i).is_finite();
             if ok {
                 geom.append_value(wkb_point(lon.value(i), lat.value(i)));
             } else {
@@ -138,16 +118,9 @@ pub async fn export(ds: &Dataset, table: &str, out: &Path, crs: GeoCrs) -> Resul
             ys.push(if ok { lat.value(i) } else { 0.0 });
             valid.push(ok);
         }
-        let (x, y): (ArrayRef, ArrayRef) = (
-            Arc::new(Float64Array::from(xs)),
-            Arc::new(Float64Array::from(ys)),
-        );
-        let bbox = StructArray::try_new(
-            bbox_fields(),
-            vec![x.clone(), y.clone(), x, y],
-            Some(valid.into()),
-        )
-        .map_err(|e| Error::table(out, e))?;
+        let (x, y): (ArrayRef, ArrayRef) = (Arc::new(Float64Array::from(xs)), Arc::new(Float64Array::from(ys)));
+        let bbox = StructArray::try_new(bbox_fields(), vec![x.clone(), y.clone(), x, y], Some(valid.into()))
+            .map_err(|e| Error::table(out, e))?;
         let mut cols: Vec<ArrayRef> = keep.iter().map(|&i| batch.column(i).clone()).collect();
         cols.push(Arc::new(geom.finish()));
         cols.push(Arc::new(bbox));
@@ -160,9 +133,7 @@ pub async fn export(ds: &Dataset, table: &str, out: &Path, crs: GeoCrs) -> Resul
 }
 
 fn column_f64(b: &RecordBatch, name: &str, out: &Path) -> Result<Float64Array> {
-    let c = b
-        .column_by_name(name)
-        .ok_or_else(|| Error::field(out, name, "missing"))?;
+    let c = b.column_by_name(name).ok_or_else(|| Error::field(out, name, "missing"))?;
     let c = arrow::compute::cast(c, &DataType::Float64).map_err(|e| Error::field(out, name, e))?;
     Ok(c.as_primitive::<Float64Type>().clone())
 }
@@ -182,8 +153,7 @@ mod tests {
 
     #[test]
     fn geo_metadata_names_the_covering() {
-        let v: serde_json::Value =
-            serde_json::from_str(&geo_metadata(Some([1.0, 2.0, 3.0, 4.0]))).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&geo_metadata(Some([1.0, 2.0, 3.0, 4.0]))).unwrap();
         assert_eq!(v["version"], "1.1.0");
         assert_eq!(v["primary_column"], "geometry");
         let g = &v["columns"]["geometry"];

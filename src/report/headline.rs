@@ -44,38 +44,20 @@ fn read(path: &Path) -> Result<Vec<RecordBatch>> {
     let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
         .and_then(|b| b.build())
         .map_err(|e| Error::table(path, e))?;
-    reader
-        .map(|b| b.map_err(|e| Error::table(path, e)))
-        .collect()
+    reader.map(|b| b.map_err(|e| Error::table(path, e))).collect()
 }
 
 fn strings(b: &RecordBatch, path: &Path, name: &str) -> Result<Vec<String>> {
-    let c = b
-        .column_by_name(name)
-        .ok_or_else(|| Error::field(path, name, "column missing"))?;
-    let c = c
-        .as_string_opt::<i32>()
-        .ok_or_else(|| Error::field(path, name, "not a string"))?;
-    Ok((0..c.len())
-        .map(|i| {
-            if c.is_null(i) {
-                String::new()
-            } else {
-                c.value(i).to_string()
-            }
-        })
-        .collect())
+    let c = b.column_by_name(name).ok_or_else(|| Error::field(path, name, "column missing"))?;
+    let c = c.as_string_opt::<i32>().ok_or_else(|| Error::field(path, name, "not a string"))?;
+    Ok((0..c.len()).map(|i| if c.is_null(i) { String::new() } else { c.value(i).to_string() }).collect())
 }
 
 fn numbers(b: &RecordBatch, path: &Path, name: &str) -> Result<Vec<f64>> {
-    let c = b
-        .column_by_name(name)
-        .ok_or_else(|| Error::field(path, name, "column missing"))?;
+    let c = b.column_by_name(name).ok_or_else(|| Error::field(path, name, "column missing"))?;
     let c = arrow::compute::cast(c, &DataType::Float64).map_err(|e| Error::field(path, name, e))?;
     let c = c.as_primitive::<Float64Type>();
-    Ok((0..c.len())
-        .map(|i| if c.is_null(i) { f64::NAN } else { c.value(i) })
-        .collect())
+    Ok((0..c.len()).map(|i| if c.is_null(i) { f64::NAN } else { c.value(i) }).collect())
 }
 
 impl Headline {
@@ -84,15 +66,8 @@ impl Headline {
         let mut h = Headline::default();
         let path = report_dir.join("ground_detection.parquet");
         for b in read(&path)? {
-            let (a, g) = (
-                strings(&b, &path, "algorithm")?,
-                strings(&b, &path, "sensitivity_group")?,
-            );
-            let (n, bias, rmse) = (
-                numbers(&b, &path, "n")?,
-                numbers(&b, &path, "bias")?,
-                numbers(&b, &path, "rmse")?,
-            );
+            let (a, g) = (strings(&b, &path, "algorithm")?, strings(&b, &path, "sensitivity_group")?);
+            let (n, bias, rmse) = (numbers(&b, &path, "n")?, numbers(&b, &path, "bias")?, numbers(&b, &path, "rmse")?);
             for i in 0..b.num_rows() {
                 h.ground.push(GroundRow {
                     algorithm: a[i].clone(),
@@ -105,16 +80,8 @@ impl Headline {
         }
         let path = report_dir.join("msd.parquet");
         for b in read(&path)? {
-            let (w, a, g) = (
-                strings(&b, &path, "weighting")?,
-                strings(&b, &path, "algorithm")?,
-                strings(&b, &path, "sensitivity_group")?,
-            );
-            let (sb, sdsd, lcs) = (
-                numbers(&b, &path, "sb")?,
-                numbers(&b, &path, "sdsd")?,
-                numbers(&b, &path, "lcs")?,
-            );
+            let (w, a, g) = (strings(&b, &path, "weighting")?, strings(&b, &path, "algorithm")?, strings(&b, &path, "sensitivity_group")?);
+            let (sb, sdsd, lcs) = (numbers(&b, &path, "sb")?, numbers(&b, &path, "sdsd")?, numbers(&b, &path, "lcs")?);
             let (msd, n) = (numbers(&b, &path, "msd")?, numbers(&b, &path, "n")?);
             for i in 0..b.num_rows() {
                 h.msd.push(MsdRow {
@@ -135,12 +102,7 @@ impl Headline {
     /// Algorithms in table order (`default`, a1 … a6 as present).
     fn algorithms(&self) -> Vec<String> {
         let mut out: Vec<String> = Vec::new();
-        for a in self
-            .ground
-            .iter()
-            .map(|r| &r.algorithm)
-            .chain(self.msd.iter().map(|r| &r.algorithm))
-        {
+        for a in self.ground.iter().map(|r| &r.algorithm).chain(self.msd.iter().map(|r| &r.algorithm)) {
             if !out.contains(a) {
                 out.push(a.clone());
             }
@@ -151,20 +113,9 @@ impl Headline {
     /// `ground_detection`, one line per algorithm: all shots, then the low and high sensitivity groups.
     pub fn ground_table(&self) -> String {
         let mut s = String::new();
-        let _ = writeln!(
-            s,
-            "Ground detection: GEDI ground − ALS ground, count weighting (m)"
-        );
-        let _ = writeln!(
-            s,
-            "{:<10} {:>6} {:>8} {:>7} │ {:>6} {:>8} │ {:>6} {:>8}",
-            "algorithm", "n", "bias", "rmse", "n low", "bias", "n high", "bias"
-        );
-        let cell = |a: &str, g: &str| {
-            self.ground
-                .iter()
-                .find(|r| r.algorithm == a && r.sensitivity_group == g)
-        };
+        let _ = writeln!(s, "Ground detection: GEDI ground − ALS ground, count weighting (m)");
+        let _ = writeln!(s, "{:<10} {:>6} {:>8} {:>7} │ {:>6} {:>8} │ {:>6} {:>8}", "algorithm", "n", "bias", "rmse", "n low", "bias", "n high", "bias");
+        let cell = |a: &str, g: &str| self.ground.iter().find(|r| r.algorithm == a && r.sensitivity_group == g);
         for a in self.algorithms() {
             let (all, low, high) = (cell(&a, "all"), cell(&a, "low"), cell(&a, "high"));
             let n = |r: Option<&GroundRow>| r.map_or("0".to_string(), |r| r.n.to_string());
@@ -201,29 +152,14 @@ impl Headline {
         }
         let _ = writeln!(s, "{}", line.trim_end());
         for a in self.algorithms() {
-            let cell = |w: &str| {
-                self.msd
-                    .iter()
-                    .find(|r| r.algorithm == a && r.weighting == w && r.sensitivity_group == "all")
-            };
-            let n = weightings
-                .iter()
-                .filter_map(|w| cell(w))
-                .map(|r| r.n)
-                .max()
-                .unwrap_or(0);
+            let cell = |w: &str| self.msd.iter().find(|r| r.algorithm == a && r.weighting == w && r.sensitivity_group == "all");
+            let n = weightings.iter().filter_map(|w| cell(w)).map(|r| r.n).max().unwrap_or(0);
             let mut line = format!("{a:<10} {n:>6}");
             for w in weightings {
                 let text = match cell(w) {
                     Some(r) if r.msd > 0.0 => {
                         let p = |x: f64| (100.0 * x / r.msd).round();
-                        format!(
-                            "{:.2} ({:.0}/{:.0}/{:.0})",
-                            r.msd,
-                            p(r.sb),
-                            p(r.sdsd),
-                            p(r.lcs)
-                        )
+                        format!("{:.2} ({:.0}/{:.0}/{:.0})", r.msd, p(r.sb), p(r.sdsd), p(r.lcs))
                     }
                     Some(r) => format!("{:.2}", r.msd),
                     None => "–".to_string(),
@@ -242,13 +178,7 @@ mod tests {
 
     #[test]
     fn tables_lay_out_every_algorithm_and_weighting() {
-        let g = |a: &str, grp: &str, n: i64, bias: f64| GroundRow {
-            algorithm: a.into(),
-            sensitivity_group: grp.into(),
-            n,
-            bias,
-            rmse: bias.abs() + 0.1,
-        };
+        let g = |a: &str, grp: &str, n: i64, bias: f64| GroundRow { algorithm: a.into(), sensitivity_group: grp.into(), n, bias, rmse: bias.abs() + 0.1 };
         let m = |w: &str, a: &str| MsdRow {
             weighting: w.into(),
             algorithm: a.into(),
@@ -260,26 +190,14 @@ mod tests {
             n: 12,
         };
         let h = Headline {
-            ground: vec![
-                g("default", "low", 4, 0.4),
-                g("default", "all", 12, 0.5),
-                g("a1", "all", 10, -0.25),
-            ],
+            ground: vec![g("default", "low", 4, 0.4), g("default", "all", 12, 0.5), g("a1", "all", 10, -0.25)],
             msd: vec![m("count", "default"), m("int", "a1")],
         };
         let t = h.ground_table();
         let lines: Vec<&str> = t.lines().collect();
         assert_eq!(lines.len(), 4, "{t}");
-        assert!(
-            lines[2].starts_with("default")
-                && lines[2].contains("+0.500")
-                && lines[2].contains("+0.400"),
-            "{t}"
-        );
-        assert!(
-            lines[3].starts_with("a1") && lines[3].contains("-0.250"),
-            "{t}"
-        );
+        assert!(lines[2].starts_with("default") && lines[2].contains("+0.500") && lines[2].contains("+0.400"), "{t}");
+        assert!(lines[3].starts_with("a1") && lines[3].contains("-0.250"), "{t}");
         let t = h.msd_table();
         assert!(t.contains("4.00 (25/13/63)"), "{t}");
         let a1 = t.lines().find(|l| l.starts_with("a1")).unwrap();

@@ -15,19 +15,11 @@ use crate::error::{Error, Result};
 const MAX_ROWS: usize = 100;
 
 /// Per-percentile tables: linked only (their figures show them).
-const LINK_ONLY: [&str; 4] = [
-    "msd_profile",
-    "bias_profiles",
-    "phenology",
-    "waveform_examples",
-];
+const LINK_ONLY: [&str; 4] = ["msd_profile", "bias_profiles", "phenology", "waveform_examples"];
 
 /// Escape text for HTML.
 pub fn escape(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
 }
 
 /// Standard base64 (RFC 4648, with padding).
@@ -35,9 +27,7 @@ pub fn base64(bytes: &[u8]) -> String {
     const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
     for c in bytes.chunks(3) {
-        let n = (c[0] as u32) << 16
-            | (*c.get(1).unwrap_or(&0) as u32) << 8
-            | *c.get(2).unwrap_or(&0) as u32;
+        let n = (c[0] as u32) << 16 | (*c.get(1).unwrap_or(&0) as u32) << 8 | *c.get(2).unwrap_or(&0) as u32;
         for k in 0..4 {
             if k <= c.len() {
                 out.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
@@ -50,10 +40,7 @@ pub fn base64(bytes: &[u8]) -> String {
 }
 
 /// An HTML table of `b` (floats with 3 decimals), at most `max_rows` rows.
-pub fn html_table(
-    b: &RecordBatch,
-    max_rows: usize,
-) -> std::result::Result<String, arrow::error::ArrowError> {
+pub fn html_table(b: &RecordBatch, max_rows: usize) -> std::result::Result<String, arrow::error::ArrowError> {
     let opts = FormatOptions::default().with_null("–");
     let mut s = String::from("<table>\n<thead><tr>");
     for f in b.schema().fields() {
@@ -70,28 +57,19 @@ pub fn html_table(
         for (f, fmt) in b.schema().fields().iter().zip(&fmts) {
             let text = fmt.value(i).to_string();
             let text = match f.data_type() {
-                arrow::datatypes::DataType::Float32 | arrow::datatypes::DataType::Float64 => text
-                    .parse::<f64>()
-                    .map(|v| format!("{v:.3}"))
-                    .unwrap_or(text),
+                arrow::datatypes::DataType::Float32 | arrow::datatypes::DataType::Float64 => {
+                    text.parse::<f64>().map(|v| format!("{v:.3}")).unwrap_or(text)
+                }
                 _ => text,
             };
-            let class = if f.data_type().is_numeric() {
-                " class=\"num\""
-            } else {
-                ""
-            };
+            let class = if f.data_type().is_numeric() { " class=\"num\"" } else { "" };
             let _ = write!(s, "<td{class}>{}</td>", escape(&text));
         }
         s.push_str("</tr>\n");
     }
     s.push_str("</tbody>\n</table>\n");
     if b.num_rows() > max_rows {
-        let _ = writeln!(
-            s,
-            "<p class=\"note\">First {max_rows} of {} rows.</p>",
-            b.num_rows()
-        );
+        let _ = writeln!(s, "<p class=\"note\">First {max_rows} of {} rows.</p>", b.num_rows());
     }
     Ok(s)
 }
@@ -107,10 +85,7 @@ pub fn page(
     let mut s = String::new();
     let title = format!(
         "gedisim study report — {}",
-        ds.root()
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default()
+        ds.root().file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()
     );
     let _ = write!(
         s,
@@ -138,8 +113,7 @@ pub fn page(
     }
     for (name, caption) in figures {
         let png = summary.dir.join(format!("{name}.png"));
-        let bytes =
-            std::fs::read(&png).map_err(|e| Error::file(&png, format!("cannot read: {e}")))?;
+        let bytes = std::fs::read(&png).map_err(|e| Error::file(&png, format!("cannot read: {e}")))?;
         let _ = writeln!(
             s,
             "<figure><img alt=\"{n}\" src=\"data:image/png;base64,{}\">\n<figcaption>{} (<a href=\"{n}.svg\">SVG</a>, <a href=\"{n}.png\">PNG</a>)</figcaption></figure>",
@@ -149,11 +123,7 @@ pub fn page(
         );
     }
     for note in &summary.figure_notes {
-        let _ = writeln!(
-            s,
-            "<p class=\"note\">Figure not drawn — {}</p>",
-            escape(note)
-        );
+        let _ = writeln!(s, "<p class=\"note\">Figure not drawn — {}</p>", escape(note));
     }
     s.push_str("<h2>Tables</h2>\n");
     for t in ran {
@@ -181,10 +151,7 @@ pub fn page(
     if !summary.geoparquet.is_empty() || !geo_notes.is_empty() {
         s.push_str("<h2>GeoParquet hand-off</h2>\n<ul>\n");
         for p in &summary.geoparquet {
-            let n = p
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default();
+            let n = p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
             let _ = writeln!(s, "<li><a href=\"{n}\">{n}</a>: GeoParquet 1.1, WKB points (lon, lat, OGC:CRS84), bbox covering column</li>", n = escape(&n));
         }
         for n in geo_notes {
@@ -192,11 +159,7 @@ pub fn page(
         }
         s.push_str("</ul>\n");
     }
-    let _ = writeln!(
-        s,
-        "<p class=\"note\">Written by gedisim {}.</p>\n</body>\n</html>",
-        env!("CARGO_PKG_VERSION")
-    );
+    let _ = writeln!(s, "<p class=\"note\">Written by gedisim {}.</p>\n</body>\n</html>", env!("CARGO_PKG_VERSION"));
     Ok(s)
 }
 

@@ -106,10 +106,7 @@ pub enum Effect {
     /// GEDI − ALS vertical offset beyond the nominal geoid (m).
     Datum { dz_m: f64 },
     /// Return weighting and ground/vegetation reflectance ratio of the real waveforms.
-    Weighting {
-        method: WeightMethod,
-        rho_ground_over_veg: f64,
-    },
+    Weighting { method: WeightMethod, rho_ground_over_veg: f64 },
     /// Effective system pulse σ (m, range) of the real waveforms.
     Pulse { pulse_sigma_m: f64 },
     /// Footprint σ (m) of the real waveforms.
@@ -156,10 +153,7 @@ pub enum EffectError {
 }
 
 fn param_err(field: &str, message: impl fmt::Display) -> EffectError {
-    EffectError::Param {
-        field: field.to_string(),
-        message: message.to_string(),
-    }
+    EffectError::Param { field: field.to_string(), message: message.to_string() }
 }
 
 /// A parameter value as recorded in truth.json.
@@ -190,22 +184,10 @@ fn specs(effect: &str) -> Option<(&'static [ParamSpec], &'static str, f64)> {
         ($($n:literal = $d:literal),*) => { &[$(ParamSpec { name: $n, default: $d }),*] };
     }
     Some(match effect {
-        "geolocation" => (
-            p!("level" = "shot", "shot_sigma_m" = "3.0"),
-            "shot_sigma_m",
-            0.0,
-        ),
+        "geolocation" => (p!("level" = "shot", "shot_sigma_m" = "3.0"), "shot_sigma_m", 0.0),
         "datum" => (p!("dz_m" = "0.5"), "dz_m", 0.0),
-        "weighting" => (
-            p!("method" = "ratio", "rho_ground_over_veg" = "0.7"),
-            "rho_ground_over_veg",
-            1.0,
-        ),
-        "pulse" => (
-            p!("pulse_sigma_m" = "1.5"),
-            "pulse_sigma_m",
-            NOMINAL_PULSE_SIGMA_M,
-        ),
+        "weighting" => (p!("method" = "ratio", "rho_ground_over_veg" = "0.7"), "rho_ground_over_veg", 1.0),
+        "pulse" => (p!("pulse_sigma_m" = "1.5"), "pulse_sigma_m", NOMINAL_PULSE_SIGMA_M),
         "footprint" => (p!("fsigma_m" = "7.0"), "fsigma_m", NOMINAL_FSIGMA_M),
         "noise" => (p!("noise_sigma_factor" = "2.0"), "noise_sigma_factor", 1.0),
         "canopy_change" => (p!("height_m" = "10.0", "fraction" = "0.3"), "fraction", 0.0),
@@ -235,25 +217,12 @@ impl Effect {
     pub fn params(&self) -> Vec<(&'static str, ParamValue)> {
         use ParamValue::{Number as N, Text as T};
         match *self {
-            Effect::Geolocation {
-                level,
-                shot_sigma_m,
-            } => vec![
-                (
-                    "level",
-                    T(match level {
-                        GeoLevel::Beam => "beam",
-                        GeoLevel::Shot => "shot",
-                    }
-                    .into()),
-                ),
+            Effect::Geolocation { level, shot_sigma_m } => vec![
+                ("level", T(match level { GeoLevel::Beam => "beam", GeoLevel::Shot => "shot" }.into())),
                 ("shot_sigma_m", N(shot_sigma_m)),
             ],
             Effect::Datum { dz_m } => vec![("dz_m", N(dz_m))],
-            Effect::Weighting {
-                method,
-                rho_ground_over_veg,
-            } => vec![
+            Effect::Weighting { method, rho_ground_over_veg } => vec![
                 (
                     "method",
                     T(match method {
@@ -268,27 +237,11 @@ impl Effect {
             ],
             Effect::Pulse { pulse_sigma_m } => vec![("pulse_sigma_m", N(pulse_sigma_m))],
             Effect::Footprint { fsigma_m } => vec![("fsigma_m", N(fsigma_m))],
-            Effect::Noise { noise_sigma_factor } => {
-                vec![("noise_sigma_factor", N(noise_sigma_factor))]
-            }
-            Effect::CanopyChange { height_m, fraction } => {
-                vec![("height_m", N(height_m)), ("fraction", N(fraction))]
-            }
-            Effect::Occlusion { height_m, gain } => {
-                vec![("height_m", N(height_m)), ("gain", N(gain))]
-            }
-            Effect::GroundDetection {
-                algorithm,
-                offset_m,
-            } => vec![
-                (
-                    "algorithm",
-                    if algorithm == 0 {
-                        T("all".into())
-                    } else {
-                        N(f64::from(algorithm))
-                    },
-                ),
+            Effect::Noise { noise_sigma_factor } => vec![("noise_sigma_factor", N(noise_sigma_factor))],
+            Effect::CanopyChange { height_m, fraction } => vec![("height_m", N(height_m)), ("fraction", N(fraction))],
+            Effect::Occlusion { height_m, gain } => vec![("height_m", N(height_m)), ("gain", N(gain))],
+            Effect::GroundDetection { algorithm, offset_m } => vec![
+                ("algorithm", if algorithm == 0 { T("all".into()) } else { N(f64::from(algorithm)) }),
                 ("offset_m", N(offset_m)),
             ],
         }
@@ -297,61 +250,30 @@ impl Effect {
     /// Parse one effect: `name`, optional `magnitude` (scales the main parameter's departure from
     /// its nominal value: `main = nominal + magnitude·(value − nominal)`), and `key=value`
     /// parameters (unknown keys are errors). Missing parameters take their defaults.
-    pub fn parse(
-        name: &str,
-        magnitude: Option<f64>,
-        params: &[(String, String)],
-    ) -> Result<Effect, EffectError> {
-        let (spec, main, nominal) =
-            specs(name).ok_or_else(|| EffectError::UnknownEffect(name.to_string()))?;
+    pub fn parse(name: &str, magnitude: Option<f64>, params: &[(String, String)]) -> Result<Effect, EffectError> {
+        let (spec, main, nominal) = specs(name).ok_or_else(|| EffectError::UnknownEffect(name.to_string()))?;
         for (k, _) in params {
             if !spec.iter().any(|s| s.name == k) {
                 let known: Vec<&str> = spec.iter().map(|s| s.name).collect();
-                return Err(param_err(
-                    k,
-                    format!(
-                        "not a parameter of '{name}' (its parameters: {})",
-                        known.join(", ")
-                    ),
-                ));
+                return Err(param_err(k, format!("not a parameter of '{name}' (its parameters: {})", known.join(", "))));
             }
         }
         if let Some(m) = magnitude {
             if !m.is_finite() {
-                return Err(EffectError::Magnitude(format!(
-                    "{m} is not a finite number"
-                )));
+                return Err(EffectError::Magnitude(format!("{m} is not a finite number")));
             }
         }
-        let given = |k: &str| {
-            params
-                .iter()
-                .rev()
-                .find(|(p, _)| p == k)
-                .map(|(_, v)| v.as_str())
-        };
+        let given = |k: &str| params.iter().rev().find(|(p, _)| p == k).map(|(_, v)| v.as_str());
         let raw = |k: &str| -> &str {
-            given(k).unwrap_or_else(|| {
-                spec.iter()
-                    .find(|s| s.name == k)
-                    .map(|s| s.default)
-                    .unwrap_or("")
-            })
+            given(k).unwrap_or_else(|| spec.iter().find(|s| s.name == k).map(|s| s.default).unwrap_or(""))
         };
         let num = |k: &str| -> Result<f64, EffectError> {
             let v = raw(k);
-            let x: f64 = v
-                .trim()
-                .parse()
-                .map_err(|_| param_err(k, format!("'{v}' is not a number")))?;
+            let x: f64 = v.trim().parse().map_err(|_| param_err(k, format!("'{v}' is not a number")))?;
             if !x.is_finite() {
                 return Err(param_err(k, format!("'{v}' is not finite")));
             }
-            Ok(if k == main {
-                nominal + magnitude.unwrap_or(1.0) * (x - nominal)
-            } else {
-                x
-            })
+            Ok(if k == main { nominal + magnitude.unwrap_or(1.0) * (x - nominal) } else { x })
         };
         let check = |k: &str, x: f64, ok: bool, what: &str| -> Result<f64, EffectError> {
             if ok {
@@ -368,16 +290,11 @@ impl Effect {
                     v => return Err(param_err("level", format!("'{v}' is not beam or shot"))),
                 };
                 let s = num("shot_sigma_m")?;
-                Effect::Geolocation {
-                    level,
-                    shot_sigma_m: check("shot_sigma_m", s, (0.0..=50.0).contains(&s), "0..50 m")?,
-                }
+                Effect::Geolocation { level, shot_sigma_m: check("shot_sigma_m", s, (0.0..=50.0).contains(&s), "0..50 m")? }
             }
             "datum" => {
                 let dz = num("dz_m")?;
-                Effect::Datum {
-                    dz_m: check("dz_m", dz, dz.abs() <= 100.0, "|dz| ≤ 100 m")?,
-                }
+                Effect::Datum { dz_m: check("dz_m", dz, dz.abs() <= 100.0, "|dz| ≤ 100 m")? }
             }
             "weighting" => {
                 let method = match raw("method") {
@@ -385,76 +302,44 @@ impl Effect {
                     "frac" => WeightMethod::Frac,
                     "int" => WeightMethod::Int,
                     "ratio" => WeightMethod::Ratio,
-                    v => {
-                        return Err(param_err(
-                            "method",
-                            format!("'{v}' is not count, frac, int or ratio"),
-                        ))
-                    }
+                    v => return Err(param_err("method", format!("'{v}' is not count, frac, int or ratio"))),
                 };
                 // A method other than ratio keeps ρ = 1 unless ρ is given.
-                let rho = if method != WeightMethod::Ratio && given("rho_ground_over_veg").is_none()
-                {
+                let rho = if method != WeightMethod::Ratio && given("rho_ground_over_veg").is_none() {
                     1.0
                 } else {
                     num("rho_ground_over_veg")?
                 };
                 Effect::Weighting {
                     method,
-                    rho_ground_over_veg: check(
-                        "rho_ground_over_veg",
-                        rho,
-                        (0.0..=100.0).contains(&rho),
-                        "0..100",
-                    )?,
+                    rho_ground_over_veg: check("rho_ground_over_veg", rho, (0.0..=100.0).contains(&rho), "0..100")?,
                 }
             }
             "pulse" => {
                 let s = num("pulse_sigma_m")?;
-                Effect::Pulse {
-                    pulse_sigma_m: check("pulse_sigma_m", s, s > 0.01 && s <= 20.0, "0.01..20 m")?,
-                }
+                Effect::Pulse { pulse_sigma_m: check("pulse_sigma_m", s, s > 0.01 && s <= 20.0, "0.01..20 m")? }
             }
             "footprint" => {
                 let s = num("fsigma_m")?;
-                Effect::Footprint {
-                    fsigma_m: check("fsigma_m", s, s >= 0.5 && s <= 30.0, "0.5..30 m")?,
-                }
+                Effect::Footprint { fsigma_m: check("fsigma_m", s, s >= 0.5 && s <= 30.0, "0.5..30 m")? }
             }
             "noise" => {
                 let f = num("noise_sigma_factor")?;
-                Effect::Noise {
-                    noise_sigma_factor: check(
-                        "noise_sigma_factor",
-                        f,
-                        f > 0.0 && f <= 100.0,
-                        "0..100, > 0",
-                    )?,
-                }
+                Effect::Noise { noise_sigma_factor: check("noise_sigma_factor", f, f > 0.0 && f <= 100.0, "0..100, > 0")? }
             }
             "canopy_change" => {
                 let h = num("height_m")?;
                 let f = num("fraction")?;
                 Effect::CanopyChange {
                     height_m: check("height_m", h, (0.0..=100.0).contains(&h), "0..100 m")?,
-                    fraction: check(
-                        "fraction",
-                        f,
-                        (-10.0..=1.0).contains(&f),
-                        "≤ 1; negative = growth",
-                    )?,
+                    fraction: check("fraction", f, (-10.0..=1.0).contains(&f), "≤ 1; negative = growth")?,
                 }
             }
             "occlusion" => {
                 let h = num("height_m")?;
                 let g = num("gain")?;
                 Effect::Occlusion {
-                    height_m: check(
-                        "height_m",
-                        h,
-                        h > OCCLUSION_FLOOR_M && h <= 100.0,
-                        "0.5..100 m",
-                    )?,
+                    height_m: check("height_m", h, h > OCCLUSION_FLOOR_M && h <= 100.0, "0.5..100 m")?,
                     gain: check("gain", g, g >= -1.0 && g <= 100.0, "-1..100")?,
                 }
             }
@@ -463,16 +348,11 @@ impl Effect {
                     "all" | "0" => 0,
                     v => match v.trim().trim_start_matches('a').parse::<u8>() {
                         Ok(n) if (1..=6).contains(&n) => n,
-                        _ => {
-                            return Err(param_err("algorithm", format!("'{v}' is not 1..6 or all")))
-                        }
+                        _ => return Err(param_err("algorithm", format!("'{v}' is not 1..6 or all"))),
                     },
                 };
                 let o = num("offset_m")?;
-                Effect::GroundDetection {
-                    algorithm,
-                    offset_m: check("offset_m", o, o.abs() <= 50.0, "|offset| ≤ 50 m")?,
-                }
+                Effect::GroundDetection { algorithm, offset_m: check("offset_m", o, o.abs() <= 50.0, "|offset| ≤ 50 m")? }
             }
             _ => return Err(EffectError::UnknownEffect(name.to_string())),
         };
@@ -482,10 +362,7 @@ impl Effect {
     /// Change the simulation physics (weighting, pulse, footprint); other effects leave it alone.
     pub fn apply_physics(&self, p: &mut Physics) {
         match *self {
-            Effect::Weighting {
-                method,
-                rho_ground_over_veg,
-            } => {
+            Effect::Weighting { method, rho_ground_over_veg } => {
                 p.weighting = match method {
                     WeightMethod::Count | WeightMethod::Ratio => Weighting::Count,
                     WeightMethod::Frac => Weighting::Frac,
@@ -507,9 +384,7 @@ impl Effect {
     /// Change the canopy part of a simulated waveform by height above ground.
     pub fn apply_waveform(&self, w: &mut WaveParts) {
         let (lo, hi, factor) = match *self {
-            Effect::CanopyChange { height_m, fraction } => {
-                (height_m, f64::INFINITY, 1.0 - fraction)
-            }
+            Effect::CanopyChange { height_m, fraction } => (height_m, f64::INFINITY, 1.0 - fraction),
             Effect::Occlusion { height_m, gain } => (OCCLUSION_FLOOR_M, height_m, 1.0 + gain),
             _ => return,
         };
@@ -540,10 +415,7 @@ impl Effect {
     /// Offset added to the L2A ground elevation of algorithm `alg` (1..6), m.
     pub fn ground_offset_m(&self, alg: u8) -> f64 {
         match *self {
-            Effect::GroundDetection {
-                algorithm,
-                offset_m,
-            } if algorithm == 0 || algorithm == alg => offset_m,
+            Effect::GroundDetection { algorithm, offset_m } if algorithm == 0 || algorithm == alg => offset_m,
             _ => 0.0,
         }
     }
@@ -551,10 +423,7 @@ impl Effect {
     /// Extra horizontal geolocation error: (level, RMS per axis, m), if this effect has one.
     pub fn extra_offset(&self) -> Option<(GeoLevel, f64)> {
         match *self {
-            Effect::Geolocation {
-                level,
-                shot_sigma_m,
-            } => Some((level, shot_sigma_m)),
+            Effect::Geolocation { level, shot_sigma_m } => Some((level, shot_sigma_m)),
             _ => None,
         }
     }
@@ -569,11 +438,7 @@ pub struct EffectSet {
 impl EffectSet {
     /// Parse `none`, `name` or `name+name…`; `--param key=value` entries go to the one effect
     /// that has the key (a key several effects share may be written `effect.key`).
-    pub fn parse(
-        spec: &str,
-        magnitude: Option<f64>,
-        params: &[(String, String)],
-    ) -> Result<EffectSet, EffectError> {
+    pub fn parse(spec: &str, magnitude: Option<f64>, params: &[(String, String)]) -> Result<EffectSet, EffectError> {
         let names: Vec<&str> = spec.split('+').map(str::trim).collect();
         if names.iter().any(|n| n.is_empty()) {
             return Err(EffectError::Empty(spec.to_string()));
@@ -599,27 +464,16 @@ impl EffectSet {
         for (k, v) in params {
             let (target, key) = match k.split_once('.') {
                 Some((e, key)) => {
-                    let i = names.iter().position(|n| *n == e).ok_or_else(|| {
-                        param_err(k, format!("'{e}' is not one of the effects given"))
-                    })?;
+                    let i = names.iter().position(|n| *n == e).ok_or_else(|| param_err(k, format!("'{e}' is not one of the effects given")))?;
                     (i, key.to_string())
                 }
                 None => {
                     let owners: Vec<usize> = (0..names.len())
-                        .filter(|&i| {
-                            specs(names[i])
-                                .map(|(s, _, _)| s.iter().any(|p| p.name == k))
-                                .unwrap_or(false)
-                        })
+                        .filter(|&i| specs(names[i]).map(|(s, _, _)| s.iter().any(|p| p.name == k)).unwrap_or(false))
                         .collect();
                     match owners.as_slice() {
                         [i] => (*i, k.clone()),
-                        [] => {
-                            return Err(param_err(
-                                k,
-                                format!("not a parameter of {}", names.join(" or ")),
-                            ))
-                        }
+                        [] => return Err(param_err(k, format!("not a parameter of {}", names.join(" or ")))),
                         _ => return Err(param_err(k, "ambiguous: write effect.key")),
                     }
                 }
@@ -639,11 +493,7 @@ impl EffectSet {
         if self.effects.is_empty() {
             "none".into()
         } else {
-            self.effects
-                .iter()
-                .map(Effect::name)
-                .collect::<Vec<_>>()
-                .join("+")
+            self.effects.iter().map(Effect::name).collect::<Vec<_>>().join("+")
         }
     }
 
@@ -666,10 +516,7 @@ impl EffectSet {
 
     /// Product of the noise factors.
     pub fn noise_sigma_factor(&self) -> f64 {
-        self.effects
-            .iter()
-            .map(Effect::noise_sigma_factor)
-            .product()
+        self.effects.iter().map(Effect::noise_sigma_factor).product()
     }
 
     /// Sum of the ground offsets of algorithm `alg` (m).
@@ -695,67 +542,29 @@ mod tests {
     fn defaults_and_magnitude_scale_the_departure_from_nominal() {
         let e = Effect::parse("pulse", None, &[]).unwrap();
         assert_eq!(e, Effect::Pulse { pulse_sigma_m: 1.5 });
-        let Effect::Pulse { pulse_sigma_m } = Effect::parse("pulse", Some(2.0), &[]).unwrap()
-        else {
-            panic!()
-        };
-        assert!(
-            (pulse_sigma_m - (NOMINAL_PULSE_SIGMA_M + 2.0 * (1.5 - NOMINAL_PULSE_SIGMA_M))).abs()
-                < 1e-12
-        );
-        assert_eq!(
-            Effect::parse("datum", Some(3.0), &[]).unwrap(),
-            Effect::Datum { dz_m: 1.5 }
-        );
-        assert_eq!(
-            Effect::parse("datum", None, &[kv("dz_m", "-2")]).unwrap(),
-            Effect::Datum { dz_m: -2.0 }
-        );
+        let Effect::Pulse { pulse_sigma_m } = Effect::parse("pulse", Some(2.0), &[]).unwrap() else { panic!() };
+        assert!((pulse_sigma_m - (NOMINAL_PULSE_SIGMA_M + 2.0 * (1.5 - NOMINAL_PULSE_SIGMA_M))).abs() < 1e-12);
+        assert_eq!(Effect::parse("datum", Some(3.0), &[]).unwrap(), Effect::Datum { dz_m: 1.5 });
+        assert_eq!(Effect::parse("datum", None, &[kv("dz_m", "-2")]).unwrap(), Effect::Datum { dz_m: -2.0 });
         assert_eq!(
             Effect::parse("weighting", None, &[kv("method", "frac")]).unwrap(),
-            Effect::Weighting {
-                method: WeightMethod::Frac,
-                rho_ground_over_veg: 1.0
-            }
+            Effect::Weighting { method: WeightMethod::Frac, rho_ground_over_veg: 1.0 }
         );
     }
 
     #[test]
     fn pair_parses_and_params_go_to_their_owner() {
-        let s = EffectSet::parse(
-            "datum+pulse",
-            None,
-            &[kv("dz_m", "1"), kv("pulse_sigma_m", "2")],
-        )
-        .unwrap();
+        let s = EffectSet::parse("datum+pulse", None, &[kv("dz_m", "1"), kv("pulse_sigma_m", "2")]).unwrap();
         assert_eq!(s.name(), "datum+pulse");
-        assert_eq!(
-            s.effects,
-            vec![
-                Effect::Datum { dz_m: 1.0 },
-                Effect::Pulse { pulse_sigma_m: 2.0 }
-            ]
-        );
-        let s = EffectSet::parse(
-            "canopy_change+occlusion",
-            None,
-            &[kv("occlusion.height_m", "4")],
-        )
-        .unwrap();
-        assert_eq!(
-            s.effects[1],
-            Effect::Occlusion {
-                height_m: 4.0,
-                gain: 0.5
-            }
-        );
+        assert_eq!(s.effects, vec![Effect::Datum { dz_m: 1.0 }, Effect::Pulse { pulse_sigma_m: 2.0 }]);
+        let s = EffectSet::parse("canopy_change+occlusion", None, &[kv("occlusion.height_m", "4")]).unwrap();
+        assert_eq!(s.effects[1], Effect::Occlusion { height_m: 4.0, gain: 0.5 });
         assert_eq!(EffectSet::parse("none", None, &[]).unwrap().name(), "none");
     }
 
     #[test]
     fn bad_specs_name_the_field() {
-        let err =
-            |s: &str, p: &[(String, String)]| EffectSet::parse(s, None, p).unwrap_err().to_string();
+        let err = |s: &str, p: &[(String, String)]| EffectSet::parse(s, None, p).unwrap_err().to_string();
         assert!(err("bogus", &[]).contains("unknown effect 'bogus'"));
         assert!(err("datum+datum", &[]).contains("twice"));
         assert!(err("none+datum", &[]).contains("none"));
@@ -768,37 +577,20 @@ mod tests {
         for e in [err("datum", &[kv("dz_m", "nan")]), err("", &[])] {
             assert_eq!(e.lines().count(), 1, "{e}");
         }
-        assert!(EffectSet::parse("datum", Some(f64::NAN), &[])
-            .unwrap_err()
-            .to_string()
-            .contains("--magnitude"));
+        assert!(EffectSet::parse("datum", Some(f64::NAN), &[]).unwrap_err().to_string().contains("--magnitude"));
     }
 
     #[test]
     fn canopy_effects_scale_their_height_band() {
-        let parts = WaveParts {
-            ground: vec![0.0; 40],
-            canopy: vec![1.0; 40],
-            z0: 20.0,
-            dz: 0.5,
-            ground_z: 0.0,
-        };
+        let parts = WaveParts { ground: vec![0.0; 40], canopy: vec![1.0; 40], z0: 20.0, dz: 0.5, ground_z: 0.0 };
         let mut w = parts.clone();
-        Effect::CanopyChange {
-            height_m: 10.0,
-            fraction: 0.3,
-        }
-        .apply_waveform(&mut w);
+        Effect::CanopyChange { height_m: 10.0, fraction: 0.3 }.apply_waveform(&mut w);
         for k in 0..40 {
             let expect = if parts.height(k) >= 10.0 { 0.7 } else { 1.0 };
             assert!((w.canopy[k] - expect).abs() < 1e-12, "bin {k}");
         }
         let mut w = parts.clone();
-        Effect::Occlusion {
-            height_m: 5.0,
-            gain: 0.5,
-        }
-        .apply_waveform(&mut w);
+        Effect::Occlusion { height_m: 5.0, gain: 0.5 }.apply_waveform(&mut w);
         assert_eq!(w.canopy[39], 1.0 * 1.5); // 0.5 m above ground
         assert_eq!(w.canopy[30], 1.0); // 5 m: outside [0.5, 5)
         assert_eq!(w.canopy[0], 1.0);
@@ -807,9 +599,7 @@ mod tests {
     #[test]
     fn physics_hooks() {
         let base = Physics::nominal();
-        let p = EffectSet::parse("footprint+pulse", None, &[])
-            .unwrap()
-            .physics(&base);
+        let p = EffectSet::parse("footprint+pulse", None, &[]).unwrap().physics(&base);
         assert_eq!(p.sim.fsigma, 7.0);
         assert!((p.sim.pulse.sigma - 1.5).abs() < 1e-6);
         assert!((base.sim.pulse.sigma as f64 - NOMINAL_PULSE_SIGMA_M).abs() < 1e-6);

@@ -25,10 +25,7 @@ pub struct Extent {
 impl Extent {
     /// Whether (x, y) is at least `margin` inside the extent.
     pub fn contains_with_margin(&self, x: f64, y: f64, margin: f64) -> bool {
-        x >= self.xmin + margin
-            && x <= self.xmax - margin
-            && y >= self.ymin + margin
-            && y <= self.ymax - margin
+        x >= self.xmin + margin && x <= self.xmax - margin && y >= self.ymin + margin && y <= self.ymax - margin
     }
 }
 
@@ -99,9 +96,7 @@ pub fn plan(tiles: &[Extent], s: &PlanSettings, seed: u64) -> Plan {
         for pass in 0..s.passes_per_tile {
             let granule = t * s.passes_per_tile + pass;
             let mut rng = Stream::new(seed, &["plan", &t.to_string(), &pass.to_string()]);
-            let heading = HEADINGS_DEG[pass % 2]
-                + (rng.uniform() - 0.5) * 8.0
-                + if pass % 4 >= 2 { 180.0 } else { 0.0 };
+            let heading = HEADINGS_DEG[pass % 2] + (rng.uniform() - 0.5) * 8.0 + if pass % 4 >= 2 { 180.0 } else { 0.0 };
             let h = heading.to_radians();
             let (ux, uy) = (h.sin(), h.cos()); // along track
             let (vx, vy) = (h.cos(), -h.sin()); // cross track
@@ -114,10 +109,7 @@ pub fn plan(tiles: &[Extent], s: &PlanSettings, seed: u64) -> Plan {
             ];
             let proj = |ax: f64, ay: f64| {
                 let v: Vec<f64> = corners.iter().map(|&(x, y)| x * ax + y * ay).collect();
-                (
-                    v.iter().cloned().fold(f64::INFINITY, f64::min),
-                    v.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
-                )
+                (v.iter().cloned().fold(f64::INFINITY, f64::min), v.iter().cloned().fold(f64::NEG_INFINITY, f64::max))
             };
             let (cmin, cmax) = proj(vx, vy);
             let (amin, amax) = proj(ux, uy);
@@ -127,10 +119,7 @@ pub fn plan(tiles: &[Extent], s: &PlanSettings, seed: u64) -> Plan {
             for (b, beam) in BEAM_NAMES.iter().enumerate() {
                 let track = out.tracks.len();
                 let mut tr = Stream::new(seed, &["track", &granule.to_string(), beam]);
-                let (mut dx, mut dy) = (
-                    clipped_normal(&mut tr, s.track_offset_sigma_m),
-                    clipped_normal(&mut tr, s.track_offset_sigma_m),
-                );
+                let (mut dx, mut dy) = (clipped_normal(&mut tr, s.track_offset_sigma_m), clipped_normal(&mut tr, s.track_offset_sigma_m));
                 if let Some((GeoLevel::Beam, sigma)) = s.extra_offset {
                     dx += clipped_normal(&mut tr, sigma);
                     dy += clipped_normal(&mut tr, sigma);
@@ -144,9 +133,7 @@ pub fn plan(tiles: &[Extent], s: &PlanSettings, seed: u64) -> Plan {
                     dx,
                     dy,
                 });
-                let c = cmin
-                    + (b as f64 + 0.25 + 0.5 * tr.uniform()) / BEAM_NAMES.len() as f64
-                        * (cmax - cmin);
+                let c = cmin + (b as f64 + 0.25 + 0.5 * tr.uniform()) / BEAM_NAMES.len() as f64 * (cmax - cmin);
                 let phase = tr.uniform() * SHOT_SPACING_M;
                 let mut along_index = 0;
                 let mut a = amin - SHOT_SPACING_M + phase;
@@ -157,18 +144,8 @@ pub fn plan(tiles: &[Extent], s: &PlanSettings, seed: u64) -> Plan {
                         sdx += clipped_normal(&mut tr, sigma);
                         sdy += clipped_normal(&mut tr, sigma);
                     }
-                    if ext.contains_with_margin(x, y, m)
-                        && ext.contains_with_margin(x + sdx, y + sdy, m)
-                    {
-                        out.shots.push(PlannedShot {
-                            track,
-                            along_index,
-                            along_m: a - amin,
-                            x,
-                            y,
-                            dx: sdx,
-                            dy: sdy,
-                        });
+                    if ext.contains_with_margin(x, y, m) && ext.contains_with_margin(x + sdx, y + sdy, m) {
+                        out.shots.push(PlannedShot { track, along_index, along_m: a - amin, x, y, dx: sdx, dy: sdy });
                         along_index += 1;
                     }
                     a += SHOT_SPACING_M;
@@ -184,46 +161,26 @@ mod tests {
     use super::*;
 
     fn settings() -> PlanSettings {
-        PlanSettings {
-            passes_per_tile: 4,
-            track_offset_sigma_m: 3.0,
-            margin_m: 12.0,
-            extra_offset: None,
-        }
+        PlanSettings { passes_per_tile: 4, track_offset_sigma_m: 3.0, margin_m: 12.0, extra_offset: None }
     }
 
     #[test]
     fn shots_stay_inside_with_their_offsets_and_spacing() {
-        let ext = Extent {
-            xmin: 0.0,
-            ymin: 0.0,
-            xmax: 100.0,
-            ymax: 100.0,
-        };
+        let ext = Extent { xmin: 0.0, ymin: 0.0, xmax: 100.0, ymax: 100.0 };
         let p = plan(&[ext], &settings(), 7);
         assert_eq!(p.tracks.len(), 32);
         assert!(p.shots.len() >= 16, "{} shots", p.shots.len());
         for s in &p.shots {
-            assert!(
-                ext.contains_with_margin(s.x, s.y, 12.0)
-                    && ext.contains_with_margin(s.x + s.dx, s.y + s.dy, 12.0)
-            );
+            assert!(ext.contains_with_margin(s.x, s.y, 12.0) && ext.contains_with_margin(s.x + s.dx, s.y + s.dy, 12.0));
             let t = &p.tracks[s.track];
-            assert_eq!(
-                (s.dx, s.dy),
-                (t.dx, t.dy),
-                "no extra offset without the effect"
-            );
+            assert_eq!((s.dx, s.dy), (t.dx, t.dy), "no extra offset without the effect");
             assert!(t.dx.abs() <= 7.5 && t.dy.abs() <= 7.5);
         }
         // Consecutive shots of a track are 60 m apart.
         for w in p.shots.windows(2) {
             if w[0].track == w[1].track {
                 let d = ((w[1].x - w[0].x).powi(2) + (w[1].y - w[0].y).powi(2)).sqrt();
-                assert!(
-                    (d - SHOT_SPACING_M).abs() < 1e-6 || d > SHOT_SPACING_M,
-                    "{d}"
-                );
+                assert!((d - SHOT_SPACING_M).abs() < 1e-6 || d > SHOT_SPACING_M, "{d}");
             }
         }
         assert_eq!(plan(&[ext], &settings(), 7), p, "same seed, same plan");
@@ -232,29 +189,16 @@ mod tests {
 
     #[test]
     fn shot_level_geolocation_adds_per_shot_offsets() {
-        let ext = Extent {
-            xmin: 0.0,
-            ymin: 0.0,
-            xmax: 100.0,
-            ymax: 100.0,
-        };
+        let ext = Extent { xmin: 0.0, ymin: 0.0, xmax: 100.0, ymax: 100.0 };
         let mut s = settings();
         s.extra_offset = Some((GeoLevel::Shot, 2.0));
         let p = plan(&[ext], &s, 7);
-        assert!(p
-            .shots
-            .iter()
-            .any(|sh| (sh.dx, sh.dy) != (p.tracks[sh.track].dx, p.tracks[sh.track].dy)));
+        assert!(p.shots.iter().any(|sh| (sh.dx, sh.dy) != (p.tracks[sh.track].dx, p.tracks[sh.track].dy)));
     }
 
     #[test]
     fn tile_smaller_than_the_margin_gets_no_shot() {
-        let ext = Extent {
-            xmin: 0.0,
-            ymin: 0.0,
-            xmax: 20.0,
-            ymax: 20.0,
-        };
+        let ext = Extent { xmin: 0.0, ymin: 0.0, xmax: 20.0, ymax: 20.0 };
         assert!(plan(&[ext], &settings(), 1).shots.is_empty());
     }
 }

@@ -6,9 +6,7 @@ use super::effects::{EffectSet, Physics, WaveParts};
 use super::real;
 use crate::gedi::granule::{L1bShot, L2aAlgorithm, L2aShot, LandCover};
 use crate::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
-use crate::process::l2a::{
-    AlgorithmSettings, L2aOutcome, L2aProcessor, Noise, WaveformGeolocation,
-};
+use crate::process::l2a::{AlgorithmSettings, L2aOutcome, L2aProcessor, Noise, WaveformGeolocation};
 use crate::process::noise_twin::{NoiseShape, ShotTwin, GEDI_BIN_M};
 use crate::sim::{SimulatedFootprint, Weighting};
 
@@ -94,11 +92,7 @@ pub fn make_shot(
 ) -> Result<(L1bShot, L2aShot, ShotTruth), ShotError> {
     let w = sim.get(physics.weighting);
     // Ground of the count weighting when the effect's weighting has none (e.g. int with no ground intensity).
-    let ground_z = w
-        .truth
-        .als_ground
-        .or(sim.get(Weighting::Count).truth.als_ground)
-        .ok_or(ShotError::NoGround)?;
+    let ground_z = w.truth.als_ground.or(sim.get(Weighting::Count).truth.als_ground).ok_or(ShotError::NoGround)?;
     let mut parts = WaveParts {
         ground: w.ground.iter().map(|&v| f64::from(v)).collect(),
         canopy: w.canopy.iter().map(|&v| f64::from(v)).collect(),
@@ -107,24 +101,14 @@ pub fn make_shot(
         ground_z,
     };
     effects.apply_waveform(&mut parts);
-    let wave: Vec<f64> = parts
-        .compose(physics.rho_ground_over_veg)
-        .into_iter()
-        .map(|v| v.max(0.0))
-        .collect();
+    let wave: Vec<f64> = parts.compose(physics.rho_ground_over_veg).into_iter().map(|v| v.max(0.0)).collect();
     let max = wave.iter().cloned().fold(0.0, f64::max);
     if !(max > 0.0) {
         return Err(ShotError::NoEnergy);
     }
     let cut = max * 1e-9;
-    let first = wave
-        .iter()
-        .position(|&v| v > cut)
-        .ok_or(ShotError::NoEnergy)?;
-    let last = wave
-        .iter()
-        .rposition(|&v| v > cut)
-        .ok_or(ShotError::NoEnergy)?;
+    let first = wave.iter().position(|&v| v > cut).ok_or(ShotError::NoEnergy)?;
+    let last = wave.iter().rposition(|&v| v > cut).ok_or(ShotError::NoEnergy)?;
     let signal = &wave[first..=last];
     let z_first = sim.z0 - first as f64 * sim.dz;
 
@@ -133,8 +117,7 @@ pub fn make_shot(
     let top_target = z_first + spec.above_signal_m;
     let start = ((top_target - z_first) / GEDI_BIN_M).round() as isize;
     let bin0_ortho = z_first + start as f64 * GEDI_BIN_M;
-    let bottom =
-        (ground_z - spec.below_ground_m).min(z_first - (signal.len() as f64 + 2.0) * sim.dz);
+    let bottom = (ground_z - spec.below_ground_m).min(z_first - (signal.len() as f64 + 2.0) * sim.dz);
     let n = ((bin0_ortho - bottom) / GEDI_BIN_M).ceil() as usize + 1;
     if n > usize::from(u16::MAX) {
         return Err(ShotError::TooLong(n));
@@ -176,11 +159,7 @@ pub fn make_shot(
     let settings = AlgorithmSettings::all_gedi();
     let mut outcomes: Vec<L2aOutcome> = Vec::with_capacity(settings.len());
     l2a.process_all(&twin.wave, twin.noise, &geo, &settings, &mut outcomes);
-    let energy_total: f64 = twin
-        .wave
-        .iter()
-        .map(|&v| f64::from(v) - twin.noise.mean)
-        .sum();
+    let energy_total: f64 = twin.wave.iter().map(|&v| f64::from(v) - twin.noise.mean).sum();
     let mut shot = L2aShot {
         shot_number: spec.shot_number,
         delta_time: spec.delta_time,
@@ -210,12 +189,7 @@ pub fn make_shot(
 
 /// The stored products of one algorithm, with the ground-detection offset `offset_m` applied
 /// (ground up by `offset_m`: elevation + offset, RH − offset, zcross moved to match).
-fn algorithm_products(
-    outcome: &L2aOutcome,
-    offset_m: f64,
-    spec: &ShotSpec,
-    dem: f64,
-) -> L2aAlgorithm {
+fn algorithm_products(outcome: &L2aOutcome, offset_m: f64, spec: &ShotSpec, dem: f64) -> L2aAlgorithm {
     let Ok(r) = outcome else {
         return L2aAlgorithm {
             elev_lowestmode: FILL as f32,
@@ -235,11 +209,7 @@ fn algorithm_products(
         .rh_cm
         .iter()
         .map(|&cm| {
-            let v = if offset_m == 0.0 {
-                f64::from(cm)
-            } else {
-                (f64::from(cm) - shift_cm).trunc()
-            };
+            let v = if offset_m == 0.0 { f64::from(cm) } else { (f64::from(cm) - shift_cm).trunc() };
             v.clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
         })
         .collect();

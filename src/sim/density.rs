@@ -24,31 +24,18 @@ impl DensityGrid {
         let (min_x, min_y) = (x0 - half, y0 - half);
         let span = ((x0 + half) - min_x) as f32;
         let (n, origin, truncate) = if shifted {
-            (
-                (span / GRID_RES) as usize + 2,
-                (min_x + GRID_RES as f64, min_y + GRID_RES as f64),
-                true,
-            )
+            ((span / GRID_RES) as usize + 2, (min_x + GRID_RES as f64, min_y + GRID_RES as f64), true)
         } else {
             ((span / GRID_RES).ceil() as usize + 1, (min_x, min_y), false)
         };
-        DensityGrid {
-            origin,
-            n: (n, n),
-            truncate,
-            counts: vec![0; n * n],
-        }
+        DensityGrid { origin, n: (n, n), truncate, counts: vec![0; n * n] }
     }
 
     /// Index of the cell holding (x, y), if any.
     pub fn cell(&self, x: f64, y: f64) -> Option<usize> {
         let idx = |v: f64, o: f64| {
             let t = (v - o) / GRID_RES as f64;
-            if self.truncate {
-                t.trunc()
-            } else {
-                t.floor()
-            }
+            if self.truncate { t.trunc() } else { t.floor() }
         };
         let (i, j) = (idx(x, self.origin.0), idx(y, self.origin.1));
         (i >= 0.0 && j >= 0.0 && (i as usize) < self.n.0 && (j as usize) < self.n.1)
@@ -86,11 +73,7 @@ impl DensityGrid {
                 }
             }
         }
-        if within == 0 {
-            1.0
-        } else {
-            covered as f32 / within as f32
-        }
+        if within == 0 { 1.0 } else { covered as f32 / within as f32 }
     }
 }
 

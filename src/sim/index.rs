@@ -70,19 +70,10 @@ impl Octree {
         if centres.is_empty() {
             return None;
         }
-        let (min_x, max_x, min_y, max_y) = (
-            min_x - max_sep,
-            max_x + max_sep,
-            min_y - max_sep,
-            max_y + max_sep,
-        );
+        let (min_x, max_x, min_y, max_y) = (min_x - max_sep, max_x + max_sep, min_y - max_sep, max_y + max_sep);
         let dx = (max_x - min_x) as f32;
         let dy = (max_y - min_y) as f32;
-        let res = if dx > dy {
-            (dx as f64 / OCT_TOP as f64) as f32
-        } else {
-            (dy as f64 / OCT_TOP as f64) as f32
-        };
+        let res = if dx > dy { (dx as f64 / OCT_TOP as f64) as f32 } else { (dy as f64 / OCT_TOP as f64) as f32 };
         let nx = (dx / res) as usize + 1;
         let ny = (dy / res) as usize + 1;
         let kept = BoxLookup::new(centres, max_sep);
@@ -95,14 +86,7 @@ impl Octree {
                     .then(|| (i as u32, yb as usize * nx + xb as usize))
             })
             .collect();
-        Some(Octree {
-            min_x,
-            min_y,
-            res,
-            nx,
-            ny,
-            cells: Cells::build(nx * ny, &filed),
-        })
+        Some(Octree { min_x, min_y, res, nx, ny, cells: Cells::build(nx * ny, &filed) })
     }
 
     /// Appends to `out` the candidates of the footprint box [x0 ± half] × [y0 ± half], in the
@@ -138,20 +122,11 @@ impl<'a> BoxLookup<'a> {
         let size = (2.0 * half).max(1.0);
         let min_x = centres.iter().map(|c| c.0).fold(f64::INFINITY, f64::min) - half;
         let min_y = centres.iter().map(|c| c.1).fold(f64::INFINITY, f64::min) - half;
-        let max_x = centres
-            .iter()
-            .map(|c| c.0)
-            .fold(f64::NEG_INFINITY, f64::max)
-            + half;
-        let max_y = centres
-            .iter()
-            .map(|c| c.1)
-            .fold(f64::NEG_INFINITY, f64::max)
-            + half;
+        let max_x = centres.iter().map(|c| c.0).fold(f64::NEG_INFINITY, f64::max) + half;
+        let max_y = centres.iter().map(|c| c.1).fold(f64::NEG_INFINITY, f64::max) + half;
         let nx = ((max_x - min_x) / size) as usize + 1;
         let ny = ((max_y - min_y) / size) as usize + 1;
-        let cell =
-            |v: f64, o: f64, n: usize| (((v - o) / size).floor().max(0.0) as usize).min(n - 1);
+        let cell = |v: f64, o: f64, n: usize| (((v - o) / size).floor().max(0.0) as usize).min(n - 1);
         // A box covers the cells between those of its corners (the cell map is monotone).
         let mut filed = Vec::new();
         for (f, &(x, y)) in centres.iter().enumerate() {
@@ -162,15 +137,7 @@ impl<'a> BoxLookup<'a> {
             }
         }
         filed.sort_by_key(|&(_, c)| c);
-        BoxLookup {
-            centres,
-            half,
-            origin: (min_x, min_y),
-            size,
-            nx,
-            ny,
-            cells: Cells::build(nx * ny, &filed),
-        }
+        BoxLookup { centres, half, origin: (min_x, min_y), size, nx, ny, cells: Cells::build(nx * ny, &filed) }
     }
 
     fn contains(&self, x: f64, y: f64) -> bool {
@@ -179,16 +146,10 @@ impl<'a> BoxLookup<'a> {
         if !(i >= 0.0 && j >= 0.0 && (i as usize) < self.nx && (j as usize) < self.ny) {
             return false;
         }
-        self.cells
-            .cell(j as usize * self.nx + i as usize)
-            .iter()
-            .any(|&f| {
-                let (cx, cy) = self.centres[f as usize];
-                x >= cx - self.half
-                    && x <= cx + self.half
-                    && y >= cy - self.half
-                    && y <= cy + self.half
-            })
+        self.cells.cell(j as usize * self.nx + i as usize).iter().any(|&f| {
+            let (cx, cy) = self.centres[f as usize];
+            x >= cx - self.half && x <= cx + self.half && y >= cy - self.half && y <= cy + self.half
+        })
     }
 }
 
@@ -221,13 +182,7 @@ impl CellGrid {
             hi = (hi.0.max(cx), hi.1.max(cy));
         }
         if lo.0 > hi.0 {
-            return CellGrid {
-                size,
-                first: (0, 0),
-                nx: 0,
-                ny: 0,
-                cells: Cells::build(0, &[]),
-            };
+            return CellGrid { size, first: (0, 0), nx: 0, ny: 0, cells: Cells::build(0, &[]) };
         }
         let (nx, ny) = ((hi.0 - lo.0 + 1) as usize, (hi.1 - lo.1 + 1) as usize);
         let filed: Vec<(u32, usize)> = (0..n)
@@ -237,13 +192,7 @@ impl CellGrid {
                 (i as u32, cy * nx + cx)
             })
             .collect();
-        CellGrid {
-            size,
-            first: lo,
-            nx,
-            ny,
-            cells: Cells::build(nx * ny, &filed),
-        }
+        CellGrid { size, first: lo, nx, ny, cells: Cells::build(nx * ny, &filed) }
     }
 
     /// Point indices in cell order (row by row), i.e. the order [`CellGrid::candidates`] reads.
@@ -257,17 +206,9 @@ impl CellGrid {
         if self.nx == 0 {
             return;
         }
-        let rel = |v: f64, first: i64, n: usize| {
-            ((v / self.size).floor() as i64 - first).clamp(-1, n as i64)
-        };
-        let (i0, i1) = (
-            rel(x0 - half, self.first.0, self.nx),
-            rel(x0 + half, self.first.0, self.nx),
-        );
-        let (j0, j1) = (
-            rel(y0 - half, self.first.1, self.ny),
-            rel(y0 + half, self.first.1, self.ny),
-        );
+        let rel = |v: f64, first: i64, n: usize| ((v / self.size).floor() as i64 - first).clamp(-1, n as i64);
+        let (i0, i1) = (rel(x0 - half, self.first.0, self.nx), rel(x0 + half, self.first.0, self.nx));
+        let (j0, j1) = (rel(y0 - half, self.first.1, self.ny), rel(y0 + half, self.first.1, self.ny));
         for j in j0.max(0)..=j1.min(self.ny as i64 - 1) {
             let row = j as usize * self.nx;
             let (a, b) = (i0.max(0) as usize, i1.min(self.nx as i64 - 1));
@@ -275,10 +216,7 @@ impl CellGrid {
                 continue;
             }
             // Cells of a row are contiguous in `order`: one range per row.
-            let (s, e) = (
-                self.cells.start[row + a],
-                self.cells.start[row + b as usize + 1],
-            );
+            let (s, e) = (self.cells.start[row + a], self.cells.start[row + b as usize + 1]);
             out.extend(s as u32..e as u32);
         }
     }

@@ -264,36 +264,21 @@ pub fn simulate(
         points.scan_angle_deg.len(),
     ];
     if lens.iter().any(|&l| l != n) {
-        return Err(Error::Usage(
-            "ALS points: columns of different lengths".into(),
-        ));
+        return Err(Error::Usage("ALS points: columns of different lengths".into()));
     }
     let max_sep = gauss_sep(cfg.fsigma, I_THRESH) as f64;
     // The reference bounds its boxes by sqrt(maxSep²).
     let half = (max_sep * max_sep).sqrt();
-    let sim: fn(&Job) -> Outcome = if cfg.quirks.f32_sums {
-        simulate_footprint::<f32>
-    } else {
-        simulate_footprint::<f64>
-    };
+    let sim: fn(&Job) -> Outcome = if cfg.quirks.f32_sums { simulate_footprint::<f32> } else { simulate_footprint::<f64> };
     let run = |fp: &Footprint, pts: &AlsPoints, cand: Vec<u32>| {
         if !(fp.x.is_finite() && fp.y.is_finite()) {
             return Err(SkipReason::NoPoints);
         }
-        sim(&Job {
-            points: pts,
-            candidates: &cand,
-            footprint: fp,
-            cfg,
-            half,
-        })
+        sim(&Job { points: pts, candidates: &cand, footprint: fp, cfg, half })
     };
     Ok(if cfg.quirks.batch_grid {
-        let centres: Vec<(f64, f64)> = footprints
-            .iter()
-            .map(|f| (f.x, f.y))
-            .filter(|c| c.0.is_finite() && c.1.is_finite())
-            .collect();
+        let centres: Vec<(f64, f64)> =
+            footprints.iter().map(|f| (f.x, f.y)).filter(|c| c.0.is_finite() && c.1.is_finite()).collect();
         let octree = Octree::build(points, &centres, max_sep);
         footprints
             .par_iter()
@@ -337,13 +322,7 @@ const WAVE_BUFFER: f64 = 35.0;
 
 /// Simulates one footprint, accumulating in `T` (f32 for the reference, f64 otherwise).
 fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
-    let Job {
-        points: p,
-        candidates,
-        footprint: fp,
-        cfg,
-        half,
-    } = *job;
+    let Job { points: p, candidates, footprint: fp, cfg, half } = *job;
     let q = cfg.quirks;
     let (x0, y0) = (fp.x, fp.y);
     if candidates.is_empty() {
@@ -380,10 +359,7 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
         grid.clear();
     }
     let area = (std::f64::consts::PI * dense_rad_sq as f64) as f32;
-    let densities = Densities {
-        point: n_dense / area,
-        beam: n_dense_last / area,
-    };
+    let densities = Densities { point: n_dense / area, beam: n_dense_last / area };
     let covered_fraction = grid.covered_fraction(x0, y0, 10f64.min(cfg.fsigma as f64));
     if let Some(min) = cfg.min_covered_fraction {
         if covered_fraction < min {
@@ -412,26 +388,14 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
                 r /= n as f32;
             }
         }
-        let intensity = if p.intensity[i] > 0 {
-            p.intensity[i]
-        } else {
-            1
-        };
+        let intensity = if p.intensity[i] > 0 { p.intensity[i] } else { 1 };
         let n_ret = p.number_of_returns[i];
-        let frac_hit = if n_ret > 0 {
-            (1.0 / n_ret as f64) as f32
-        } else {
-            1.0
-        };
+        let frac_hit = if n_ret > 0 { (1.0 / n_ret as f64) as f32 } else { 1.0 };
         let mut w = [0f32; N_WEIGHTINGS];
         w[Weighting::Count as usize] = r;
         w[Weighting::Frac as usize] = r * frac_hit;
         w[Weighting::Int as usize] = intensity as f32 * r;
-        contributions.push(Contribution {
-            z: p.z[i],
-            w,
-            ground: p.classification[i] == 2,
-        });
+        contributions.push(Contribution { z: p.z[i], w, ground: p.classification[i] == 2 });
         scan_sum += r * p.scan_angle_deg[i].abs();
         weight_sum += r;
         if !q.batch_grid {
@@ -456,12 +420,7 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
         let dz = cfg.res;
         let top_index = ((z_hi + buff) / dz).ceil();
         let top = top_index * dz;
-        (
-            top,
-            dz,
-            ((top - (z_lo - buff)) / dz).ceil() as usize,
-            Some(top_index as i64),
-        )
+        (top, dz, ((top - (z_lo - buff)) / dz).ceil() as usize, Some(top_index as i64))
     };
     if !(n_bins > 0 && n_bins < 10_000_000) {
         return Err(SkipReason::NoSignal);
@@ -491,11 +450,8 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
         }
     }
     if cfg.clean_outliers {
-        let split_cleaned: &[Weighting] = if q.frac_split_uncleaned {
-            &[Weighting::Int, Weighting::Count]
-        } else {
-            &Weighting::ALL
-        };
+        let split_cleaned: &[Weighting] =
+            if q.frac_split_uncleaned { &[Weighting::Int, Weighting::Count] } else { &Weighting::ALL };
         waves.clean_outliers(res32, split_cleaned);
     }
     waves.normalise(res32);
@@ -504,47 +460,24 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
     }
 
     // Bin labels: the reference's f32 top edges, or centres.
-    let z0 = if q.top_edge_labels {
-        top as f32 as f64
-    } else {
-        top - 0.5 * dz
-    };
+    let z0 = if q.top_edge_labels { top as f32 as f64 } else { top - 0.5 * dz };
     let label = |k: usize| {
-        if q.top_edge_labels {
-            (top as f32 - k as f32 * res32) as f64
-        } else {
-            z0 - k as f64 * dz
-        }
+        if q.top_edge_labels { (top as f32 - k as f32 * res32) as f64 } else { z0 - k as f64 * dz }
     };
     let to_f32 = |a: &[T]| a.iter().map(|v| v.to_f32()).collect::<Vec<f32>>();
     let weightings = Weighting::ALL.map(|k| {
-        let (wave, ground, canopy) = (
-            to_f32(&waves.total[k as usize]),
-            to_f32(&waves.ground[k as usize]),
-            to_f32(&waves.canopy[k as usize]),
-        );
+        let (wave, ground, canopy) =
+            (to_f32(&waves.total[k as usize]), to_f32(&waves.ground[k as usize]), to_f32(&waves.canopy[k as usize]));
         let (truth, rh) = if q.printed_metrics {
             // gediMetric reads the ASCII file: labels and canopy/ground as %f, totals as %.10f,
             // pulse and footprint widths from the %f header.
             let w: Vec<f32> = wave.iter().map(|&v| as_printed(v, 1e10)).collect();
             let g: Vec<f32> = ground.iter().map(|&v| as_printed(v, 1e6)).collect();
-            metrics(
-                &w,
-                &g,
-                |k| printed_label(label(k)),
-                as_printed(pulse.sigma, 1e6),
-                as_printed(cfg.fsigma, 1e6),
-            )
+            metrics(&w, &g, |k| printed_label(label(k)), as_printed(pulse.sigma, 1e6), as_printed(cfg.fsigma, 1e6))
         } else {
             metrics(&wave, &ground, label, pulse.sigma, cfg.fsigma)
         };
-        WeightedWave {
-            wave,
-            ground,
-            canopy,
-            truth,
-            rh,
-        }
+        WeightedWave { wave, ground, canopy, truth, rh }
     });
 
     Ok(SimulatedFootprint {
@@ -554,30 +487,17 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
         weightings,
         n_points: contributions.len() as u32,
         densities,
-        mean_scan_angle_deg: if weight_sum > 0.0 {
-            scan_sum / weight_sum
-        } else {
-            0.0
-        },
+        mean_scan_angle_deg: if weight_sum > 0.0 { scan_sum / weight_sum } else { 0.0 },
         covered_fraction,
     })
 }
 
 /// Truths and RH of one weighting (RH on the wave with values below 10⁻¹⁴ zeroed, gediMetric's
 /// noise-free denoising).
-fn metrics(
-    wave: &[f32],
-    ground: &[f32],
-    label: impl Fn(usize) -> f64,
-    psigma: f32,
-    fsigma: f32,
-) -> (Truth, Option<[f32; N_RH]>) {
+fn metrics(wave: &[f32], ground: &[f32], label: impl Fn(usize) -> f64, psigma: f32, fsigma: f32) -> (Truth, Option<[f32; N_RH]>) {
     let truth = truth::truths(wave, ground, &label, psigma, fsigma);
     let rh = truth.als_ground.map(|g| {
-        let denoised: Vec<f32> = wave
-            .iter()
-            .map(|&v| if v >= 1e-14 { v } else { 0.0 })
-            .collect();
+        let denoised: Vec<f32> = wave.iter().map(|&v| if v >= 1e-14 { v } else { 0.0 }).collect();
         rh_profile_by(&denoised, &label, g)
     });
     (truth, rh)
@@ -599,11 +519,7 @@ fn printed_label(z: f64) -> f64 {
 fn weight_cut_off_sq(fsigma: f32) -> f64 {
     let s = fsigma as f64;
     let peak_ratio = I_THRESH as f64 * s * (2.0 * std::f64::consts::PI).sqrt();
-    let r = if peak_ratio < 1.0 {
-        s * (-2.0 * peak_ratio.ln()).sqrt()
-    } else {
-        0.0
-    };
+    let r = if peak_ratio < 1.0 { s * (-2.0 * peak_ratio.ln()).sqrt() } else { 0.0 };
     (r + 0.01) * (r + 0.01)
 }
 
@@ -624,11 +540,7 @@ pub fn tap_offsets(pulse: &Pulse, cfg: &SimConfig) -> Vec<i64> {
                 ((c - j) as f32 * pulse.res / cfg.res as f32).floor() as i64
             } else {
                 let t = (c - j) as f64 * pulse.res as f64 / cfg.res;
-                if (t - t.round()).abs() < 1e-4 {
-                    t.round() as i64
-                } else {
-                    t.floor() as i64
-                }
+                if (t - t.round()).abs() < 1e-4 { t.round() as i64 } else { t.floor() as i64 }
             }
         })
         .collect()
@@ -669,22 +581,13 @@ mod tests {
     }
 
     fn fp(id: &str, x: f64, y: f64) -> Footprint {
-        Footprint {
-            id: id.into(),
-            x,
-            y,
-        }
+        Footprint { id: id.into(), x, y }
     }
 
     #[test]
     fn empty_point_set_skips_every_footprint() {
         for profile in [Profile::Gedirat, Profile::Default] {
-            let out = simulate(
-                &AlsPoints::default(),
-                &[fp("a", 0.0, 0.0)],
-                &SimConfig::new(profile),
-            )
-            .unwrap();
+            let out = simulate(&AlsPoints::default(), &[fp("a", 0.0, 0.0)], &SimConfig::new(profile)).unwrap();
             assert_eq!(out, vec![Err(SkipReason::NoPoints)]);
         }
     }
@@ -693,24 +596,14 @@ mod tests {
     fn inconsistent_columns_are_an_error() {
         let mut p = synthetic_plot();
         p.z.pop();
-        assert!(simulate(
-            &p,
-            &[fp("a", 30.0, 30.0)],
-            &SimConfig::new(Profile::Default)
-        )
-        .is_err());
+        assert!(simulate(&p, &[fp("a", 30.0, 30.0)], &SimConfig::new(Profile::Default)).is_err());
     }
 
     #[test]
     fn flat_ground_truths_and_rh() {
         let p = synthetic_plot();
         for profile in [Profile::Gedirat, Profile::Default] {
-            let out = simulate(
-                &p,
-                &[fp("a", 30.0, 30.0), fp("far", 500.0, 500.0)],
-                &SimConfig::new(profile),
-            )
-            .unwrap();
+            let out = simulate(&p, &[fp("a", 30.0, 30.0), fp("far", 500.0, 500.0)], &SimConfig::new(profile)).unwrap();
             assert_eq!(out[1], Err(SkipReason::NoPoints));
             let s = out[0].as_ref().unwrap();
             for w in Weighting::ALL {
@@ -719,20 +612,10 @@ mod tests {
                 assert!((sum - 1.0).abs() < 1e-4, "{profile:?} {w:?} integral {sum}");
                 let g = ww.truth.als_ground.unwrap();
                 // Top-edge labels sit half a bin above the returns' centre of gravity.
-                let offset = if profile == Profile::Gedirat {
-                    s.dz / 2.0
-                } else {
-                    0.0
-                };
-                assert!(
-                    (g - 100.0 - offset).abs() < 0.1,
-                    "{profile:?} {w:?} ground {g}"
-                );
+                let offset = if profile == Profile::Gedirat { s.dz / 2.0 } else { 0.0 };
+                assert!((g - 100.0 - offset).abs() < 0.1, "{profile:?} {w:?} ground {g}");
                 let rh = ww.rh.unwrap();
-                assert!(
-                    (rh[100] - 10.0).abs() < 4.0 && rh[0] < 0.0,
-                    "{profile:?} {w:?} rh {rh:?}"
-                );
+                assert!((rh[100] - 10.0).abs() < 4.0 && rh[0] < 0.0, "{profile:?} {w:?} rh {rh:?}");
                 assert!(ww.truth.als_cover > 0.0 && ww.truth.als_cover < 1.0);
             }
             assert!((s.mean_scan_angle_deg - 3.0).abs() < 1e-4);
@@ -746,21 +629,10 @@ mod tests {
         let p = synthetic_plot();
         let cfg = SimConfig::new(Profile::Default);
         let alone = simulate(&p, &[fp("a", 25.0, 31.0)], &cfg).unwrap();
-        let batch = simulate(
-            &p,
-            &[
-                fp("b", 40.0, 40.0),
-                fp("a", 25.0, 31.0),
-                fp("c", 20.0, 20.0),
-            ],
-            &cfg,
-        )
-        .unwrap();
+        let batch = simulate(&p, &[fp("b", 40.0, 40.0), fp("a", 25.0, 31.0), fp("c", 20.0, 20.0)], &cfg).unwrap();
         assert_eq!(alone[0], batch[1]);
         // The subset of points near the footprint gives the same numbers too.
-        let near: Vec<u32> = (0..p.len() as u32)
-            .filter(|&i| (p.x[i as usize] - 25.0).abs() < 20.0)
-            .collect();
+        let near: Vec<u32> = (0..p.len() as u32).filter(|&i| (p.x[i as usize] - 25.0).abs() < 20.0).collect();
         let subset = simulate(&p.permuted(&near), &[fp("a", 25.0, 31.0)], &cfg).unwrap();
         assert_eq!(alone, subset);
     }
@@ -771,9 +643,7 @@ mod tests {
         let p = synthetic_plot();
         let edge = [fp("edge", 0.0, 30.0)];
         match simulate(&p, &edge, &SimConfig::new(Profile::Default)).unwrap()[0] {
-            Err(SkipReason::PartlyCovered { covered_fraction }) => {
-                assert!(covered_fraction < 2.0 / 3.0)
-            }
+            Err(SkipReason::PartlyCovered { covered_fraction }) => assert!(covered_fraction < 2.0 / 3.0),
             ref other => panic!("{other:?}"),
         }
         // The reference has no working check: it simulates it, the fraction is only reported.

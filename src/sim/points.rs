@@ -55,13 +55,11 @@ impl AlsPoints {
         self.z.extend_from_slice(&other.z);
         self.intensity.extend_from_slice(&other.intensity);
         self.return_number.extend_from_slice(&other.return_number);
-        self.number_of_returns
-            .extend_from_slice(&other.number_of_returns);
+        self.number_of_returns.extend_from_slice(&other.number_of_returns);
         self.classification.extend_from_slice(&other.classification);
         self.scan_angle_deg.extend_from_slice(&other.scan_angle_deg);
         self.gps_time.extend_from_slice(&other.gps_time);
-        self.point_source_id
-            .extend_from_slice(&other.point_source_id);
+        self.point_source_id.extend_from_slice(&other.point_source_id);
     }
 }
 

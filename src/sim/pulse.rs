@@ -30,9 +30,7 @@ impl Pulse {
             return Ok(Pulse::dirac());
         }
         if !(res > 0.0) || !sigma.is_finite() || !res.is_finite() {
-            return Err(Error::Usage(format!(
-                "pulse: bad Gaussian pulse sigma {sigma} m / res {res} m"
-            )));
+            return Err(Error::Usage(format!("pulse: bad Gaussian pulse sigma {sigma} m / res {res} m")));
         }
         // Half-length: steps (including the failing one) until G < cut-off, two samples each.
         let mut n = 0usize;
@@ -62,13 +60,7 @@ impl Pulse {
             x += res; // repeated f32 addition, as the reference samples it
         }
         ys.iter_mut().for_each(|y| *y /= tot);
-        Ok(Pulse {
-            x: xs,
-            y: ys,
-            cent_bin,
-            res,
-            sigma,
-        })
+        Ok(Pulse { x: xs, y: ys, cent_bin, res, sigma })
     }
 
     /// Gaussian pulse from its full width at half maximum in ns (two-way range: σ =
@@ -80,13 +72,7 @@ impl Pulse {
 
     /// A single sample of weight 1 (no pulse broadening).
     pub fn dirac() -> Pulse {
-        Pulse {
-            x: vec![0.0],
-            y: vec![1.0],
-            cent_bin: 0,
-            res: 0.0,
-            sigma: 0.0,
-        }
+        Pulse { x: vec![0.0], y: vec![1.0], cent_bin: 0, res: 0.0, sigma: 0.0 }
     }
 
     /// Tabulated pulse from (range m increasing with time, amplitude any scale) pairs, centred as
@@ -95,14 +81,9 @@ impl Pulse {
     pub fn tabulated(pairs: &[(f32, f32)]) -> Result<Pulse> {
         let n = pairs.len();
         if n < 2 {
-            return Err(Error::Usage(format!(
-                "pulse: need at least 2 samples, got {n}"
-            )));
+            return Err(Error::Usage(format!("pulse: need at least 2 samples, got {n}")));
         }
-        if pairs
-            .iter()
-            .any(|(x, y)| !x.is_finite() || !y.is_finite() || *y < 0.0)
-        {
+        if pairs.iter().any(|(x, y)| !x.is_finite() || !y.is_finite() || *y < 0.0) {
             return Err(Error::Usage("pulse: non-finite or negative sample".into()));
         }
         let res = ((pairs[n - 1].0 - pairs[0].0).abs() as f64 / (n - 1) as f64) as f32;
@@ -116,9 +97,7 @@ impl Pulse {
             tot += y;
         }
         if !(tot > 0.0) || !(res > 0.0) {
-            return Err(Error::Usage(
-                "pulse: zero total amplitude or zero range span".into(),
-            ));
+            return Err(Error::Usage("pulse: zero total amplitude or zero range span".into()));
         }
         cofg = cofg / tot - centre;
         let x: Vec<f32> = pairs.iter().map(|&(x, _)| x - centre).collect();
@@ -130,18 +109,10 @@ impl Pulse {
                 cent_bin = i;
             }
         }
-        let var: f32 = x.iter().zip(pairs).fold(0f32, |acc, (xi, &(_, y))| {
-            acc + (xi - cofg) * (xi - cofg) * y
-        });
+        let var: f32 = x.iter().zip(pairs).fold(0f32, |acc, (xi, &(_, y))| acc + (xi - cofg) * (xi - cofg) * y);
         let sigma = ((var / tot) as f64).sqrt() as f32;
         let y = pairs.iter().map(|&(_, y)| y / tot).collect();
-        Ok(Pulse {
-            x,
-            y,
-            cent_bin,
-            res,
-            sigma,
-        })
+        Ok(Pulse { x, y, cent_bin, res, sigma })
     }
 }
 
@@ -158,12 +129,7 @@ pub fn parse_pulse_text(text: &str) -> Result<Vec<(f32, f32)>> {
         match (cols.next(), cols.next()) {
             // atof then a store into a float, as the reference reads it
             (Some(Ok(x)), Some(Ok(y))) => pairs.push((x as f32, y as f32)),
-            _ => {
-                return Err(Error::Usage(format!(
-                    "pulse: line {}: expected two numbers, got {line:?}",
-                    n + 1
-                )))
-            }
+            _ => return Err(Error::Usage(format!("pulse: line {}: expected two numbers, got {line:?}", n + 1))),
         }
     }
     Ok(pairs)
@@ -196,10 +162,7 @@ mod tests {
         assert!(Pulse::tabulated(&[(0.0, 1.0)]).is_err());
         assert!(Pulse::tabulated(&[(0.0, 0.0), (0.15, 0.0)]).is_err());
         assert!(parse_pulse_text("# c\n0 1\nfoo\n").is_err());
-        assert_eq!(
-            parse_pulse_text("# c\n0 1\n\n0.15 2 9\n").unwrap(),
-            vec![(0.0, 1.0), (0.15, 2.0)]
-        );
+        assert_eq!(parse_pulse_text("# c\n0 1\n\n0.15 2 9\n").unwrap(), vec![(0.0, 1.0), (0.15, 2.0)]);
         assert_eq!(Pulse::gaussian(0.0, 0.15).unwrap(), Pulse::dirac());
     }
 }

@@ -25,13 +25,7 @@ pub struct Truth {
 /// Truths of a waveform `wave` and its ground part `ground` (same bins, top to bottom, bin k at
 /// elevation `label(k)`), for a pulse of width `psigma` and a footprint of width `fsigma` (m).
 /// Sums and types follow gediMetric `determineTruth` / `waveformTrueCover`.
-pub fn truths(
-    wave: &[f32],
-    ground: &[f32],
-    label: impl Fn(usize) -> f64,
-    psigma: f32,
-    fsigma: f32,
-) -> Truth {
+pub fn truths(wave: &[f32], ground: &[f32], label: impl Fn(usize) -> f64, psigma: f32, fsigma: f32) -> Truth {
     // Ground centre of gravity: f64 numerator, f32 denominator; the plain mean is held in f32.
     let (mut tot_g, mut num, mut mean_g) = (0f32, 0f64, 0f32);
     for (k, &g) in ground.iter().enumerate() {
@@ -69,12 +63,7 @@ pub fn truths(
         }
     }
 
-    Truth {
-        als_ground,
-        true_top,
-        slope_deg,
-        als_cover: als_cover(wave, ground),
-    }
+    Truth { als_ground, true_top, slope_deg, als_cover: als_cover(wave, ground) }
 }
 
 /// ALS cover: C = Σ(wave − ground) − n·min(wave), G = Σ ground − n·min(ground),
@@ -90,11 +79,7 @@ pub fn als_cover(wave: &[f32], ground: &[f32]) -> f32 {
     let n = wave.len().min(ground.len()) as f32;
     tot_c -= min_c * n;
     tot_g -= min_g * n;
-    if tot_g + tot_c > 0.0 {
-        tot_c / (tot_c + tot_g * RHO_RATIO)
-    } else {
-        -1.0
-    }
+    if tot_g + tot_c > 0.0 { tot_c / (tot_c + tot_g * RHO_RATIO) } else { -1.0 }
 }
 
 #[cfg(test)]
@@ -116,9 +101,6 @@ mod tests {
     #[test]
     fn no_ground_and_no_energy() {
         let t = truths(&[0.0; 3], &[0.0; 3], |k| k as f64, 0.5, 5.5);
-        assert_eq!(
-            (t.als_ground, t.true_top, t.slope_deg, t.als_cover),
-            (None, None, None, -1.0)
-        );
+        assert_eq!((t.als_ground, t.true_top, t.slope_deg, t.als_cover), (None, None, None, -1.0));
     }
 }

@@ -11,14 +11,7 @@ use super::{Weighting, N_WEIGHTINGS};
 
 /// Accumulator type of the waveform arrays (f32 or f64).
 pub trait Sample:
-    Copy
-    + Default
-    + PartialOrd
-    + AddAssign
-    + DivAssign
-    + Mul<Output = Self>
-    + Div<Output = Self>
-    + Sub<Output = Self>
+    Copy + Default + PartialOrd + AddAssign + DivAssign + Mul<Output = Self> + Div<Output = Self> + Sub<Output = Self>
 {
     /// Converts an f32 weight or pulse sample.
     fn from_f32(v: f32) -> Self;
@@ -79,11 +72,7 @@ impl<T: Sample> WaveSet<T> {
     /// Nine zeroed arrays of `n` bins.
     pub fn zeros(n: usize) -> WaveSet<T> {
         let z = || std::array::from_fn(|_| vec![T::default(); n]);
-        WaveSet {
-            total: z(),
-            ground: z(),
-            canopy: z(),
-        }
+        WaveSet { total: z(), ground: z(), canopy: z() }
     }
 
     /// Number of bins.
@@ -97,11 +86,7 @@ impl<T: Sample> WaveSet<T> {
             return;
         }
         let b = bin as usize;
-        let part = if c.ground {
-            &mut self.ground
-        } else {
-            &mut self.canopy
-        };
+        let part = if c.ground { &mut self.ground } else { &mut self.canopy };
         // Products in f32 as in the reference (`rScale*fracHit*y`), then added.
         for k in [Weighting::Int, Weighting::Count, Weighting::Frac] {
             let v = T::from_f32(c.w[k as usize] * scale);
@@ -120,11 +105,7 @@ impl<T: Sample> WaveSet<T> {
                 hi = hi.max(a.iter().rposition(|v| *v != T::default()).unwrap_or(f) + 1);
             }
         }
-        if lo == usize::MAX {
-            0..0
-        } else {
-            lo..hi
-        }
+        if lo == usize::MAX { 0..0 } else { lo..hi }
     }
 
     /// Convolves every array with pulse taps (`offsets[j]` bins, weight `y[j]`):
@@ -137,22 +118,11 @@ impl<T: Sample> WaveSet<T> {
             return;
         }
         // Outside [support − max offset, support − min offset] every tap reads zeros.
-        let (omin, omax) = (
-            *offsets.iter().min().unwrap_or(&0),
-            *offsets.iter().max().unwrap_or(&0),
-        );
+        let (omin, omax) = (*offsets.iter().min().unwrap_or(&0), *offsets.iter().max().unwrap_or(&0));
         let lo = (support.start as i64 - omax).max(0);
         let hi = (support.end as i64 - omin).min(n);
-        let taps: Vec<(i64, T)> = offsets
-            .iter()
-            .zip(y)
-            .map(|(&o, &y)| (o, T::from_f32(y)))
-            .collect();
-        let arrays = self
-            .total
-            .iter_mut()
-            .chain(&mut self.ground)
-            .chain(&mut self.canopy);
+        let taps: Vec<(i64, T)> = offsets.iter().zip(y).map(|(&o, &y)| (o, T::from_f32(y))).collect();
+        let arrays = self.total.iter_mut().chain(&mut self.ground).chain(&mut self.canopy);
         for a in arrays {
             let mut out = vec![T::default(); a.len()];
             for i in lo..hi {

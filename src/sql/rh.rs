@@ -6,9 +6,7 @@ use std::sync::Arc;
 use arrow::array::{Array, AsArray};
 use arrow::datatypes::{DataType, Float32Type, Float64Type};
 use datafusion::common::{exec_err, Result as DfResult};
-use datafusion::logical_expr::{
-    ColumnarValue, ScalarFunctionArgs, ScalarUDFImpl, Signature, Volatility,
-};
+use datafusion::logical_expr::{ColumnarValue, ScalarFunctionArgs, ScalarUDFImpl, Signature, Volatility};
 
 use crate::process::rh::rh_profile;
 use crate::tables::{list_f32, list_f32_builder};
@@ -24,12 +22,7 @@ impl GediRh {
     pub fn new() -> Self {
         GediRh {
             signature: Signature::exact(
-                vec![
-                    list_f32(),
-                    DataType::Float64,
-                    DataType::Float64,
-                    DataType::Float64,
-                ],
+                vec![list_f32(), DataType::Float64, DataType::Float64, DataType::Float64],
                 Volatility::Immutable,
             ),
         }

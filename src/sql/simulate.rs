@@ -41,16 +41,9 @@ impl TableFunctionImpl for GediSimulate {
             [] => Profile::Default,
             [Expr::Literal(ScalarValue::Utf8(Some(p)), _)] if p == "default" => Profile::Default,
             [Expr::Literal(ScalarValue::Utf8(Some(p)), _)] if p == "gedirat" => Profile::Gedirat,
-            other => {
-                return plan_err!(
-                    "gedi_simulate([profile]): profile is 'default' or 'gedirat', got {other:?}"
-                )
-            }
+            other => return plan_err!("gedi_simulate([profile]): profile is 'default' or 'gedirat', got {other:?}"),
         };
-        Ok(Arc::new(SimulatedShots {
-            dataset: self.dataset.clone(),
-            profile,
-        }))
+        Ok(Arc::new(SimulatedShots { dataset: self.dataset.clone(), profile }))
     }
 }
 
@@ -83,14 +76,7 @@ impl TableProvider for SimulatedShots {
         limit: Option<usize>,
     ) -> DfResult<Arc<dyn ExecutionPlan>> {
         let parts: Vec<Arc<dyn PartitionStream>> = vec![Arc::new(self.clone())];
-        Ok(Arc::new(StreamingTableExec::try_new(
-            sim_schema(),
-            parts,
-            projection,
-            vec![],
-            false,
-            limit,
-        )?))
+        Ok(Arc::new(StreamingTableExec::try_new(sim_schema(), parts, projection, vec![], false, limit)?))
     }
 }
 
@@ -109,15 +95,11 @@ impl PartitionStream for SimulatedShots {
                 block.map_err(to_df)?.batch().map_err(to_df)
             })))
         };
-        let iter: Box<dyn Iterator<Item = DfResult<arrow::record_batch::RecordBatch>> + Send> =
-            match batches() {
-                Ok(it) => it,
-                Err(e) => Box::new(std::iter::once(Err(to_df(e)))),
-            };
-        Box::pin(RecordBatchStreamAdapter::new(
-            sim_schema(),
-            futures::stream::iter(iter),
-        ))
+        let iter: Box<dyn Iterator<Item = DfResult<arrow::record_batch::RecordBatch>> + Send> = match batches() {
+            Ok(it) => it,
+            Err(e) => Box::new(std::iter::once(Err(to_df(e)))),
+        };
+        Box::pin(RecordBatchStreamAdapter::new(sim_schema(), futures::stream::iter(iter)))
     }
 }
 

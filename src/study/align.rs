@@ -39,9 +39,7 @@ impl VerticalReference {
     pub fn to_als_datum(&self, z_ellipsoid: f64) -> f64 {
         match *self {
             VerticalReference::Geoid { geoid_offset } => z_ellipsoid - geoid_offset,
-            VerticalReference::GeoidAndCollocation { geoid_offset, dz } => {
-                z_ellipsoid - geoid_offset - dz
-            }
+            VerticalReference::GeoidAndCollocation { geoid_offset, dz } => z_ellipsoid - geoid_offset - dz,
         }
     }
 }
@@ -83,10 +81,7 @@ mod tests {
         let geoid = VerticalReference::Geoid { geoid_offset: 49.5 };
         assert_eq!(geoid.to_als_datum(350.0), 300.5);
         assert_eq!(geoid.label(), "geoid");
-        let both = VerticalReference::GeoidAndCollocation {
-            geoid_offset: 49.5,
-            dz: 0.75,
-        };
+        let both = VerticalReference::GeoidAndCollocation { geoid_offset: 49.5, dz: 0.75 };
         assert_eq!(both.to_als_datum(350.0), 299.75);
         assert_eq!(both.label(), "geoid+collocation_dz");
     }

@@ -74,9 +74,8 @@ pub fn forest_type_of_clc(code: u16) -> &'static str {
 /// The 44 CLC level-3 codes in the order of the Copernicus raster's grid codes 1…44 (the 8-bit
 /// CLC GeoTIFFs store the grid code, 1-based; 48 and 128 are no data).
 pub const CLC_CODES: [u16; 44] = [
-    111, 112, 121, 122, 123, 124, 131, 132, 133, 141, 142, 211, 212, 213, 221, 222, 223, 231, 241,
-    242, 243, 244, 311, 312, 313, 321, 322, 323, 324, 331, 332, 333, 334, 335, 411, 412, 421, 422,
-    423, 511, 512, 521, 522, 523,
+    111, 112, 121, 122, 123, 124, 131, 132, 133, 141, 142, 211, 212, 213, 221, 222, 223, 231, 241, 242, 243, 244, 311,
+    312, 313, 321, 322, 323, 324, 331, 332, 333, 334, 335, 411, 412, 421, 422, 423, 511, 512, 521, 522, 523,
 ];
 
 /// The CLC code of a Copernicus grid code (1…44), else `None`.
@@ -87,22 +86,13 @@ pub fn clc_code_of_grid_code(grid: u16) -> Option<u16> {
 /// Validate a forest-type label given by a user (CSV strata): one of [`FOREST_TYPES`].
 pub fn parse_forest_type(s: &str) -> Option<&'static str> {
     let s = s.trim();
-    FOREST_TYPES
-        .iter()
-        .copied()
-        .find(|t| t.eq_ignore_ascii_case(s))
+    FOREST_TYPES.iter().copied().find(|t| t.eq_ignore_ascii_case(s))
 }
 
 /// The study's quality filter for one algorithm (gedi-products.md §5): `quality_flag_aN = 1`,
 /// `degrade_flag = 0` (per shot) and sensitivity ≥ 0.90. Missing values fail.
-pub fn passes_quality(
-    quality_flag: Option<u8>,
-    degrade_flag: Option<u8>,
-    sensitivity: Option<f64>,
-) -> bool {
-    quality_flag == Some(1)
-        && degrade_flag == Some(0)
-        && sensitivity.and_then(sensitivity_group).is_some()
+pub fn passes_quality(quality_flag: Option<u8>, degrade_flag: Option<u8>, sensitivity: Option<f64>) -> bool {
+    quality_flag == Some(1) && degrade_flag == Some(0) && sensitivity.and_then(sensitivity_group).is_some()
 }
 
 #[cfg(test)]

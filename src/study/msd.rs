@@ -41,12 +41,7 @@ pub fn msd_split(real: &[f64], simulated: &[f64]) -> Option<MsdSplit> {
         c += (y - my) * (s - ms);
     }
     let (sy, ss, cov) = ((vy / nf).sqrt(), (vs / nf).sqrt(), c / nf);
-    Some(MsdSplit {
-        sb: (my - ms).powi(2),
-        sdsd: (sy - ss).powi(2),
-        lcs: 2.0 * (sy * ss - cov),
-        n,
-    })
+    Some(MsdSplit { sb: (my - ms).powi(2), sdsd: (sy - ss).powi(2), lcs: 2.0 * (sy * ss - cov), n })
 }
 
 #[cfg(test)]
@@ -58,12 +53,7 @@ mod tests {
         let y = [10.0, 12.5, 17.0, 21.0, 8.25];
         let s = [11.0, 12.0, 15.5, 23.0, 9.0];
         let split = msd_split(&y, &s).unwrap();
-        let direct = y
-            .iter()
-            .zip(&s)
-            .map(|(a, b)| (a - b) * (a - b))
-            .sum::<f64>()
-            / 5.0;
+        let direct = y.iter().zip(&s).map(|(a, b)| (a - b) * (a - b)).sum::<f64>() / 5.0;
         assert!((split.msd() - direct).abs() < 1e-12, "{split:?} {direct}");
         assert!(split.sb >= 0.0 && split.sdsd >= 0.0 && split.lcs >= 0.0);
     }

@@ -58,11 +58,7 @@ pub struct StudyRules {
 
 impl Default for StudyRules {
     fn default() -> Self {
-        StudyRules {
-            max_days_apart: DEFAULT_MAX_DAYS_APART,
-            min_rh100: MIN_RH100,
-            max_rh100: MAX_RH100,
-        }
+        StudyRules { max_days_apart: DEFAULT_MAX_DAYS_APART, min_rh100: MIN_RH100, max_rh100: MAX_RH100 }
     }
 }
 
@@ -108,19 +104,13 @@ impl Filter {
         match self {
             Filter::AlsCoverage => "footprint fully covered by ALS and simulated".into(),
             Filter::AcquisitionWindow => {
-                format!(
-                    "shot date within the ALS acquisition window ± {} days",
-                    rules.max_days_apart
-                )
+                format!("shot date within the ALS acquisition window ± {} days", rules.max_days_apart)
             }
             Filter::Quality => "quality_flag = 1 and degrade_flag = 0".into(),
             Filter::Sensitivity => "sensitivity ≥ 0.9".into(),
             Filter::GediValues => "GEDI ground, RH and geoid offset present".into(),
             Filter::AlsCover => "0 < ALS cover < 1".into(),
-            Filter::SimRh100 => format!(
-                "{} m ≤ simulated RH100 ≤ {} m",
-                rules.min_rh100, rules.max_rh100
-            ),
+            Filter::SimRh100 => format!("{} m ≤ simulated RH100 ≤ {} m", rules.min_rh100, rules.max_rh100),
         }
     }
 
@@ -175,10 +165,8 @@ impl FilterCounts {
 
     /// As JSON (stored in each results file's metadata).
     pub fn to_json(&self) -> serde_json::Value {
-        let removed: serde_json::Map<String, serde_json::Value> = Filter::ALL
-            .iter()
-            .map(|f| (f.name().to_string(), self.removed_by(*f).into()))
-            .collect();
+        let removed: serde_json::Map<String, serde_json::Value> =
+            Filter::ALL.iter().map(|f| (f.name().to_string(), self.removed_by(*f).into())).collect();
         serde_json::json!({
             "shots": self.shots,
             "candidates": self.candidates,
@@ -270,20 +258,11 @@ pub struct TileWindow {
 /// `None` (unknown) when no tile holds the point or one of them has no dates.
 pub fn als_window(tiles: &[TileWindow], x: f64, y: f64) -> Option<AlsWindow> {
     let mut out: Option<AlsWindow> = None;
-    for t in tiles
-        .iter()
-        .filter(|t| x >= t.xmin && x <= t.xmax && y >= t.ymin && y <= t.ymax)
-    {
+    for t in tiles.iter().filter(|t| x >= t.xmin && x <= t.xmax && y >= t.ymin && y <= t.ymax) {
         let (s, e) = (t.start_us?, t.end_us?);
         out = Some(match out {
-            None => AlsWindow {
-                start_us: s,
-                end_us: e,
-            },
-            Some(w) => AlsWindow {
-                start_us: w.start_us.min(s),
-                end_us: w.end_us.max(e),
-            },
+            None => AlsWindow { start_us: s, end_us: e },
+            Some(w) => AlsWindow { start_us: w.start_us.min(s), end_us: w.end_us.max(e) },
         });
     }
     out
@@ -321,13 +300,7 @@ pub struct ShotContext<'a> {
 
 /// The rows of one shot that pass every filter, appended to `out`; every candidate is counted
 /// in `counts`.
-pub fn select_rows(
-    shot: &ShotFacts,
-    ctx: &ShotContext,
-    rules: &StudyRules,
-    counts: &mut FilterCounts,
-    out: &mut Vec<ResultInput>,
-) {
+pub fn select_rows(shot: &ShotFacts, ctx: &ShotContext, rules: &StudyRules, counts: &mut FilterCounts, out: &mut Vec<ResultInput>) {
     counts.shots += 1;
     let before = out.len();
     for (w, weighting) in WEIGHTINGS.iter().enumerate() {
@@ -350,24 +323,12 @@ pub fn select_rows(
 }
 
 fn finite_rh(rh: &Option<Vec<f32>>) -> Option<&Vec<f32>> {
-    rh.as_ref()
-        .filter(|v| v.len() == RH_LEN && v.iter().all(|x| x.is_finite()))
+    rh.as_ref().filter(|v| v.len() == RH_LEN && v.iter().all(|x| x.is_finite()))
 }
 
 /// Row (w, a) of the shot, or the first filter it fails.
-fn row(
-    shot: &ShotFacts,
-    ctx: &ShotContext,
-    rules: &StudyRules,
-    w: usize,
-    a: usize,
-    counts: &mut FilterCounts,
-) -> Result<ResultInput, Filter> {
-    let sim = ctx
-        .sim
-        .map(|s| &s[w])
-        .filter(|s| s.ok)
-        .ok_or(Filter::AlsCoverage)?;
+fn row(shot: &ShotFacts, ctx: &ShotContext, rules: &StudyRules, w: usize, a: usize, counts: &mut FilterCounts) -> Result<ResultInput, Filter> {
+    let sim = ctx.sim.map(|s| &s[w]).filter(|s| s.ok).ok_or(Filter::AlsCoverage)?;
     match (ctx.window, shot.delta_time.filter(|t| t.is_finite())) {
         (Some(win), Some(t)) => {
             if !within_window(t, win, rules.max_days_apart) {
@@ -380,35 +341,17 @@ fn row(
     if !(alg.quality_flag == Some(1) && shot.degrade_flag == Some(0)) {
         return Err(Filter::Quality);
     }
-    let sensitivity = alg
-        .sensitivity
-        .filter(|&s| sensitivity_group(s).is_some())
-        .ok_or(Filter::Sensitivity)?;
-    let elev = alg
-        .elev_lowestmode
-        .filter(|z| z.is_finite())
-        .ok_or(Filter::GediValues)?;
+    let sensitivity = alg.sensitivity.filter(|&s| sensitivity_group(s).is_some()).ok_or(Filter::Sensitivity)?;
+    let elev = alg.elev_lowestmode.filter(|z| z.is_finite()).ok_or(Filter::GediValues)?;
     let rh_gedi = finite_rh(&alg.rh).ok_or(Filter::GediValues)?;
-    let geoid_offset = shot
-        .geoid_offset
-        .filter(|n| n.is_finite())
-        .ok_or(Filter::GediValues)?;
-    let cover = sim
-        .als_cover
-        .filter(|&c| c > 0.0 && c < 1.0)
-        .ok_or(Filter::AlsCover)?;
-    let als_ground = sim
-        .als_ground
-        .filter(|z| z.is_finite())
-        .ok_or(Filter::SimRh100)?;
+    let geoid_offset = shot.geoid_offset.filter(|n| n.is_finite()).ok_or(Filter::GediValues)?;
+    let cover = sim.als_cover.filter(|&c| c > 0.0 && c < 1.0).ok_or(Filter::AlsCover)?;
+    let als_ground = sim.als_ground.filter(|z| z.is_finite()).ok_or(Filter::SimRh100)?;
     let rh_sim = finite_rh(&sim.rh)
         .filter(|rh| (rules.min_rh100..=rules.max_rh100).contains(&(rh[RH_LEN - 1] as f64)))
         .ok_or(Filter::SimRh100)?;
     let vertical_reference = match ctx.segment.filter(|s| s.dz.is_finite()) {
-        Some(s) => VerticalReference::GeoidAndCollocation {
-            geoid_offset,
-            dz: s.dz,
-        },
+        Some(s) => VerticalReference::GeoidAndCollocation { geoid_offset, dz: s.dz },
         None => VerticalReference::Geoid { geoid_offset },
     };
     Ok(ResultInput {
@@ -444,12 +387,7 @@ mod tests {
     }
 
     fn alg() -> AlgorithmFacts {
-        AlgorithmFacts {
-            quality_flag: Some(1),
-            sensitivity: Some(0.97),
-            elev_lowestmode: Some(349.0),
-            rh: Some(rh(21.0)),
-        }
+        AlgorithmFacts { quality_flag: Some(1), sensitivity: Some(0.97), elev_lowestmode: Some(349.0), rh: Some(rh(21.0)) }
     }
 
     /// A shot that passes every filter, dated 2022-06-01 (delta_time of that day).
@@ -483,10 +421,7 @@ mod tests {
     }
 
     fn window() -> Option<AlsWindow> {
-        Some(AlsWindow {
-            start_us: JUNE_2022_US - 86_400_000_000,
-            end_us: JUNE_2022_US,
-        })
+        Some(AlsWindow { start_us: JUNE_2022_US - 86_400_000_000, end_us: JUNE_2022_US })
     }
 
     fn run(shot: &ShotFacts, ctx: &ShotContext) -> (Vec<ResultInput>, FilterCounts) {
@@ -503,39 +438,18 @@ mod tests {
     #[test]
     fn a_good_shot_gives_21_rows_in_order_with_the_right_facts() {
         let s = sims();
-        let ctx = ShotContext {
-            sim: Some(&s),
-            window: window(),
-            segment: None,
-            forest_type: Some("mixed"),
-        };
+        let ctx = ShotContext { sim: Some(&s), window: window(), segment: None, forest_type: Some("mixed") };
         let (rows, c) = run(&shot(), &ctx);
         assert_eq!(rows.len(), 21);
-        assert_eq!(
-            (
-                c.shots,
-                c.candidates,
-                c.kept,
-                c.shots_kept,
-                c.window_unknown
-            ),
-            (1, 21, 21, 1, 0)
-        );
+        assert_eq!((c.shots, c.candidates, c.kept, c.shots_kept, c.window_unknown), (1, 21, 21, 1, 0));
         assert!(balanced(&c));
         assert_eq!(rows[0].weighting, "count");
         assert_eq!(rows[0].algorithm, StudyAlgorithm::Default);
         assert_eq!(rows[8].weighting, "frac");
         assert_eq!(rows[8].algorithm, StudyAlgorithm::A(1));
-        assert_eq!(
-            rows[8].slope_deg,
-            Some(6.0),
-            "the truths of the row's weighting"
-        );
+        assert_eq!(rows[8].slope_deg, Some(6.0), "the truths of the row's weighting");
         assert_eq!(rows[0].forest_type.as_deref(), Some("mixed"));
-        assert_eq!(
-            rows[0].vertical_reference,
-            VerticalReference::Geoid { geoid_offset: 50.0 }
-        );
+        assert_eq!(rows[0].vertical_reference, VerticalReference::Geoid { geoid_offset: 50.0 });
         // The rows build a valid results batch, GEDI ground 349 − 50 = 299: 1 m below the ALS.
         let b = results_batch(&rows).unwrap();
         assert_eq!(b.num_rows(), 21);
@@ -544,24 +458,10 @@ mod tests {
     #[test]
     fn collocated_shot_uses_the_segment_dz_and_r() {
         let s = sims();
-        let seg = SegmentFacts {
-            dz: 0.4,
-            r_after: Some(0.97),
-        };
-        let ctx = ShotContext {
-            sim: Some(&s),
-            window: window(),
-            segment: Some(seg),
-            forest_type: None,
-        };
+        let seg = SegmentFacts { dz: 0.4, r_after: Some(0.97) };
+        let ctx = ShotContext { sim: Some(&s), window: window(), segment: Some(seg), forest_type: None };
         let (rows, _) = run(&shot(), &ctx);
-        assert_eq!(
-            rows[0].vertical_reference,
-            VerticalReference::GeoidAndCollocation {
-                geoid_offset: 50.0,
-                dz: 0.4
-            }
-        );
+        assert_eq!(rows[0].vertical_reference, VerticalReference::GeoidAndCollocation { geoid_offset: 50.0, dz: 0.4 });
         assert_eq!(rows[0].r_collocation, Some(0.97));
         assert!((rows[0].vertical_reference.to_als_datum(349.0) - 298.6).abs() < 1e-12);
     }
@@ -569,35 +469,18 @@ mod tests {
     #[test]
     fn each_filter_removes_what_it_should_counted_at_the_first_failure() {
         let s = sims();
-        let full = ShotContext {
-            sim: Some(&s),
-            window: window(),
-            segment: None,
-            forest_type: None,
-        };
+        let full = ShotContext { sim: Some(&s), window: window(), segment: None, forest_type: None };
         // Not simulated: every row to als_coverage, even with bad GEDI quality.
         let mut bad = shot();
         bad.degrade_flag = Some(1);
-        let (rows, c) = run(
-            &bad,
-            &ShotContext {
-                sim: None,
-                ..full.clone()
-            },
-        );
+        let (rows, c) = run(&bad, &ShotContext { sim: None, ..full.clone() });
         assert!(rows.is_empty());
         assert_eq!(c.removed_by(Filter::AlsCoverage), 21);
         assert_eq!(c.shots_kept, 0);
         // Partly covered simulation: same.
         let mut partial = sims();
         partial.iter_mut().for_each(|w| w.ok = false);
-        let (_, c) = run(
-            &shot(),
-            &ShotContext {
-                sim: Some(&partial),
-                ..full.clone()
-            },
-        );
+        let (_, c) = run(&shot(), &ShotContext { sim: Some(&partial), ..full.clone() });
         assert_eq!(c.removed_by(Filter::AlsCoverage), 21);
         // Degraded shot: every row to quality.
         let (_, c) = run(&bad, &full);
@@ -609,49 +492,23 @@ mod tests {
         s3.algorithms[5].rh = None;
         let (rows, c) = run(&s3, &full);
         assert_eq!(
-            (
-                c.removed_by(Filter::Quality),
-                c.removed_by(Filter::Sensitivity),
-                c.removed_by(Filter::GediValues),
-                c.kept
-            ),
+            (c.removed_by(Filter::Quality), c.removed_by(Filter::Sensitivity), c.removed_by(Filter::GediValues), c.kept),
             (3, 3, 3, 12)
         );
         assert_eq!(rows.len(), 12);
-        assert!(rows
-            .iter()
-            .all(|r| !matches!(r.algorithm, StudyAlgorithm::A(3 | 4 | 5))));
+        assert!(rows.iter().all(|r| !matches!(r.algorithm, StudyAlgorithm::A(3 | 4 | 5))));
         // Cover 1 in frac, RH100 70 m in int: 7 rows each.
         let mut odd = sims();
         odd[1].als_cover = Some(1.0);
         odd[2].rh = Some(rh(70.0));
-        let (rows, c) = run(
-            &shot(),
-            &ShotContext {
-                sim: Some(&odd),
-                ..full.clone()
-            },
-        );
-        assert_eq!(
-            (
-                c.removed_by(Filter::AlsCover),
-                c.removed_by(Filter::SimRh100),
-                c.kept
-            ),
-            (7, 7, 7)
-        );
+        let (rows, c) = run(&shot(), &ShotContext { sim: Some(&odd), ..full.clone() });
+        assert_eq!((c.removed_by(Filter::AlsCover), c.removed_by(Filter::SimRh100), c.kept), (7, 7, 7));
         assert!(rows.iter().all(|r| r.weighting == "count"));
         // RH100 bounds are inclusive; 4.9 m is out.
         for (top, kept) in [(5.0, 21), (60.0, 21), (4.9, 0)] {
             let mut s = sims();
             s.iter_mut().for_each(|w| w.rh = Some(rh(top)));
-            let (_, c) = run(
-                &shot(),
-                &ShotContext {
-                    sim: Some(&s),
-                    ..full.clone()
-                },
-            );
+            let (_, c) = run(&shot(), &ShotContext { sim: Some(&s), ..full.clone() });
             assert_eq!(c.kept, kept, "RH100 {top}");
         }
         // No geoid offset: nothing can be aligned.
@@ -665,22 +522,10 @@ mod tests {
     #[test]
     fn quality_and_sensitivity_filters_agree_with_passes_quality() {
         let s = sims();
-        let ctx = ShotContext {
-            sim: Some(&s),
-            window: window(),
-            segment: None,
-            forest_type: None,
-        };
+        let ctx = ShotContext { sim: Some(&s), window: window(), segment: None, forest_type: None };
         for q in [None, Some(0), Some(1)] {
             for d in [None, Some(0), Some(3)] {
-                for sens in [
-                    None,
-                    Some(0.5),
-                    Some(0.9),
-                    Some(0.96),
-                    Some(0.99),
-                    Some(f64::NAN),
-                ] {
+                for sens in [None, Some(0.5), Some(0.9), Some(0.96), Some(0.99), Some(f64::NAN)] {
                     let mut sh = shot();
                     sh.degrade_flag = d;
                     sh.algorithms.iter_mut().for_each(|a| {
@@ -688,11 +533,7 @@ mod tests {
                         a.sensitivity = sens;
                     });
                     let (rows, _) = run(&sh, &ctx);
-                    assert_eq!(
-                        !rows.is_empty(),
-                        passes_quality(q, d, sens),
-                        "{q:?} {d:?} {sens:?}"
-                    );
+                    assert_eq!(!rows.is_empty(), passes_quality(q, d, sens), "{q:?} {d:?} {sens:?}");
                 }
             }
         }
@@ -702,46 +543,22 @@ mod tests {
     fn acquisition_window_with_margin_and_unknown_dates() {
         let s = sims();
         let w = window().unwrap();
-        let ctx = ShotContext {
-            sim: Some(&s),
-            window: Some(w),
-            segment: None,
-            forest_type: None,
-        };
-        let rules = StudyRules {
-            max_days_apart: 30.0,
-            ..Default::default()
-        };
+        let ctx = ShotContext { sim: Some(&s), window: Some(w), segment: None, forest_type: None };
+        let rules = StudyRules { max_days_apart: 30.0, ..Default::default() };
         let day = 86_400.0;
-        for (offset_days, kept) in [
-            (0.0, true),
-            (29.9, true),
-            (30.1, false),
-            (-30.9, true),
-            (-31.1, false),
-        ] {
+        for (offset_days, kept) in [(0.0, true), (29.9, true), (30.1, false), (-30.9, true), (-31.1, false)] {
             let mut sh = shot();
             sh.delta_time = Some(JUNE_2022_S + offset_days * day);
             let mut c = FilterCounts::default();
             let mut out = Vec::new();
             select_rows(&sh, &ctx, &rules, &mut c, &mut out);
-            assert_eq!(
-                !out.is_empty(),
-                kept,
-                "{offset_days} days after the window's end"
-            );
+            assert_eq!(!out.is_empty(), kept, "{offset_days} days after the window's end");
             if !kept {
                 assert_eq!(c.removed_by(Filter::AcquisitionWindow), 21);
             }
         }
         // Unknown window or date: kept, and counted as not checked.
-        let (rows, c) = run(
-            &shot(),
-            &ShotContext {
-                window: None,
-                ..ctx.clone()
-            },
-        );
+        let (rows, c) = run(&shot(), &ShotContext { window: None, ..ctx.clone() });
         assert_eq!((rows.len() as u64, c.window_unknown), (21, 21));
         let mut nodate = shot();
         nodate.delta_time = None;
@@ -750,38 +567,11 @@ mod tests {
 
     #[test]
     fn window_of_the_tiles_holding_the_point() {
-        let t = |x0: f64, s: Option<i64>, e: Option<i64>| TileWindow {
-            xmin: x0,
-            ymin: 0.0,
-            xmax: x0 + 100.0,
-            ymax: 100.0,
-            start_us: s,
-            end_us: e,
-        };
-        let tiles = [
-            t(0.0, Some(10), Some(20)),
-            t(50.0, Some(5), Some(15)),
-            t(200.0, None, None),
-        ];
-        assert_eq!(
-            als_window(&tiles, 10.0, 10.0),
-            Some(AlsWindow {
-                start_us: 10,
-                end_us: 20
-            })
-        );
-        assert_eq!(
-            als_window(&tiles, 60.0, 10.0),
-            Some(AlsWindow {
-                start_us: 5,
-                end_us: 20
-            })
-        );
-        assert_eq!(
-            als_window(&tiles, 250.0, 10.0),
-            None,
-            "a tile without dates"
-        );
+        let t = |x0: f64, s: Option<i64>, e: Option<i64>| TileWindow { xmin: x0, ymin: 0.0, xmax: x0 + 100.0, ymax: 100.0, start_us: s, end_us: e };
+        let tiles = [t(0.0, Some(10), Some(20)), t(50.0, Some(5), Some(15)), t(200.0, None, None)];
+        assert_eq!(als_window(&tiles, 10.0, 10.0), Some(AlsWindow { start_us: 10, end_us: 20 }));
+        assert_eq!(als_window(&tiles, 60.0, 10.0), Some(AlsWindow { start_us: 5, end_us: 20 }));
+        assert_eq!(als_window(&tiles, 250.0, 10.0), None, "a tile without dates");
         assert_eq!(als_window(&tiles, 500.0, 10.0), None, "no tile");
     }
 
@@ -789,37 +579,17 @@ mod tests {
     fn counts_add_and_round_trip_through_json() {
         let mut a = FilterCounts::default();
         a.remove_shots(2, Filter::AlsCoverage);
-        assert_eq!(
-            (a.shots, a.candidates, a.removed_by(Filter::AlsCoverage)),
-            (2, 42, 42)
-        );
+        assert_eq!((a.shots, a.candidates, a.removed_by(Filter::AlsCoverage)), (2, 42, 42));
         let s = sims();
-        let ctx = ShotContext {
-            sim: Some(&s),
-            window: None,
-            segment: None,
-            forest_type: None,
-        };
+        let ctx = ShotContext { sim: Some(&s), window: None, segment: None, forest_type: None };
         let mut out = Vec::new();
         select_rows(&shot(), &ctx, &StudyRules::default(), &mut a, &mut out);
         let mut total = FilterCounts::default();
         total.add(&a);
         total.add(&a);
-        assert_eq!(
-            (
-                total.shots,
-                total.candidates,
-                total.kept,
-                total.shots_kept,
-                total.window_unknown
-            ),
-            (6, 126, 42, 2, 42)
-        );
+        assert_eq!((total.shots, total.candidates, total.kept, total.shots_kept, total.window_unknown), (6, 126, 42, 2, 42));
         assert!(balanced(&total));
         assert_eq!(FilterCounts::from_json(&total.to_json()), Some(total));
-        assert_eq!(
-            FilterCounts::from_json(&serde_json::json!({"shots": 1})),
-            None
-        );
+        assert_eq!(FilterCounts::from_json(&serde_json::json!({"shots": 1})), None);
     }
 }

@@ -5,19 +5,15 @@
 use std::sync::Arc;
 
 use arrow::array::{
-    Array, ArrayRef, AsArray, Float32Array, Float32Builder, Float64Array, ListBuilder, RecordBatch,
-    StringArray, UInt64Array, UInt8Array,
+    Array, ArrayRef, AsArray, Float32Array, Float64Array, ListBuilder, Float32Builder, RecordBatch, StringArray,
+    UInt64Array, UInt8Array,
 };
-use arrow::datatypes::{
-    DataType, Field, Fields, Float32Type, Float64Type, Schema, SchemaRef, UInt64Type,
-};
+use arrow::datatypes::{DataType, Field, Fields, Float32Type, Float64Type, Schema, SchemaRef, UInt64Type};
 use rayon::prelude::*;
 
 use super::{list_f32, list_f32_builder};
 use crate::error::{Error, Result};
-use crate::process::l2a::{
-    AlgorithmSettings, L2aOutcome, L2aProcessor, Noise, WaveformGeolocation,
-};
+use crate::process::l2a::{AlgorithmSettings, L2aOutcome, L2aProcessor, Noise, WaveformGeolocation};
 
 /// Schema of the `l2a` table.
 pub fn l2a_schema() -> SchemaRef {
@@ -178,31 +174,17 @@ impl L2aColumns {
 /// Run the L2A kernel with `settings` on every shot of a `shots` batch that has a waveform (rows
 /// without L1B columns are skipped), shots in parallel. A shot the kernel cannot process keeps
 /// its rows with `status` = `no_result: <reason>` and null values.
-pub fn l2a_batch(
-    shots: &RecordBatch,
-    settings: &[AlgorithmSettings],
-    source: &std::path::Path,
-) -> Result<RecordBatch> {
-    let col = |n: &str| {
-        shots
-            .column_by_name(n)
-            .ok_or_else(|| Error::field(source, n, "column missing"))
-    };
+pub fn l2a_batch(shots: &RecordBatch, settings: &[AlgorithmSettings], source: &std::path::Path) -> Result<RecordBatch> {
+    let col = |n: &str| shots.column_by_name(n).ok_or_else(|| Error::field(source, n, "column missing"));
     let sn = col("shot_number")?.as_primitive::<UInt64Type>().clone();
     let beam = col("beam")?.as_string::<i32>().clone();
     let waves = col("rx_waveform")?.as_list::<i32>().clone();
-    let f64c =
-        |n: &str| -> Result<Float64Array> { Ok(col(n)?.as_primitive::<Float64Type>().clone()) };
-    let (mean, sd) = (
-        f64c("noise_mean_corrected")?,
-        f64c("noise_stddev_corrected")?,
-    );
+    let f64c = |n: &str| -> Result<Float64Array> { Ok(col(n)?.as_primitive::<Float64Type>().clone()) };
+    let (mean, sd) = (f64c("noise_mean_corrected")?, f64c("noise_stddev_corrected")?);
     let (z0, zn) = (f64c("elevation_bin0")?, f64c("elevation_lastbin")?);
     let (la0, lan) = (f64c("lat_bin0")?, f64c("lat_lastbin")?);
     let (lo0, lon) = (f64c("lon_bin0")?, f64c("lon_lastbin")?);
-    let rows: Vec<usize> = (0..shots.num_rows())
-        .filter(|&i| !waves.is_null(i))
-        .collect();
+    let rows: Vec<usize> = (0..shots.num_rows()).filter(|&i| !waves.is_null(i)).collect();
     let outcomes: Vec<(usize, Vec<L2aOutcome>, WaveformGeolocation)> = rows
         .par_iter()
         .map_init(L2aProcessor::new, |proc, &i| {
@@ -217,22 +199,15 @@ pub fn l2a_batch(
                 longitude_bin0: lo0.value(i),
                 longitude_lastbin: lon.value(i),
             };
-            let noise = Noise {
-                mean: mean.value(i),
-                stddev: sd.value(i),
-            };
+            let noise = Noise { mean: mean.value(i), stddev: sd.value(i) };
             let mut out = Vec::with_capacity(settings.len());
             proc.process_all(w.values(), noise, &geo, settings, &mut out);
             (i, out, geo)
         })
         .collect();
     let n = outcomes.len() * settings.len();
-    let (mut o_sn, mut o_beam, mut o_alg, mut o_status) = (
-        Vec::with_capacity(n),
-        Vec::with_capacity(n),
-        Vec::with_capacity(n),
-        Vec::with_capacity(n),
-    );
+    let (mut o_sn, mut o_beam, mut o_alg, mut o_status) =
+        (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
     let mut c = L2aColumns::with_capacity(n);
     for (i, outs, geo) in &outcomes {
         for (s, o) in settings.iter().zip(outs) {

@@ -1,8 +1,8 @@
 //! Derived tables: their Arrow schemas and the conversion of kernel outputs into record batches.
 
 pub mod l2a;
-pub mod offsets;
 pub mod results;
+pub mod offsets;
 pub mod sim;
 
 use std::sync::Arc;

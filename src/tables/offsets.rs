@@ -5,9 +5,7 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Arc;
 
-use arrow::array::{
-    ArrayRef, AsArray, Float64Array, ListBuilder, StringArray, UInt32Array, UInt64Builder,
-};
+use arrow::array::{ArrayRef, AsArray, Float64Array, ListBuilder, StringArray, UInt32Array, UInt64Builder};
 use arrow::datatypes::{DataType, Field, Float64Type, Schema, SchemaRef, UInt64Type};
 use arrow::record_batch::RecordBatch;
 
@@ -52,10 +50,7 @@ pub fn offsets_schema() -> SchemaRef {
         f("granule", DataType::Utf8),
         f("beam", DataType::Utf8),
         f("level", DataType::Utf8),
-        f(
-            "shot_numbers",
-            DataType::List(Arc::new(Field::new_list_field(DataType::UInt64, true))),
-        ),
+        f("shot_numbers", DataType::List(Arc::new(Field::new_list_field(DataType::UInt64, true)))),
         f("n_shots", DataType::UInt32),
         f("dx", DataType::Float64),
         f("dy", DataType::Float64),
@@ -71,12 +66,8 @@ pub fn offsets_schema() -> SchemaRef {
 
 /// The rows as one record batch.
 pub fn offsets_batch(rows: &[OffsetRow]) -> Result<RecordBatch> {
-    let strings = |f: fn(&OffsetRow) -> &str| {
-        Arc::new(StringArray::from_iter_values(rows.iter().map(f))) as ArrayRef
-    };
-    let floats = |f: fn(&OffsetRow) -> f64| {
-        Arc::new(Float64Array::from_iter_values(rows.iter().map(f))) as ArrayRef
-    };
+    let strings = |f: fn(&OffsetRow) -> &str| Arc::new(StringArray::from_iter_values(rows.iter().map(f))) as ArrayRef;
+    let floats = |f: fn(&OffsetRow) -> f64| Arc::new(Float64Array::from_iter_values(rows.iter().map(f))) as ArrayRef;
     let mut shots = ListBuilder::new(UInt64Builder::new());
     for r in rows {
         shots.append_value(r.shot_numbers.iter().map(|&s| Some(s)));
@@ -87,9 +78,7 @@ pub fn offsets_batch(rows: &[OffsetRow]) -> Result<RecordBatch> {
         strings(|r| &r.beam),
         strings(|r| &r.level),
         Arc::new(shots.finish()),
-        Arc::new(UInt32Array::from_iter_values(
-            rows.iter().map(|r| r.n_shots),
-        )),
+        Arc::new(UInt32Array::from_iter_values(rows.iter().map(|r| r.n_shots))),
         floats(|r| r.dx),
         floats(|r| r.dy),
         floats(|r| r.dz),
@@ -100,8 +89,7 @@ pub fn offsets_batch(rows: &[OffsetRow]) -> Result<RecordBatch> {
         floats(|r| r.dy_halfwidth),
         floats(|r| r.dz_halfwidth),
     ];
-    RecordBatch::try_new(offsets_schema(), cols)
-        .map_err(|e| Error::Usage(format!("offsets table: {e}")))
+    RecordBatch::try_new(offsets_schema(), cols).map_err(|e| Error::Usage(format!("offsets table: {e}")))
 }
 
 /// The offset applied to one shot by `simulate`.
@@ -138,26 +126,13 @@ pub fn read_r_after(ds: &Dataset) -> Result<HashMap<String, f64>> {
     }
     for path in dataset::table_files(&dir).map_err(|e| Error::file(&dir, e))? {
         let file = std::fs::File::open(&path).map_err(|e| Error::file(&path, e))?;
-        let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-            .map_err(|e| Error::table(&path, e))?;
-        let mask = parquet::arrow::ProjectionMask::columns(
-            builder.parquet_schema(),
-            ["segment_id", "r_after"],
-        );
-        for b in builder
-            .with_projection(mask)
-            .build()
-            .map_err(|e| Error::table(&path, e))?
-        {
+        let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| Error::table(&path, e))?;
+        let mask = parquet::arrow::ProjectionMask::columns(builder.parquet_schema(), ["segment_id", "r_after"]);
+        for b in builder.with_projection(mask).build().map_err(|e| Error::table(&path, e))? {
             let b = b.map_err(|e| Error::table(&path, e))?;
-            let ids = b
-                .column_by_name("segment_id")
-                .and_then(|c| c.as_string_opt::<i32>().cloned());
-            let ids =
-                ids.ok_or_else(|| Error::field(&path, "segment_id", "missing or not a string"))?;
-            let r = b
-                .column_by_name("r_after")
-                .and_then(|c| c.as_primitive_opt::<Float64Type>().cloned());
+            let ids = b.column_by_name("segment_id").and_then(|c| c.as_string_opt::<i32>().cloned());
+            let ids = ids.ok_or_else(|| Error::field(&path, "segment_id", "missing or not a string"))?;
+            let r = b.column_by_name("r_after").and_then(|c| c.as_primitive_opt::<Float64Type>().cloned());
             let r = r.ok_or_else(|| Error::field(&path, "r_after", "missing or not float64"))?;
             for i in 0..b.num_rows() {
                 out.insert(ids.value(i).to_string(), r.value(i));
@@ -174,50 +149,23 @@ fn read_file(path: &Path, out: &mut HashMap<u64, AppliedOffset>) -> Result<()> {
         .map_err(|e| Error::table(path, e))?;
     for b in reader {
         let b = b.map_err(|e| Error::table(path, e))?;
-        let col = |n: &str| {
-            b.column_by_name(n)
-                .ok_or_else(|| Error::field(path, n, "column missing from the offsets table"))
-        };
+        let col = |n: &str| b.column_by_name(n).ok_or_else(|| Error::field(path, n, "column missing from the offsets table"));
         let f64s = |n: &str| -> Result<Float64Array> {
-            col(n)?
-                .as_primitive_opt::<Float64Type>()
-                .cloned()
-                .ok_or_else(|| Error::field(path, n, "not float64"))
+            col(n)?.as_primitive_opt::<Float64Type>().cloned().ok_or_else(|| Error::field(path, n, "not float64"))
         };
-        let ids = col("segment_id")?
-            .as_string_opt::<i32>()
-            .cloned()
-            .ok_or_else(|| Error::field(path, "segment_id", "not a string"))?;
-        let shots = col("shot_numbers")?
-            .as_list_opt::<i32>()
-            .cloned()
-            .ok_or_else(|| Error::field(path, "shot_numbers", "not a list"))?;
+        let ids = col("segment_id")?.as_string_opt::<i32>().cloned().ok_or_else(|| Error::field(path, "segment_id", "not a string"))?;
+        let shots = col("shot_numbers")?.as_list_opt::<i32>().cloned().ok_or_else(|| Error::field(path, "shot_numbers", "not a list"))?;
         let (dx, dy, dz) = (f64s("dx")?, f64s("dy")?, f64s("dz")?);
         for i in 0..b.num_rows() {
             let list = shots.value(i);
-            let list = list
-                .as_primitive_opt::<UInt64Type>()
-                .ok_or_else(|| Error::field(path, "shot_numbers", "not a list of uint64"))?;
+            let list = list.as_primitive_opt::<UInt64Type>().ok_or_else(|| Error::field(path, "shot_numbers", "not a list of uint64"))?;
             for s in list.iter().flatten() {
-                let applied = AppliedOffset {
-                    segment_id: ids.value(i).to_string(),
-                    dx: dx.value(i),
-                    dy: dy.value(i),
-                    dz: dz.value(i),
-                };
+                let applied = AppliedOffset { segment_id: ids.value(i).to_string(), dx: dx.value(i), dy: dy.value(i), dz: dz.value(i) };
                 if !(applied.dx.is_finite() && applied.dy.is_finite()) {
-                    return Err(Error::field(
-                        path,
-                        "dx",
-                        format!("segment {}: not finite", applied.segment_id),
-                    ));
+                    return Err(Error::field(path, "dx", format!("segment {}: not finite", applied.segment_id)));
                 }
                 if out.insert(s, applied).is_some() {
-                    return Err(Error::field(
-                        path,
-                        "shot_numbers",
-                        format!("shot {s} is in two segments"),
-                    ));
+                    return Err(Error::field(path, "shot_numbers", format!("shot {s} is in two segments")));
                 }
             }
         }
@@ -252,37 +200,14 @@ mod tests {
             dz_halfwidth: 0.1,
         };
         let dest = ds.table_file(tables::OFFSETS, "offsets").unwrap();
-        dataset::write_parquet(
-            &dest,
-            offsets_schema(),
-            &[offsets_batch(std::slice::from_ref(&row)).unwrap()],
-            &Default::default(),
-        )
-        .unwrap();
+        dataset::write_parquet(&dest, offsets_schema(), &[offsets_batch(std::slice::from_ref(&row)).unwrap()], &Default::default()).unwrap();
         let got = read_offsets(&ds).unwrap();
         assert_eq!(got.len(), 3);
-        assert_eq!(
-            got[&u64::MAX],
-            AppliedOffset {
-                segment_id: row.segment_id.clone(),
-                dx: 4.0,
-                dy: -3.0,
-                dz: 47.5
-            }
-        );
+        assert_eq!(got[&u64::MAX], AppliedOffset { segment_id: row.segment_id.clone(), dx: 4.0, dy: -3.0, dz: 47.5 });
         assert_eq!(read_r_after(&ds).unwrap()[&row.segment_id], 0.99);
         let twice = [row.clone(), row];
-        dataset::write_parquet(
-            &dest,
-            offsets_schema(),
-            &[offsets_batch(&twice).unwrap()],
-            &Default::default(),
-        )
-        .unwrap();
+        dataset::write_parquet(&dest, offsets_schema(), &[offsets_batch(&twice).unwrap()], &Default::default()).unwrap();
         let err = read_offsets(&ds).unwrap_err().to_string();
-        assert!(
-            err.contains("shot_numbers") && err.contains("offsets.parquet"),
-            "{err}"
-        );
+        assert!(err.contains("shot_numbers") && err.contains("offsets.parquet"), "{err}");
     }
 }

@@ -6,9 +6,7 @@
 use std::collections::HashMap;
 use std::sync::Arc;
 
-use arrow::array::{
-    ArrayRef, Float32Builder, Float64Array, ListBuilder, StringArray, UInt64Array, UInt8Array,
-};
+use arrow::array::{ArrayRef, Float32Builder, Float64Array, ListBuilder, StringArray, UInt64Array, UInt8Array};
 use arrow::datatypes::{DataType, Field, Schema, SchemaRef};
 use arrow::record_batch::RecordBatch;
 
@@ -107,8 +105,7 @@ pub fn results_metadata() -> HashMap<String, String> {
         ("gedisim:table".to_string(), "results".to_string()),
         (
             "gedisim:rh_aligned".to_string(),
-            "rh_gedi + (gedi_ground - als_ground), both grounds in the ALS vertical datum"
-                .to_string(),
+            "rh_gedi + (gedi_ground - als_ground), both grounds in the ALS vertical datum".to_string(),
         ),
     ])
 }
@@ -128,49 +125,26 @@ pub fn results_batch(rows: &[ResultInput]) -> Result<RecordBatch> {
     for r in rows {
         for (name, rh) in [("rh_sim", &r.rh_sim), ("rh_gedi", &r.rh_gedi)] {
             if rh.len() != RH_LEN {
-                return Err(bad(
-                    r,
-                    name,
-                    format!("{} values, expected {RH_LEN}", rh.len()),
-                ));
+                return Err(bad(r, name, format!("{} values, expected {RH_LEN}", rh.len())));
             }
         }
         if !["count", "frac", "int"].contains(&r.weighting.as_str()) {
-            return Err(bad(
-                r,
-                "weighting",
-                format!("`{}` is not count, frac or int", r.weighting),
-            ));
+            return Err(bad(r, "weighting", format!("`{}` is not count, frac or int", r.weighting)));
         }
         if let StudyAlgorithm::A(k) = r.algorithm {
             if !(1..=6).contains(&k) {
-                return Err(bad(
-                    r,
-                    "algorithm",
-                    format!("a{k} is not a GEDI algorithm (1..6)"),
-                ));
+                return Err(bad(r, "algorithm", format!("a{k} is not a GEDI algorithm (1..6)")));
             }
         }
         let group = classes::sensitivity_group(r.sensitivity).ok_or_else(|| {
-            bad(
-                r,
-                "sensitivity",
-                format!(
-                    "{} is below the study's 0.90 (apply the filter first)",
-                    r.sensitivity
-                ),
-            )
+            bad(r, "sensitivity", format!("{} is below the study's 0.90 (apply the filter first)", r.sensitivity))
         })?;
         groups.push(group);
         let ground = r.vertical_reference.to_als_datum(r.elev_lowestmode);
         gedi_ground.push(ground);
         rh_sim.append_value(r.rh_sim.iter().map(|&v| Some(v)));
         rh_gedi.append_value(r.rh_gedi.iter().map(|&v| Some(v)));
-        rh_aligned.append_value(
-            align_rh(&r.rh_gedi, ground, r.als_ground)
-                .into_iter()
-                .map(Some),
-        );
+        rh_aligned.append_value(align_rh(&r.rh_gedi, ground, r.als_ground).into_iter().map(Some));
     }
     let strings = |f: &dyn Fn(&ResultInput) -> String| -> ArrayRef {
         Arc::new(rows.iter().map(f).map(Some).collect::<StringArray>())
@@ -181,23 +155,11 @@ pub fn results_batch(rows: &[ResultInput]) -> Result<RecordBatch> {
         strings(&|r| r.beam.clone()),
         strings(&|r| r.beam_type.clone()),
         strings(&|r| {
-            r.forest_type
-                .as_deref()
-                .and_then(classes::parse_forest_type)
-                .unwrap_or(classes::UNKNOWN)
-                .to_string()
+            r.forest_type.as_deref().and_then(classes::parse_forest_type).unwrap_or(classes::UNKNOWN).to_string()
         }),
         strings(&|r| classes::phenology(r.leaf_off_flag).to_string()),
-        Arc::new(
-            rows.iter()
-                .map(|r| r.selected_algorithm)
-                .collect::<UInt8Array>(),
-        ),
-        Arc::new(
-            rows.iter()
-                .map(|r| r.sensitivity as f32)
-                .collect::<arrow::array::Float32Array>(),
-        ),
+        Arc::new(rows.iter().map(|r| r.selected_algorithm).collect::<UInt8Array>()),
+        Arc::new(rows.iter().map(|r| r.sensitivity as f32).collect::<arrow::array::Float32Array>()),
         Arc::new(groups.iter().map(|g| Some(*g)).collect::<StringArray>()),
         Arc::new(rows.iter().map(|r| r.slope_deg).collect::<Float64Array>()),
         strings(&|r| classes::slope_class(r.slope_deg).to_string()),
@@ -211,11 +173,7 @@ pub fn results_batch(rows: &[ResultInput]) -> Result<RecordBatch> {
         Arc::new(rh_sim.finish()),
         Arc::new(rh_gedi.finish()),
         Arc::new(rh_aligned.finish()),
-        Arc::new(
-            rows.iter()
-                .map(|r| r.r_collocation)
-                .collect::<Float64Array>(),
-        ),
+        Arc::new(rows.iter().map(|r| r.r_collocation).collect::<Float64Array>()),
     ];
     RecordBatch::try_new(results_schema(), columns).map_err(|e| Error::table("results", e))
 }
@@ -252,13 +210,7 @@ mod tests {
     #[test]
     fn derived_columns_come_from_the_kernels() {
         let b = results_batch(&[row()]).unwrap();
-        let s = |name: &str| {
-            b.column_by_name(name)
-                .unwrap()
-                .as_string::<i32>()
-                .value(0)
-                .to_string()
-        };
+        let s = |name: &str| b.column_by_name(name).unwrap().as_string::<i32>().value(0).to_string();
         assert_eq!(s("phenology"), "unknown");
         assert_eq!(s("sensitivity_group"), "high");
         assert_eq!(s("slope_class"), "[10,20)");
@@ -266,18 +218,10 @@ mod tests {
         assert_eq!(s("forest_type"), "coniferous");
         assert_eq!(s("vertical_reference"), "geoid");
         assert_eq!(s("algorithm"), "default");
-        let ground = b
-            .column_by_name("gedi_ground")
-            .unwrap()
-            .as_primitive::<arrow::datatypes::Float64Type>()
-            .value(0);
+        let ground = b.column_by_name("gedi_ground").unwrap().as_primitive::<arrow::datatypes::Float64Type>().value(0);
         assert_eq!(ground, 99.0);
         // GEDI ground 1 m below the ALS ground: aligned RH 1 m below GEDI's RH.
-        let aligned = b
-            .column_by_name("rh_aligned")
-            .unwrap()
-            .as_list::<i32>()
-            .value(0);
+        let aligned = b.column_by_name("rh_aligned").unwrap().as_list::<i32>().value(0);
         let aligned = aligned.as_primitive::<Float32Type>();
         assert!((aligned.value(100) - 20.0).abs() < 1e-5);
         assert!(b.column_by_name("r_collocation").unwrap().is_null(0));
@@ -289,28 +233,16 @@ mod tests {
         let mut r = row();
         r.rh_gedi.pop();
         let e = results_batch(&[r]).unwrap_err().to_string();
-        assert!(
-            e.contains("rh_gedi") && e.contains("100 values") && e.contains("19640513500108370"),
-            "{e}"
-        );
+        assert!(e.contains("rh_gedi") && e.contains("100 values") && e.contains("19640513500108370"), "{e}");
         let mut r = row();
         r.sensitivity = 0.5;
-        assert!(results_batch(&[r])
-            .unwrap_err()
-            .to_string()
-            .contains("sensitivity"));
+        assert!(results_batch(&[r]).unwrap_err().to_string().contains("sensitivity"));
         let mut r = row();
         r.weighting = "intensity".into();
-        assert!(results_batch(&[r])
-            .unwrap_err()
-            .to_string()
-            .contains("weighting"));
+        assert!(results_batch(&[r]).unwrap_err().to_string().contains("weighting"));
         let mut r = row();
         r.algorithm = StudyAlgorithm::A(7);
-        assert!(results_batch(&[r])
-            .unwrap_err()
-            .to_string()
-            .contains("algorithm"));
+        assert!(results_batch(&[r]).unwrap_err().to_string().contains("algorithm"));
     }
 
     #[test]
@@ -319,19 +251,7 @@ mod tests {
         r.forest_type = Some("pine".into());
         r.leaf_off_flag = Some(1);
         let b = results_batch(&[r]).unwrap();
-        assert_eq!(
-            b.column_by_name("forest_type")
-                .unwrap()
-                .as_string::<i32>()
-                .value(0),
-            "unknown"
-        );
-        assert_eq!(
-            b.column_by_name("phenology")
-                .unwrap()
-                .as_string::<i32>()
-                .value(0),
-            "leaf_off"
-        );
+        assert_eq!(b.column_by_name("forest_type").unwrap().as_string::<i32>().value(0), "unknown");
+        assert_eq!(b.column_by_name("phenology").unwrap().as_string::<i32>().value(0), "leaf_off");
     }
 }

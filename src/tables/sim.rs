@@ -8,9 +8,9 @@ use arrow::array::{ArrayRef, Float32Array, Float64Array, StringArray, UInt32Arra
 use arrow::datatypes::{DataType, Field, Schema, SchemaRef};
 use arrow::record_batch::RecordBatch;
 
-use super::offsets::AppliedOffset;
 use super::{list_f32, list_f32_builder};
 use crate::error::{Error, Result};
+use super::offsets::AppliedOffset;
 use crate::sim::{Footprint, Profile, SimulatedFootprint, SkipReason, Weighting};
 
 /// Schema of the simulated-waveform table.
@@ -62,9 +62,7 @@ pub fn status(r: &std::result::Result<SimulatedFootprint, SkipReason>) -> String
         Ok(_) => "ok".to_string(),
         Err(SkipReason::NoPoints) => "no_points".to_string(),
         Err(SkipReason::NoSignal) => "no_signal".to_string(),
-        Err(SkipReason::PartlyCovered { covered_fraction }) => {
-            format!("partly_covered:{covered_fraction:.3}")
-        }
+        Err(SkipReason::PartlyCovered { covered_fraction }) => format!("partly_covered:{covered_fraction:.3}"),
     }
 }
 
@@ -83,17 +81,11 @@ pub fn sim_batch(
     let mut wname = Vec::with_capacity(n);
     let mut st = Vec::with_capacity(n);
     let (mut z0, mut dz) = (Vec::with_capacity(n), Vec::with_capacity(n));
-    let (mut wave, mut ground, mut canopy, mut rh) = (
-        list_f32_builder(n),
-        list_f32_builder(n),
-        list_f32_builder(n),
-        list_f32_builder(n),
-    );
+    let (mut wave, mut ground, mut canopy, mut rh) =
+        (list_f32_builder(n), list_f32_builder(n), list_f32_builder(n), list_f32_builder(n));
     let (mut g, mut top, mut slope, mut cover) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let (mut npts, mut pd, mut bd, mut scan, mut cov) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let (mut off_id, mut off_dx, mut off_dy, mut off_dz) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut npts, mut pd, mut bd, mut scan, mut cov) = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut off_id, mut off_dx, mut off_dy, mut off_dz) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for (k, (fp, r)) in footprints.iter().zip(results).enumerate() {
         let off = applied.get(k).and_then(|o| o.as_ref());
         for &w in weightings {

@@ -50,12 +50,7 @@ pub const FIRST_SHOT: u64 = 19_640_500_100_100_000;
 
 /// Simulates the planted shots from `ds`'s ALS (default profile, count weighting) and writes them
 /// as a V2 L1B granule at `dest`. Returns the reported positions of the shots, beam by beam.
-pub fn write_planted_l1b(
-    ds: &Dataset,
-    beams: &[PlantedBeam],
-    plant: &Plant,
-    dest: &Path,
-) -> Vec<Vec<(f64, f64)>> {
+pub fn write_planted_l1b(ds: &Dataset, beams: &[PlantedBeam], plant: &Plant, dest: &Path) -> Vec<Vec<(f64, f64)>> {
     let als = AlsTable::open(ds).expect("ALS table");
     let proj = Projector::new(2154).unwrap();
     let cfg = SimConfig::new(Profile::Default);
@@ -65,53 +60,33 @@ pub fn write_planted_l1b(
         let reported: Vec<(f64, f64)> = (0..beam.shots)
             .map(|k| {
                 let t = k as f64 / (beam.shots - 1).max(1) as f64;
-                (
-                    beam.start.0 + t * (beam.end.0 - beam.start.0),
-                    beam.start.1 + t * (beam.end.1 - beam.start.1),
-                )
+                (beam.start.0 + t * (beam.end.0 - beam.start.0), beam.start.1 + t * (beam.end.1 - beam.start.1))
             })
             .collect();
         let truth: Vec<Footprint> = reported
             .iter()
             .enumerate()
-            .map(|(k, &(x, y))| Footprint {
-                id: k.to_string(),
-                x: x + plant.shift.0,
-                y: y + plant.shift.1,
-            })
+            .map(|(k, &(x, y))| Footprint { id: k.to_string(), x: x + plant.shift.0, y: y + plant.shift.1 })
             .collect();
         let half = 20.0;
-        let boxes: Vec<BBox> = truth
-            .iter()
-            .map(|f| [f.x - half, f.y - half, f.x + half, f.y + half])
-            .collect();
+        let boxes: Vec<BBox> = truth.iter().map(|f| [f.x - half, f.y - half, f.x + half, f.y + half]).collect();
         let (points, _) = als.points_near(&boxes).expect("ALS points");
         let sims = sim::simulate(&points, &truth, &cfg).expect("simulate");
         let mut shots = Vec::new();
         for (k, (s, &(x, y))) in sims.iter().zip(&reported).enumerate() {
             let s = s.as_ref().expect("planted shots are on the ALS");
-            let wave: Vec<f64> = s
-                .get(Weighting::Count)
-                .wave
-                .iter()
-                .map(|&v| v as f64)
-                .collect();
+            let wave: Vec<f64> = s.get(Weighting::Count).wave.iter().map(|&v| v as f64).collect();
             let signal_len = (((wave.len() - 1) as f64 * s.dz) / GEDI_BIN_M).floor() as usize + 1;
             let twin = ShotTwin {
                 energy_total: beam.energy,
-                noise: Noise {
-                    mean: 230.0,
-                    stddev: plant.noise_sigma,
-                },
+                noise: Noise { mean: 230.0, stddev: plant.noise_sigma },
                 sample_count: LEADING_SAMPLES + signal_len + 60,
                 tx_pulse: None,
                 quantum: 1.0,
                 noise_shape: NoiseShape::WHITE,
             };
             let seed = plant.seed + (b * 100_000 + k) as u64;
-            let made = twin
-                .apply(&wave, s.dz, LEADING_SAMPLES as isize, seed)
-                .expect("noise twin");
+            let made = twin.apply(&wave, s.dz, LEADING_SAMPLES as isize, seed).expect("noise twin");
             let n = made.wave.len();
             // Record sample i is simulated sample (i − LEADING)·GEDI_BIN_M below the first label.
             let bin0 = s.z0 + LEADING_SAMPLES as f64 * GEDI_BIN_M + plant.datum;

@@ -6,15 +6,12 @@ use std::path::Path;
 use std::sync::Arc;
 
 use arrow::array::{
-    ArrayRef, Float32Builder, Float64Array, ListBuilder, RecordBatch, StringArray, UInt32Array,
-    UInt64Array,
+    ArrayRef, Float32Builder, Float64Array, ListBuilder, RecordBatch, StringArray, UInt32Array, UInt64Array,
 };
 use arrow::datatypes::{DataType, Field, Schema};
 use gedisim::dataset::{write_parquet, Dataset};
 use gedisim::study::align::VerticalReference;
-use gedisim::tables::results::{
-    results_batch, results_metadata, results_schema, ResultInput, StudyAlgorithm,
-};
+use gedisim::tables::results::{results_batch, results_metadata, results_schema, ResultInput, StudyAlgorithm};
 
 /// Deterministic uniform numbers in [0, 1) (xorshift64*).
 pub struct Rng(u64);
@@ -44,12 +41,7 @@ pub const FORESTS: [&str; 4] = ["broadleaf", "coniferous", "mixed", "other"];
 /// Canopy truth of shot i: (als_ground, canopy height, slope, cover).
 pub fn truth(i: usize) -> (f64, f64, f64, f64) {
     let mut r = Rng::new(1000 + i as u64);
-    (
-        300.0 + 20.0 * r.next(),
-        8.0 + 25.0 * r.next(),
-        40.0 * r.next(),
-        r.next(),
-    )
+    (300.0 + 20.0 * r.next(), 8.0 + 25.0 * r.next(), 40.0 * r.next(), r.next())
 }
 
 /// `n` shots × 3 weightings × 7 algorithms of a synthetic study.
@@ -59,42 +51,20 @@ pub fn synthetic_results(n: usize) -> Vec<ResultInput> {
         let mut r = Rng::new(7 + i as u64);
         let (als_ground, height, slope, cover) = truth(i);
         let leaf_off_flag = [Some(0u8), Some(1), None][i % 3];
-        let rh_true: Vec<f64> = (0..=100)
-            .map(|k| height * (k as f64 / 100.0).powf(1.5) - 0.5)
-            .collect();
+        let rh_true: Vec<f64> = (0..=100).map(|k| height * (k as f64 / 100.0).powf(1.5) - 0.5).collect();
         let sens_base = 0.90 + 0.099 * r.next();
-        for (a, alg) in std::iter::once(StudyAlgorithm::Default)
-            .chain((1..=6).map(StudyAlgorithm::A))
-            .enumerate()
-        {
+        for (a, alg) in std::iter::once(StudyAlgorithm::Default).chain((1..=6).map(StudyAlgorithm::A)).enumerate() {
             let e = GROUND_OFFSET[a] + 0.3 * r.normal();
             let leaf = if leaf_off_flag == Some(1) { -1.0 } else { 0.0 };
-            let rh_gedi: Vec<f32> = rh_true
-                .iter()
-                .map(|h| (h - e + 0.5 * r.normal() + leaf) as f32)
-                .collect();
-            for (w, (scale, bias)) in
-                ["count", "frac", "int"]
-                    .into_iter()
-                    .zip([(0.95, 0.0), (1.0, 0.2), (1.02, -0.3)])
+            let rh_gedi: Vec<f32> = rh_true.iter().map(|h| (h - e + 0.5 * r.normal() + leaf) as f32).collect();
+            for (w, (scale, bias)) in ["count", "frac", "int"].into_iter().zip([(0.95, 0.0), (1.0, 0.2), (1.02, -0.3)])
             {
-                let rh_sim: Vec<f32> = rh_true
-                    .iter()
-                    .map(|h| (h * scale + bias + 0.4 * r.normal()) as f32)
-                    .collect();
+                let rh_sim: Vec<f32> = rh_true.iter().map(|h| (h * scale + bias + 0.4 * r.normal()) as f32).collect();
                 rows.push(ResultInput {
                     shot_number: FIRST_SHOT + i as u64,
                     granule: "GEDI02_A_2019108080338_O01964_T05337_02_001_01".into(),
-                    beam: if i % 2 == 0 {
-                        "BEAM0000".into()
-                    } else {
-                        "BEAM0101".into()
-                    },
-                    beam_type: if i % 2 == 0 {
-                        "coverage".into()
-                    } else {
-                        "full_power".into()
-                    },
+                    beam: if i % 2 == 0 { "BEAM0000".into() } else { "BEAM0101".into() },
+                    beam_type: if i % 2 == 0 { "coverage".into() } else { "full_power".into() },
                     forest_type: (i % 9 != 0).then(|| FORESTS[i % 4].to_string()),
                     leaf_off_flag,
                     selected_algorithm: Some(if i % 5 == 0 { 2 } else { 1 }),
@@ -105,9 +75,7 @@ pub fn synthetic_results(n: usize) -> Vec<ResultInput> {
                     algorithm: alg,
                     als_ground,
                     elev_lowestmode: als_ground + GEOID + e,
-                    vertical_reference: VerticalReference::Geoid {
-                        geoid_offset: GEOID,
-                    },
+                    vertical_reference: VerticalReference::Geoid { geoid_offset: GEOID },
                     rh_sim,
                     rh_gedi: rh_gedi.clone(),
                     r_collocation: (i % 4 != 0).then(|| 0.9 + 0.09 * r.next()),
@@ -121,13 +89,8 @@ pub fn synthetic_results(n: usize) -> Vec<ResultInput> {
 /// Write `rows` as `<dataset>/results/part-0.parquet`.
 pub fn write_results(ds: &Dataset, rows: &[ResultInput]) {
     let batch = results_batch(rows).unwrap();
-    write_parquet(
-        &ds.table_file("results", "part-0").unwrap(),
-        results_schema(),
-        &[batch],
-        &results_metadata(),
-    )
-    .unwrap();
+    write_parquet(&ds.table_file("results", "part-0").unwrap(), results_schema(), &[batch], &results_metadata())
+        .unwrap();
 }
 
 /// An offsets table of `n` segments with the contract's columns.
@@ -135,10 +98,7 @@ pub fn write_offsets(ds: &Dataset, n: usize) {
     let mut r = Rng::new(99);
     let f64s = |v: Vec<f64>| Arc::new(Float64Array::from(v)) as ArrayRef;
     let before: Vec<f64> = (0..n).map(|_| 0.6 + 0.3 * r.next()).collect();
-    let after: Vec<f64> = before
-        .iter()
-        .map(|b| (b + 0.05 + 0.1 * r.next()).min(0.999))
-        .collect();
+    let after: Vec<f64> = before.iter().map(|b| (b + 0.05 + 0.1 * r.next()).min(0.999)).collect();
     let mut shots = ListBuilder::new(arrow::array::UInt64Builder::new());
     for s in 0..n {
         shots.append_value((0..3).map(|k| Some(FIRST_SHOT + (3 * s + k) as u64)));
@@ -148,11 +108,7 @@ pub fn write_offsets(ds: &Dataset, n: usize) {
         Field::new("granule", DataType::Utf8, false),
         Field::new("beam", DataType::Utf8, false),
         Field::new("level", DataType::Utf8, false),
-        Field::new(
-            "shot_numbers",
-            DataType::List(Arc::new(Field::new_list_field(DataType::UInt64, true))),
-            false,
-        ),
+        Field::new("shot_numbers", DataType::List(Arc::new(Field::new_list_field(DataType::UInt64, true))), false),
         Field::new("n_shots", DataType::UInt32, false),
         Field::new("dx", DataType::Float64, false),
         Field::new("dy", DataType::Float64, false),
@@ -166,17 +122,9 @@ pub fn write_offsets(ds: &Dataset, n: usize) {
     ];
     let schema = Arc::new(Schema::new(fields));
     let cols: Vec<ArrayRef> = vec![
-        Arc::new(
-            (0..n)
-                .map(|s| Some(format!("seg{s:03}")))
-                .collect::<StringArray>(),
-        ),
+        Arc::new((0..n).map(|s| Some(format!("seg{s:03}"))).collect::<StringArray>()),
         Arc::new(StringArray::from(vec!["g"; n])),
-        Arc::new(
-            (0..n)
-                .map(|s| Some(if s % 2 == 0 { "BEAM0000" } else { "BEAM0101" }))
-                .collect::<StringArray>(),
-        ),
+        Arc::new((0..n).map(|s| Some(if s % 2 == 0 { "BEAM0000" } else { "BEAM0101" })).collect::<StringArray>()),
         Arc::new(StringArray::from(vec!["beam"; n])),
         Arc::new(shots.finish()),
         Arc::new(UInt32Array::from(vec![3; n])),
@@ -191,13 +139,7 @@ pub fn write_offsets(ds: &Dataset, n: usize) {
         f64s(vec![0.3; n]),
     ];
     let batch = RecordBatch::try_new(schema.clone(), cols).unwrap();
-    write_parquet(
-        &ds.table_file("offsets", "beam").unwrap(),
-        schema,
-        &[batch],
-        &Default::default(),
-    )
-    .unwrap();
+    write_parquet(&ds.table_file("offsets", "beam").unwrap(), schema, &[batch], &Default::default()).unwrap();
 }
 
 fn gauss(z: f64, mu: f64, s: f64) -> f64 {
@@ -209,16 +151,8 @@ fn gauss(z: f64, mu: f64, s: f64) -> f64 {
 pub fn write_shots_and_sim(ds: &Dataset, n: usize) {
     let list = || ListBuilder::new(Float32Builder::new());
     let (mut rx, mut sim_wave) = (list(), list());
-    let (mut sn, mut lat, mut lon, mut bin0, mut last, mut count, mut noise, mut elev) = (
-        vec![],
-        vec![],
-        vec![],
-        vec![],
-        vec![],
-        vec![],
-        vec![],
-        vec![],
-    );
+    let (mut sn, mut lat, mut lon, mut bin0, mut last, mut count, mut noise, mut elev) =
+        (vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
     let (mut fid, mut wt, mut st, mut z0s, mut dzs) = (vec![], vec![], vec![], vec![], vec![]);
     for i in 0..n {
         let (ground, h, _, _) = truth(i);
@@ -236,9 +170,8 @@ pub fn write_shots_and_sim(ds: &Dataset, n: usize) {
         rx.append_value((0..ns).map(|k| {
             let z = top - k as f64 * dz;
             Some(
-                (200.0
-                    + 300.0 * gauss(z, ground + GEOID, 0.8)
-                    + 150.0 * gauss(z, ground + GEOID + 0.7 * h, 2.5)) as f32,
+                (200.0 + 300.0 * gauss(z, ground + GEOID, 0.8) + 150.0 * gauss(z, ground + GEOID + 0.7 * h, 2.5))
+                    as f32,
             )
         }));
         for (w, canopy) in [("count", 0.8), ("frac", 1.0), ("int", 1.2)] {
@@ -282,11 +215,7 @@ pub fn write_shots_and_sim(ds: &Dataset, n: usize) {
         shots_schema.clone(),
         vec![
             Arc::new(UInt64Array::from(sn)),
-            Arc::new(
-                (0..n)
-                    .map(|i| Some(if i % 2 == 0 { "BEAM0000" } else { "BEAM0101" }))
-                    .collect::<StringArray>(),
-            ),
+            Arc::new((0..n).map(|i| Some(if i % 2 == 0 { "BEAM0000" } else { "BEAM0101" })).collect::<StringArray>()),
             opt(lat),
             opt(lon),
             none(n),
@@ -302,13 +231,7 @@ pub fn write_shots_and_sim(ds: &Dataset, n: usize) {
         ],
     )
     .unwrap();
-    write_parquet(
-        &ds.table_file("shots", "s").unwrap(),
-        shots_schema,
-        &[shots],
-        &Default::default(),
-    )
-    .unwrap();
+    write_parquet(&ds.table_file("shots", "s").unwrap(), shots_schema, &[shots], &Default::default()).unwrap();
     let sim_schema = Arc::new(Schema::new(vec![
         Field::new("footprint_id", DataType::Utf8, false),
         Field::new("weighting", DataType::Utf8, false),
@@ -329,22 +252,13 @@ pub fn write_shots_and_sim(ds: &Dataset, n: usize) {
         ],
     )
     .unwrap();
-    write_parquet(
-        &ds.table_file("sim", "shots").unwrap(),
-        sim_schema,
-        &[sim],
-        &Default::default(),
-    )
-    .unwrap();
+    write_parquet(&ds.table_file("sim", "shots").unwrap(), sim_schema, &[sim], &Default::default()).unwrap();
 }
 
 /// Read every row of a Parquet file.
 pub fn read(path: &Path) -> RecordBatch {
     let f = std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(f)
-        .unwrap()
-        .build()
-        .unwrap();
+    let r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(f).unwrap().build().unwrap();
     let batches: Vec<RecordBatch> = r.map(|b| b.unwrap()).collect();
     arrow::compute::concat_batches(&batches[0].schema(), &batches).unwrap()
 }
