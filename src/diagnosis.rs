@@ -269,32 +269,52 @@ fn reference_dz(offsets: &HashMap<u64, crate::tables::offsets::AppliedOffset>) -
 /// collocation redone with the vertical offset fixed at `dz`
 /// ([`crate::collocate::horizontal_offset_at`]), as an absolute position per shot.
 fn recollocate(als: &AlsTable, pending: &[Pending], dz: f64) -> Result<HashMap<u64, (f64, f64)>> {
-    use crate::collocate::{horizontal_offset_at, profile::real_profile, CollocateConfig, ShotInput};
+    use crate::collocate::{horizontal_offset_at, profile::real_profile, CollocateConfig, ShotInput, SUB_BATCH};
     let cfg = CollocateConfig::new(RECOLLOCATE_SHIFT_M, RECOLLOCATE_STEP_M)?;
     let half = cfg.support_half_width();
     let mut segments: std::collections::BTreeMap<&str, Vec<&Pending>> = Default::default();
     pending.iter().filter(|p| p.sites).for_each(|p| segments.entry(p.real.segment.as_str()).or_default().push(p));
+    let inputs: Vec<(&[&Pending], Vec<ShotInput>)> = segments
+        .values()
+        .map(|shots| {
+            let inputs = shots
+                .iter()
+                .filter_map(|p| {
+                    let r = &p.real;
+                    let real = real_profile(&r.wave, r.bin0, r.lastbin, cfg.model.res).ok()?;
+                    Some(ShotInput { x: p.reported.0, y: p.reported.1, real })
+                })
+                .collect();
+            (shots.as_slice(), inputs)
+        })
+        .collect();
+    // The points of whole segments of about SUB_BATCH shots are read together, like the
+    // collocation's.
     let mut out = HashMap::new();
-    for shots in segments.values() {
-        let inputs: Vec<ShotInput> = shots
-            .iter()
-            .filter_map(|p| {
-                let r = &p.real;
-                let real = real_profile(&r.wave, r.bin0, r.lastbin, cfg.model.res).ok()?;
-                Some(ShotInput { x: p.reported.0, y: p.reported.1, real })
-            })
-            .collect();
-        if inputs.is_empty() {
-            continue;
+    let mut chunk: Vec<&(&[&Pending], Vec<ShotInput>)> = Vec::new();
+    let mut solve = |chunk: &mut Vec<&(&[&Pending], Vec<ShotInput>)>| -> Result<()> {
+        let boxes: Vec<crate::als_table::BBox> =
+            chunk.iter().flat_map(|(_, i)| i).map(|s| [s.x - half, s.y - half, s.x + half, s.y + half]).collect();
+        if boxes.is_empty() {
+            return Ok(());
         }
-        let boxes: Vec<crate::als_table::BBox> = inputs.iter().map(|s| [s.x - half, s.y - half, s.x + half, s.y + half]).collect();
         let (cloud, _) = als.xyz_in_boxes(&boxes)?;
-        if let Some((ox, oy)) = horizontal_offset_at(&inputs, &cloud, &cfg, dz) {
-            for p in shots {
-                out.insert(p.real.shot_number, (p.reported.0 + ox, p.reported.1 + oy));
+        for (shots, inputs) in chunk.drain(..) {
+            if let Some((ox, oy)) = horizontal_offset_at(inputs, &cloud, &cfg, dz) {
+                for p in shots.iter() {
+                    out.insert(p.real.shot_number, (p.reported.0 + ox, p.reported.1 + oy));
+                }
             }
         }
+        Ok(())
+    };
+    for seg in inputs.iter().filter(|(_, i)| !i.is_empty()) {
+        chunk.push(seg);
+        if chunk.iter().map(|(_, i)| i.len()).sum::<usize>() >= SUB_BATCH {
+            solve(&mut chunk)?;
+        }
     }
+    solve(&mut chunk)?;
     Ok(out)
 }
 
@@ -347,7 +367,7 @@ fn simulate_cases(
             );
         }
         let vars = variants.iter().map(|cfg| sim::simulate(&points, &placed, cfg)).collect::<Result<Vec<_>>>()?;
-        for (j, (mut real, positions)) in reals.into_iter().enumerate() {
+        for (j, (mut real, _)) in reals.into_iter().enumerate() {
             on_shot();
             let Ok(n) = &nom[j] else {
                 count_dropped(report, "footprint not simulated (no ALS points or partly covered)");
@@ -358,7 +378,6 @@ fn simulate_cases(
                 count_dropped(report, "simulated footprint has no ground");
                 continue;
             };
-            let offset = |k: usize| (positions[k].0 - positions[0].0, positions[k].1 - positions[0].1);
             let mut sites = Vec::with_capacity(index[j].len());
             let mut dz = f64::NAN;
             for (k, &i) in index[j].iter().enumerate() {
@@ -370,10 +389,10 @@ fn simulate_cases(
                 match site_ground {
                     Some(g) if vs.len() == FSIGMA_GRID.len() => {
                         dz = vs[0].dz;
-                        sites.push(site_of(&vs, offset(k), g));
+                        sites.push(site_of(&vs, g));
                     }
                     _ if k == 0 => break,
-                    _ => sites.push(Site { dx: offset(k).0, dy: offset(k).1, z0: f64::NAN, variants: Vec::new(), als_ground: f64::NAN }),
+                    _ => sites.push(Site { z0: f64::NAN, variants: Vec::new(), als_ground: f64::NAN }),
                 }
             }
             if sites.is_empty() {
@@ -395,7 +414,7 @@ const NOMINAL_WIDTH: usize = 2;
 /// Put every width's parts of one position on one bin grid with [`PAD_M`] of empty bins above
 /// and below. The default profile's bins lie on one absolute lattice, so the grids differ by
 /// whole bins.
-fn site_of(vs: &[&sim::SimulatedFootprint], (dx, dy): (f64, f64), als_ground: f64) -> Site {
+fn site_of(vs: &[&sim::SimulatedFootprint], als_ground: f64) -> Site {
     let dz = vs[0].dz;
     let top = vs.iter().map(|v| v.z0).fold(f64::NEG_INFINITY, f64::max) + PAD_M;
     let bottom = vs.iter().map(|v| v.z0 - (v.n_bins() as f64 - 1.0) * dz).fold(f64::INFINITY, f64::min) - PAD_M;
@@ -419,7 +438,7 @@ fn site_of(vs: &[&sim::SimulatedFootprint], (dx, dy): (f64, f64), als_ground: f6
             }),
         })
         .collect();
-    Site { dx, dy, z0: top, variants, als_ground }
+    Site { z0: top, variants, als_ground }
 }
 
 /// What `diagnose` wrote.

@@ -79,13 +79,18 @@ fn assert_named_first(d: &Value, name: &str) {
     assert!(num(&first(d)["held_out"]["shrink"]) >= 0.5, "{:#}", first(d));
 }
 
+/// The first effect's parameter `key` lies within `tolerance` of the `planted` value.
+fn assert_param(d: &Value, key: &str, planted: f64, tolerance: f64) {
+    let v = num(&first(d)["params"][key]);
+    assert!((v - planted).abs() <= tolerance, "{key} {v} (planted {planted})");
+}
+
 #[test]
 fn datum_world_names_datum_and_recovers_dz() {
     let tmp = tempfile::tempdir().unwrap();
     let d = diagnose_world(tmp.path(), "datum", &["--magnitude", "2", "--seed", "11"]);
     assert_named_first(&d, "datum");
-    let dz = num(&first(&d)["params"]["dz_m"]);
-    assert!((dz - 1.0).abs() <= 0.2, "dz_m {dz} (planted 1.0)");
+    assert_param(&d, "dz_m", 1.0, 0.2);
 }
 
 #[test]
@@ -94,8 +99,7 @@ fn ground_detection_world_names_ground_detection() {
     let d = diagnose_world(tmp.path(), "ground_detection", &["--seed", "12"]);
     assert_named_first(&d, "ground_detection");
     assert_eq!(first(&d)["params"]["algorithm"], "all");
-    let offset = num(&first(&d)["params"]["offset_m"]);
-    assert!((offset - 0.5).abs() <= 0.1, "offset_m {offset} (planted 0.5)");
+    assert_param(&d, "offset_m", 0.5, 0.1);
 }
 
 #[test]
@@ -105,8 +109,7 @@ fn canopy_change_world_names_canopy_change() {
     let tmp = tempfile::tempdir().unwrap();
     let d = diagnose_world(tmp.path(), "canopy_change", &["--magnitude", "2", "--seed", "14"]);
     assert_named_first(&d, "canopy_change");
-    let height = num(&first(&d)["params"]["height_m"]);
-    assert!((height - 10.0).abs() <= 2.0, "height_m {height} (planted 10)");
+    assert_param(&d, "height_m", 10.0, 2.0);
 }
 
 #[test]
@@ -116,8 +119,7 @@ fn pulse_world_names_pulse_and_recovers_its_width() {
     let tmp = tempfile::tempdir().unwrap();
     let d = diagnose_world(tmp.path(), "pulse", &["--seed", "15"]);
     assert_named_first(&d, "pulse");
-    let sigma = num(&first(&d)["params"]["pulse_sigma_m"]);
-    assert!((sigma - 1.5).abs() <= 0.3, "pulse_sigma_m {sigma} (planted 1.5)");
+    assert_param(&d, "pulse_sigma_m", 1.5, 0.3);
 }
 
 #[test]

@@ -118,9 +118,6 @@ pub fn site_grid() -> Vec<(f64, f64)> {
 /// grid (bin k at `z0 − k·dz`, ALS datum).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Site {
-    /// Offset (m) from the collocated position.
-    pub dx: f64,
-    pub dy: f64,
     pub z0: f64,
     /// Empty when the position could not be simulated at every width (never chosen).
     pub variants: Vec<SimVariant>,

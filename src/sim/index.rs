@@ -42,6 +42,46 @@ impl Cells {
     }
 }
 
+/// Items filed into the occupied cells of an unbounded grid of cells keyed (row, column), in
+/// key order (row-major; each cell in filing order). Only occupied cells cost memory, so points
+/// or footprints kilometres apart (tiles scattered along a track) need no grid over their
+/// bounding box.
+#[derive(Debug, Clone)]
+struct SparseCells {
+    keys: Vec<(i64, i64)>,
+    /// Cell `keys[k]` holds `items[start[k]..start[k + 1]]`.
+    start: Vec<usize>,
+    items: Vec<u32>,
+}
+
+impl SparseCells {
+    /// Files `(cell, item)` pairs given in increasing item order; a cell keeps that order.
+    fn build(mut filed: Vec<((i64, i64), u32)>) -> SparseCells {
+        filed.sort_unstable();
+        let mut keys: Vec<(i64, i64)> = Vec::new();
+        let mut start = Vec::new();
+        for (k, &(key, _)) in filed.iter().enumerate() {
+            if keys.last() != Some(&key) {
+                keys.push(key);
+                start.push(k);
+            }
+        }
+        start.push(filed.len());
+        SparseCells { keys, start, items: filed.into_iter().map(|(_, item)| item).collect() }
+    }
+
+    /// Positions in `items` of the cells (row, i0..=i1): one contiguous range.
+    fn row_span(&self, row: i64, i0: i64, i1: i64) -> std::ops::Range<usize> {
+        let a = self.keys.partition_point(|&k| k < (row, i0));
+        let b = self.keys.partition_point(|&k| k <= (row, i1));
+        self.start[a]..self.start[b.max(a)]
+    }
+
+    fn cell(&self, key: (i64, i64)) -> &[u32] {
+        &self.items[self.row_span(key.0, key.1, key.1)]
+    }
+}
+
 /// The top level of gediRat's octree (0 levels below, 40 cells along the longer side).
 #[derive(Debug, Clone)]
 pub struct Octree {
@@ -110,58 +150,45 @@ impl Octree {
 struct BoxLookup<'a> {
     centres: &'a [(f64, f64)],
     half: f64,
-    origin: (f64, f64),
+    /// Cells of `size` m anchored at multiples of `size`.
     size: f64,
-    nx: usize,
-    ny: usize,
-    cells: Cells,
+    cells: SparseCells,
 }
 
 impl<'a> BoxLookup<'a> {
     fn new(centres: &'a [(f64, f64)], half: f64) -> BoxLookup<'a> {
         let size = (2.0 * half).max(1.0);
-        let min_x = centres.iter().map(|c| c.0).fold(f64::INFINITY, f64::min) - half;
-        let min_y = centres.iter().map(|c| c.1).fold(f64::INFINITY, f64::min) - half;
-        let max_x = centres.iter().map(|c| c.0).fold(f64::NEG_INFINITY, f64::max) + half;
-        let max_y = centres.iter().map(|c| c.1).fold(f64::NEG_INFINITY, f64::max) + half;
-        let nx = ((max_x - min_x) / size) as usize + 1;
-        let ny = ((max_y - min_y) / size) as usize + 1;
-        let cell = |v: f64, o: f64, n: usize| (((v - o) / size).floor().max(0.0) as usize).min(n - 1);
-        // A box covers the cells between those of its corners (the cell map is monotone).
+        let cell = |v: f64| (v / size).floor() as i64;
+        // A box covers the cells between those of its corners.
         let mut filed = Vec::new();
-        for (f, &(x, y)) in centres.iter().enumerate() {
-            for j in cell(y - half, min_y, ny)..=cell(y + half, min_y, ny) {
-                for i in cell(x - half, min_x, nx)..=cell(x + half, min_x, nx) {
-                    filed.push((f as u32, j * nx + i));
+        for (f, &(x, y)) in centres.iter().enumerate().filter(|(_, c)| c.0.is_finite() && c.1.is_finite()) {
+            for j in cell(y - half)..=cell(y + half) {
+                for i in cell(x - half)..=cell(x + half) {
+                    filed.push(((j, i), f as u32));
                 }
             }
         }
-        filed.sort_by_key(|&(_, c)| c);
-        BoxLookup { centres, half, origin: (min_x, min_y), size, nx, ny, cells: Cells::build(nx * ny, &filed) }
+        BoxLookup { centres, half, size, cells: SparseCells::build(filed) }
     }
 
     fn contains(&self, x: f64, y: f64) -> bool {
-        let i = ((x - self.origin.0) / self.size).floor();
-        let j = ((y - self.origin.1) / self.size).floor();
-        if !(i >= 0.0 && j >= 0.0 && (i as usize) < self.nx && (j as usize) < self.ny) {
+        if !(x.is_finite() && y.is_finite()) {
             return false;
         }
-        self.cells.cell(j as usize * self.nx + i as usize).iter().any(|&f| {
+        let key = ((y / self.size).floor() as i64, (x / self.size).floor() as i64);
+        self.cells.cell(key).iter().any(|&f| {
             let (cx, cy) = self.centres[f as usize];
             x >= cx - self.half && x <= cx + self.half && y >= cy - self.half && y <= cy + self.half
         })
     }
 }
 
-/// Default spatial index: points sorted into square cells anchored at multiples of `size`.
+/// Default spatial index: points sorted into square cells anchored at multiples of `size`
+/// (only occupied cells are stored).
 #[derive(Debug, Clone)]
 pub struct CellGrid {
     size: f64,
-    /// Absolute index (floor(x/size), floor(y/size)) of cell (0, 0).
-    first: (i64, i64),
-    nx: usize,
-    ny: usize,
-    cells: Cells,
+    cells: SparseCells,
 }
 
 impl CellGrid {
@@ -172,27 +199,15 @@ impl CellGrid {
 
     /// Files every point (x[i], y[i]) with finite coordinates into cells of `size` m.
     pub fn from_xy(x: &[f64], y: &[f64], size: f64) -> CellGrid {
-        let abs = |v: f64| (v / size).floor() as i64;
-        let n = x.len().min(y.len());
-        let finite = |i: &usize| x[*i].is_finite() && y[*i].is_finite();
-        let (mut lo, mut hi) = ((i64::MAX, i64::MAX), (i64::MIN, i64::MIN));
-        for i in (0..n).filter(finite) {
-            let (cx, cy) = (abs(x[i]), abs(y[i]));
-            lo = (lo.0.min(cx), lo.1.min(cy));
-            hi = (hi.0.max(cx), hi.1.max(cy));
-        }
-        if lo.0 > hi.0 {
-            return CellGrid { size, first: (0, 0), nx: 0, ny: 0, cells: Cells::build(0, &[]) };
-        }
-        let (nx, ny) = ((hi.0 - lo.0 + 1) as usize, (hi.1 - lo.1 + 1) as usize);
-        let filed: Vec<(u32, usize)> = (0..n)
-            .filter(finite)
-            .map(|i| {
-                let (cx, cy) = ((abs(x[i]) - lo.0) as usize, (abs(y[i]) - lo.1) as usize);
-                (i as u32, cy * nx + cx)
-            })
+        let cell = |v: f64| (v / size).floor() as i64;
+        let filed: Vec<((i64, i64), u32)> = x
+            .iter()
+            .zip(y)
+            .enumerate()
+            .filter(|(_, (x, y))| x.is_finite() && y.is_finite())
+            .map(|(i, (&x, &y))| ((cell(y), cell(x)), i as u32))
             .collect();
-        CellGrid { size, first: lo, nx, ny, cells: Cells::build(nx * ny, &filed) }
+        CellGrid { size, cells: SparseCells::build(filed) }
     }
 
     /// Point indices in cell order (row by row), i.e. the order [`CellGrid::candidates`] reads.
@@ -203,21 +218,70 @@ impl CellGrid {
     /// Appends to `out` the positions (in [`CellGrid::order`]) of the points of every cell that
     /// meets the box [x0 ± half] × [y0 ± half], row by row.
     pub fn candidates(&self, x0: f64, y0: f64, half: f64, out: &mut Vec<u32>) {
-        if self.nx == 0 {
+        if !(x0.is_finite() && y0.is_finite() && half.is_finite()) {
             return;
         }
-        let rel = |v: f64, first: i64, n: usize| ((v / self.size).floor() as i64 - first).clamp(-1, n as i64);
-        let (i0, i1) = (rel(x0 - half, self.first.0, self.nx), rel(x0 + half, self.first.0, self.nx));
-        let (j0, j1) = (rel(y0 - half, self.first.1, self.ny), rel(y0 + half, self.first.1, self.ny));
-        for j in j0.max(0)..=j1.min(self.ny as i64 - 1) {
-            let row = j as usize * self.nx;
-            let (a, b) = (i0.max(0) as usize, i1.min(self.nx as i64 - 1));
-            if b < a as i64 {
-                continue;
-            }
+        let cell = |v: f64| (v / self.size).floor() as i64;
+        let (i0, i1) = (cell(x0 - half), cell(x0 + half));
+        for j in cell(y0 - half)..=cell(y0 + half) {
             // Cells of a row are contiguous in `order`: one range per row.
-            let (s, e) = (self.cells.start[row + a], self.cells.start[row + b as usize + 1]);
-            out.extend(s as u32..e as u32);
+            let span = self.cells.row_span(j, i0, i1);
+            out.extend(span.start as u32..span.end as u32);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Brute force: indices of the points inside the cells meeting the box, row by row.
+    fn brute(x: &[f64], y: &[f64], size: f64, (x0, y0, half): (f64, f64, f64)) -> Vec<u32> {
+        let c = |v: f64| (v / size).floor() as i64;
+        let mut hits: Vec<((i64, i64), u32)> = (0..x.len())
+            .filter(|&i| (c(x0 - half)..=c(x0 + half)).contains(&c(x[i])) && (c(y0 - half)..=c(y0 + half)).contains(&c(y[i])))
+            .map(|i| ((c(y[i]), c(x[i])), i as u32))
+            .collect();
+        hits.sort();
+        hits.into_iter().map(|(_, i)| i).collect()
+    }
+
+    fn candidates(grid: &CellGrid, query: (f64, f64, f64)) -> Vec<u32> {
+        let mut out = Vec::new();
+        grid.candidates(query.0, query.1, query.2, &mut out);
+        out.into_iter().map(|k| grid.order()[k as usize]).collect()
+    }
+
+    #[test]
+    fn cell_grid_matches_brute_force_in_row_order() {
+        // A pseudo-random cloud (LCG), some points on cell edges, one non-finite.
+        let mut state = 12345u64;
+        let mut next = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut x, mut y): (Vec<f64>, Vec<f64>) = (0..2000).map(|_| (700_000.0 + 80.0 * next(), 6_500_000.0 + 80.0 * next())).unzip();
+        x.extend([700_010.0, 700_015.0, f64::NAN]);
+        y.extend([6_500_020.0, 6_500_025.0, 6_500_030.0]);
+        let grid = CellGrid::from_xy(&x, &y, 5.0);
+        assert_eq!(grid.order().len(), x.len() - 1, "the non-finite point is not filed");
+        for query in [(700_040.0, 6_500_040.0, 12.5), (700_010.0, 6_500_020.0, 5.0), (699_990.0, 6_500_001.0, 3.0), (800_000.0, 0.0, 10.0)] {
+            assert_eq!(candidates(&grid, query), brute(&x, &y, 5.0, query), "{query:?}");
+        }
+    }
+
+    #[test]
+    fn far_apart_points_need_no_grid_over_their_bounding_box() {
+        // Two tiles 900 km apart along a track: a dense 5 m grid over their bounding box would
+        // hold 3·10^10 cells.
+        let x = [100_000.0, 100_003.5, 1_000_000.0, 1_000_001.0];
+        let y = [6_000_000.0, 6_000_001.0, 6_900_000.0, 6_900_004.0];
+        let grid = CellGrid::from_xy(&x, &y, 5.0);
+        assert_eq!(candidates(&grid, (100_001.0, 6_000_000.0, 6.0)), vec![0, 1]);
+        assert_eq!(candidates(&grid, (1_000_000.5, 6_900_002.0, 6.0)), vec![2, 3]);
+        let centres = [(100_001.0, 6_000_000.0), (1_000_000.0, 6_900_000.0)];
+        let boxes = BoxLookup::new(&centres, 2.0);
+        let inside: Vec<bool> = x.iter().zip(&y).map(|(&x, &y)| boxes.contains(x, y)).collect();
+        assert_eq!(inside, vec![true, false, true, false], "boxes are inclusive: 100 003.5 lies 0.5 m outside");
     }
 }
