@@ -288,33 +288,31 @@ fn recollocate(als: &AlsTable, pending: &[Pending], dz: f64) -> Result<HashMap<u
             (shots.as_slice(), inputs)
         })
         .collect();
-    // The points of whole segments of about SUB_BATCH shots are read together, like the
-    // collocation's.
+    // Whole segments, about SUB_BATCH shots at a time, share one read, like the collocation's.
     let mut out = HashMap::new();
-    let mut chunk: Vec<&(&[&Pending], Vec<ShotInput>)> = Vec::new();
-    let mut solve = |chunk: &mut Vec<&(&[&Pending], Vec<ShotInput>)>| -> Result<()> {
+    let mut start = 0;
+    while start < inputs.len() {
+        let (mut end, mut n) = (start, 0);
+        while end < inputs.len() && n < SUB_BATCH {
+            n += inputs[end].1.len();
+            end += 1;
+        }
+        let chunk = &inputs[start..end];
+        start = end;
         let boxes: Vec<crate::als_table::BBox> =
             chunk.iter().flat_map(|(_, i)| i).map(|s| [s.x - half, s.y - half, s.x + half, s.y + half]).collect();
         if boxes.is_empty() {
-            return Ok(());
+            continue;
         }
         let (cloud, _) = als.xyz_in_boxes(&boxes)?;
-        for (shots, inputs) in chunk.drain(..) {
+        for (shots, inputs) in chunk.iter().filter(|(_, i)| !i.is_empty()) {
             if let Some((ox, oy)) = horizontal_offset_at(inputs, &cloud, &cfg, dz) {
                 for p in shots.iter() {
                     out.insert(p.real.shot_number, (p.reported.0 + ox, p.reported.1 + oy));
                 }
             }
         }
-        Ok(())
-    };
-    for seg in inputs.iter().filter(|(_, i)| !i.is_empty()) {
-        chunk.push(seg);
-        if chunk.iter().map(|(_, i)| i.len()).sum::<usize>() >= SUB_BATCH {
-            solve(&mut chunk)?;
-        }
     }
-    solve(&mut chunk)?;
     Ok(out)
 }
 
