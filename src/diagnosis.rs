@@ -49,9 +49,9 @@ struct Pending {
     footprint: Footprint,
     /// Reported position (m, ALS CRS).
     reported: (f64, f64),
-    /// Simulate it also at the [`site_grid`] (its collocation segment is short), or only at the
-    /// collocated position.
-    sites: bool,
+    /// Its collocation segment is short ([`SHORT_SEGMENT_SHOTS`]): its [`site_grid`] is centred on
+    /// the segment's re-collocated position and simulated at every width.
+    short_segment: bool,
 }
 
 /// Read every usable shot of the dataset with its simulations. `on_shot` is called per shot
@@ -67,7 +67,7 @@ pub fn read_cases(ds: &Dataset, on_shot: &(dyn Fn() + Sync)) -> Result<(Vec<Shot
     let mut segment_shots: HashMap<&str, usize> = HashMap::new();
     offsets.values().for_each(|o| *segment_shots.entry(o.segment_id.as_str()).or_default() += 1);
     for p in &mut pending {
-        p.sites = segment_shots.get(p.real.segment.as_str()).is_some_and(|&n| n < SHORT_SEGMENT_SHOTS);
+        p.short_segment = segment_shots.get(p.real.segment.as_str()).is_some_and(|&n| n < SHORT_SEGMENT_SHOTS);
     }
     let als = AlsTable::open(ds)?;
     let centres = recollocate(&als, &pending, reference_dz(&offsets))?;
@@ -235,7 +235,7 @@ fn read_shots(
                 ..Default::default()
             },
         };
-        out.push(Pending { real, footprint: Footprint { id: shot.to_string(), x: px + dx, y: py + dy }, reported: (px, py), sites: false });
+        out.push(Pending { real, footprint: Footprint { id: shot.to_string(), x: px + dx, y: py + dy }, reported: (px, py), short_segment: false });
     }
     Ok(())
 }
@@ -273,7 +273,7 @@ fn recollocate(als: &AlsTable, pending: &[Pending], dz: f64) -> Result<HashMap<u
     let cfg = CollocateConfig::new(RECOLLOCATE_SHIFT_M, RECOLLOCATE_STEP_M)?;
     let half = cfg.support_half_width();
     let mut segments: std::collections::BTreeMap<&str, Vec<&Pending>> = Default::default();
-    pending.iter().filter(|p| p.sites).for_each(|p| segments.entry(p.real.segment.as_str()).or_default().push(p));
+    pending.iter().filter(|p| p.short_segment).for_each(|p| segments.entry(p.real.segment.as_str()).or_default().push(p));
     let inputs: Vec<(&[&Pending], Vec<ShotInput>)> = segments
         .values()
         .map(|shots| {
@@ -330,42 +330,51 @@ fn simulate_cases(
     let fmax = FSIGMA_GRID[FSIGMA_GRID.len() - 1] as f32;
     let half = sim::footprint::gauss_sep(fmax, sim::footprint::I_THRESH) as f64 + 1.0;
     let grid = site_grid();
-    // Site 0 at the collocated position, then the grid around the segment's re-collocated centre.
-    let items: Vec<(Footprint, (RealShot, Vec<(f64, f64)>))> = pending
+    // Site 0 at the collocated position, then the grid around the short segment's re-collocated
+    // centre (every width) or around the collocated position (a long segment: nominal width).
+    let items: Vec<(Footprint, (RealShot, bool, Vec<(f64, f64)>))> = pending
         .into_iter()
         .map(|p| {
-            let mut sites = vec![(p.footprint.x, p.footprint.y)];
-            if let Some(&(cx, cy)) = centres.get(&p.real.shot_number).filter(|_| p.sites) {
+            let (x0, y0) = (p.footprint.x, p.footprint.y);
+            let centre = if p.short_segment { centres.get(&p.real.shot_number).copied() } else { Some((x0, y0)) };
+            let mut sites = vec![(x0, y0)];
+            if let Some((cx, cy)) = centre {
                 sites.extend(grid.iter().map(|(dx, dy)| (cx + dx, cy + dy)));
             }
-            (p.footprint, (p.real, sites))
+            (p.footprint, (p.real, p.short_segment, sites))
         })
         .collect();
     let mut cases = Vec::new();
     for block in crate::simulate::blocks(items) {
         let mut bb = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
-        for (x, y) in block.iter().flat_map(|(_, (_, sites))| sites.iter().copied()) {
+        for (x, y) in block.iter().flat_map(|(_, (_, _, sites))| sites.iter().copied()) {
             bb = [bb[0].min(x - half), bb[1].min(y - half), bb[2].max(x + half), bb[3].max(y + half)];
         }
         let (points, _) = als.points_in(bb)?;
-        let (fps, reals): (Vec<Footprint>, Vec<(RealShot, Vec<(f64, f64)>)>) = block.into_iter().unzip();
+        let (fps, reals): (Vec<Footprint>, Vec<(RealShot, bool, Vec<(f64, f64)>)>) = block.into_iter().unzip();
         let nom = sim::simulate(&points, &fps, &nominal)?;
-        // Every site of every shot of the block as one footprint: index[j][k] for shot j, site k.
-        let mut placed: Vec<Footprint> = Vec::new();
-        let mut index: Vec<Vec<usize>> = Vec::with_capacity(fps.len());
-        for (f, (_, sites)) in fps.iter().zip(&reals) {
+        // Sites simulated at every width (site 0, a short segment's grid) and at the nominal one
+        // (a long segment's grid), each as one footprint: index[j][k] = (light, i) for shot j,
+        // site k.
+        let (mut full, mut light): (Vec<Footprint>, Vec<Footprint>) = (Vec::new(), Vec::new());
+        let mut index: Vec<Vec<(bool, usize)>> = Vec::with_capacity(fps.len());
+        for (f, (_, short, sites)) in fps.iter().zip(&reals) {
             index.push(
                 sites
                     .iter()
-                    .map(|&(x, y)| {
-                        placed.push(Footprint { id: f.id.clone(), x, y });
-                        placed.len() - 1
+                    .enumerate()
+                    .map(|(k, &(x, y))| {
+                        let is_light = k > 0 && !short;
+                        let list = if is_light { &mut light } else { &mut full };
+                        list.push(Footprint { id: f.id.clone(), x, y });
+                        (is_light, list.len() - 1)
                     })
                     .collect(),
             );
         }
-        let vars = variants.iter().map(|cfg| sim::simulate(&points, &placed, cfg)).collect::<Result<Vec<_>>>()?;
-        for (j, (mut real, _)) in reals.into_iter().enumerate() {
+        let vars = variants.iter().map(|cfg| sim::simulate(&points, &full, cfg)).collect::<Result<Vec<_>>>()?;
+        let light_vars = sim::simulate(&points, &light, &variants[NOMINAL_WIDTH])?;
+        for (j, (mut real, short, positions)) in reals.into_iter().enumerate() {
             on_shot();
             let Ok(n) = &nom[j] else {
                 count_dropped(report, "footprint not simulated (no ALS points or partly covered)");
@@ -378,19 +387,27 @@ fn simulate_cases(
             };
             let mut sites = Vec::with_capacity(index[j].len());
             let mut dz = f64::NAN;
-            for (k, &i) in index[j].iter().enumerate() {
-                let vs: Vec<&sim::SimulatedFootprint> = vars.iter().filter_map(|v| v[i].as_ref().ok()).collect();
+            let (x0, y0) = positions[0];
+            for (k, &(is_light, i)) in index[j].iter().enumerate() {
+                let vs: Vec<&sim::SimulatedFootprint> = if is_light {
+                    light_vars[i].as_ref().ok().into_iter().collect()
+                } else {
+                    vars.iter().filter_map(|v| v[i].as_ref().ok()).collect()
+                };
+                let complete = vs.len() == if is_light { 1 } else { FSIGMA_GRID.len() };
                 // The collocated position keeps the nominal run's ground; another site needs
-                // every width and a ground of its own, or is kept empty (never chosen) so that
+                // its widths and a ground of its own, or is kept empty (never chosen) so that
                 // site k is the same offset for every shot of the segment.
-                let site_ground = if k == 0 { Some(ground) } else { vs.get(NOMINAL_WIDTH).and_then(|v| v.get(Weighting::Count).truth.als_ground) };
+                let nominal_width = if is_light { vs.first() } else { vs.get(NOMINAL_WIDTH) };
+                let site_ground = if k == 0 { Some(ground) } else { nominal_width.and_then(|v| v.get(Weighting::Count).truth.als_ground) };
+                let offset = (positions[k].0 - x0, positions[k].1 - y0);
                 match site_ground {
-                    Some(g) if vs.len() == FSIGMA_GRID.len() => {
+                    Some(g) if complete => {
                         dz = vs[0].dz;
-                        sites.push(site_of(&vs, g));
+                        sites.push(site_of(&vs, g, offset));
                     }
                     _ if k == 0 => break,
-                    _ => sites.push(Site { z0: f64::NAN, variants: Vec::new(), als_ground: f64::NAN }),
+                    _ => sites.push(Site { z0: f64::NAN, variants: Vec::new(), als_ground: f64::NAN, offset }),
                 }
             }
             if sites.is_empty() {
@@ -400,7 +417,7 @@ fn simulate_cases(
             real.strata.slope_class = classes::slope_class(count.truth.slope_deg.map(f64::from)).to_string();
             let cover = f64::from(count.truth.als_cover);
             real.strata.cover_class = classes::cover_class((cover >= 0.0).then_some(cover)).to_string();
-            cases.push(ShotCase { real, sim: SimShot { dz, sites, rh_nominal: rh.to_vec() }, mismatch: [false; N_ALGORITHMS] });
+            cases.push(ShotCase { real, sim: Arc::new(SimShot { dz, sites, short_segment: short, rh_nominal: rh.to_vec() }), mismatch: [false; N_ALGORITHMS] });
         }
     }
     Ok(cases)
@@ -412,7 +429,7 @@ const NOMINAL_WIDTH: usize = 2;
 /// Put every width's parts of one position on one bin grid with [`PAD_M`] of empty bins above
 /// and below. The default profile's bins lie on one absolute lattice, so the grids differ by
 /// whole bins.
-fn site_of(vs: &[&sim::SimulatedFootprint], als_ground: f64) -> Site {
+fn site_of(vs: &[&sim::SimulatedFootprint], als_ground: f64, offset: (f64, f64)) -> Site {
     let dz = vs[0].dz;
     let top = vs.iter().map(|v| v.z0).fold(f64::NEG_INFINITY, f64::max) + PAD_M;
     let bottom = vs.iter().map(|v| v.z0 - (v.n_bins() as f64 - 1.0) * dz).fold(f64::INFINITY, f64::min) - PAD_M;
@@ -436,7 +453,7 @@ fn site_of(vs: &[&sim::SimulatedFootprint], als_ground: f64) -> Site {
             }),
         })
         .collect();
-    Site { z0: top, variants, als_ground }
+    Site { z0: top, variants, als_ground, offset }
 }
 
 /// What `diagnose` wrote.
@@ -536,6 +553,12 @@ fn trial_json(t: &Trial) -> Value {
             "waveform_shrink": h.profile_shrink().map_or(Value::Null, finite),
             "score": finite(h.score()),
             "before": gap_json(&h.before), "after": gap_json(&h.after),
+            "measure": if h.spread.is_some() { "excess_msd" } else { "systematic_gap" },
+            "spread": h.spread.as_ref().map_or(Value::Null, |s| json!({
+                "msd_segments_replaced": finite(s.msd[0]), "msd_shots_replaced": finite(s.msd[1]),
+                "floor_msd_segments_replaced": finite(s.floor[0]), "floor_msd_shots_replaced": finite(s.floor[1]),
+                "excess_msd_before": finite(s.excess()[0]), "excess_msd_after": finite(s.excess()[1]),
+            })),
         },
         "fold_params": t.fold_effects.iter().map(|e| e.as_ref().map_or(Value::Null, params_json)).collect::<Vec<_>>(),
     })

@@ -115,23 +115,31 @@ pub fn site_grid() -> Vec<(f64, f64)> {
 }
 
 /// The simulation of a shot at one horizontal position: every [`FSIGMA_GRID`] width on one bin
-/// grid (bin k at `z0 − k·dz`, ALS datum).
+/// grid (bin k at `z0 − k·dz`, ALS datum) — or, at the grid sites of a long segment's shot (used
+/// by the `geolocation` hypotheses only), the nominal width alone, which then stands for every
+/// width.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Site {
     pub z0: f64,
-    /// Empty when the position could not be simulated at every width (never chosen).
+    /// Empty when the position could not be simulated (never chosen).
     pub variants: Vec<SimVariant>,
     /// ALS ground at this position (count weighting, σ_f 5.5 m) (m).
     pub als_ground: f64,
+    /// Horizontal position relative to the collocated one (site 0), m.
+    pub offset: (f64, f64),
 }
 
-/// The simulated side of one shot: the collocated position (site 0) and, for a shot of a short
-/// collocation segment, the [`site_grid`] around its segment's re-collocated centre, among which
-/// each hypothesis re-places the segment (`chain::reposition`).
+/// The simulated side of one shot: the collocated position (site 0) and the [`site_grid`] around
+/// its segment's re-collocated centre (a short segment: every width) or around the collocated
+/// position (a long segment: the nominal width), among which the hypotheses re-place the shot
+/// (`chain::reposition`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SimShot {
     pub dz: f64,
     pub sites: Vec<Site>,
+    /// The shot's collocation segment is short ([`SHORT_SEGMENT_SHOTS`]): every hypothesis
+    /// re-places the segment as one. Other shots move only under a `geolocation` hypothesis.
+    pub short_segment: bool,
     /// Noise-free RH0..RH100 of the nominal physics (count, 15 ns pulse, 5.5 m) from the ALS
     /// ground at the collocated position: the study's baseline simulated RH.
     pub rh_nominal: Vec<f32>,
@@ -148,7 +156,8 @@ impl SimShot {
 #[derive(Debug, Clone, PartialEq)]
 pub struct ShotCase {
     pub real: RealShot,
-    pub sim: SimShot,
+    /// Shared: the noise-twin null of a hypothesis (`chain::null_case`) reuses it.
+    pub sim: std::sync::Arc<SimShot>,
     /// Algorithms whose real ground disagrees grossly with the nominal chain's (a different
     /// mode picked: [`crate::diagnose::flag_ground_mismatches`]); left out of every gap.
     pub mismatch: [bool; N_ALGORITHMS],

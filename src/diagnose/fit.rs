@@ -7,16 +7,22 @@
 use rayon::prelude::*;
 
 use super::case::{ShotCase, FSIGMA_GRID};
-use super::chain::{predict, real_products, reposition, Model, Scratch};
+use super::chain::{null_cases, predict, real_products, reposition, Model, Scratch};
 use super::gap::GapSums;
 use super::profile::{self, ShotProfile};
 use crate::gedi::N_ALGORITHMS;
-use crate::scenario::effects::{Effect, WeightMethod, NOMINAL_PULSE_SIGMA_M};
+use crate::scenario::effects::{Effect, GeoLevel, WeightMethod, NOMINAL_PULSE_SIGMA_M};
 
-/// The effects the diagnosis fits, in registry order (`geolocation` needs per-shot collocation,
-/// not done yet: see docs/diagnosis.md).
-pub const FITTED_EFFECTS: [&str; 8] =
-    ["datum", "weighting", "pulse", "footprint", "noise", "canopy_change", "occlusion", "ground_detection"];
+/// The effects the diagnosis fits, in registry order.
+pub const FITTED_EFFECTS: [&str; 9] =
+    ["geolocation", "datum", "weighting", "pulse", "footprint", "noise", "canopy_change", "occlusion", "ground_detection"];
+
+/// The `geolocation` hypotheses: every segment re-placed as one (`beam`: the reference a per-shot
+/// error is judged against, since the per-track collocation leaves an error of its own) and every
+/// shot on its own (`shot`).
+pub fn geolocation(level: GeoLevel) -> Effect {
+    Effect::Geolocation { level, shot_sigma_m: 0.0 }
+}
 
 /// The gap of one shot under a model, and its ground differences per algorithm.
 #[derive(Debug, Clone, Default)]
@@ -129,6 +135,9 @@ pub fn fit(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
     if cases.is_empty() {
         return None;
     }
+    if name == "geolocation" {
+        return fit_geolocation(base, cases);
+    }
     let base = reposition(cases, base);
     let mut effect = fit_placed(name, &base, cases)?;
     if RESHAPING_EFFECTS.contains(&name) {
@@ -143,6 +152,32 @@ pub fn fit(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
         }
     }
     Some(effect)
+}
+
+/// Fit `geolocation` on top of `base`: the RMS per axis of the shots' own re-placements away from
+/// their segment's (`level` shot against `beam`), with the same RMS of the noise-twin nulls (a
+/// shot whose segment position is exact still moves, to fit its noise) removed in quadrature.
+/// `None` without shots that can move.
+fn fit_geolocation(base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
+    let beam = base.with(geolocation(GeoLevel::Beam));
+    let shot = base.with(geolocation(GeoLevel::Shot));
+    let mean_square = |cases: &[&ShotCase]| -> Option<f64> {
+        let (b, s) = (reposition(cases, &beam), reposition(cases, &shot));
+        let d: Vec<f64> = cases
+            .iter()
+            .filter(|c| c.sim.sites.len() > 1)
+            .map(|c| {
+                let (p, q) = (b.site(c).offset, s.site(c).offset);
+                0.5 * ((q.0 - p.0).powi(2) + (q.1 - p.1).powi(2))
+            })
+            .collect();
+        (!d.is_empty()).then(|| d.iter().sum::<f64>() / d.len() as f64)
+    };
+    let real = mean_square(cases)?;
+    let nulls = null_cases(cases, &reposition(cases, &beam));
+    let null_refs: Vec<&ShotCase> = nulls.iter().map(|(_, c)| c).collect();
+    let floor = mean_square(&null_refs).unwrap_or(0.0);
+    Some(Effect::Geolocation { level: GeoLevel::Shot, shot_sigma_m: (real - floor).max(0.0).sqrt() })
 }
 
 /// Fit the effect `name` on top of `base` (positions as `base` places them) to `cases`.

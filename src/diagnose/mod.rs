@@ -50,7 +50,7 @@ pub fn diagnose(mut cases: Vec<ShotCase>, names: &[&str], on_step: &dyn Fn(&str)
         Some(t) => t.held_out.before.clone(),
         None => fit::total(&rank::State::nominal(&folds).gaps).metrics(),
     };
-    let n_replaceable = cases.iter().filter(|c| c.sim.sites.len() > 1).count();
+    let n_replaceable = cases.iter().filter(|c| c.sim.short_segment && c.sim.sites.len() > 1).count();
     Diagnosis { where_, nominal, ranking, n_shots: cases.len(), n_replaceable, n_tracks: folds.n_tracks, mismatched }
 }
 

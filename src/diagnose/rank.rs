@@ -13,11 +13,11 @@
 use std::collections::BTreeMap;
 
 use super::case::ShotCase;
-use super::chain::{reposition, Model};
-use super::fit::{evaluate, fit, ShotGap};
+use super::chain::{null_cases, reposition, Model};
+use super::fit::{evaluate, fit, geolocation, ShotGap};
 use super::gap::{GapMetrics, GapSums};
 use super::profile::ProfileSums;
-use crate::scenario::effects::Effect;
+use crate::scenario::effects::{Effect, GeoLevel};
 use crate::scenario::rng::Stream;
 
 /// An effect is named only when the lower bound of its held-out shrink's 95 % interval reaches
@@ -26,6 +26,11 @@ pub const MIN_SHRINK_LOWER: f64 = 0.10;
 /// …and the lower end of its gain's interval must reach this (m of systematic gap): a relative
 /// shrink of a gap that is already within a few centimetres of nothing names nothing either.
 pub const MIN_GAIN_M: f64 = 0.02;
+/// Smallest per-shot geolocation offset (RMS per axis, m) named: half the spacing of the sites a
+/// shot can be re-placed to. Finer offsets cannot be told from what the collocation leaves of
+/// the per-track offset (on the long-track control, per-shot re-placement still "finds" offsets
+/// of 0.5–0.7 m RMS above the noise-twin floor).
+pub const MIN_SHOT_SIGMA_M: f64 = super::case::SITE_STEP_M / 2.0;
 /// Bootstrap resamples of the tracks.
 pub const BOOTSTRAP: usize = 400;
 /// Most effects on the ladder.
@@ -128,6 +133,38 @@ pub struct Comparison {
     pub shrink_mean_abs_bias: f64,
     /// Waveform-level gap (`profile::ProfileSums::chi2`) before and after.
     pub profile_chi2: [f64; 2],
+    /// For an effect judged on spread (`geolocation`): the excess MSD over the noise-twin floor,
+    /// from which `shrink`, `ci95` and `gain_ci95` then come.
+    pub spread: Option<Spread>,
+}
+
+/// The spread gap of a `geolocation` hypothesis on held-out tracks: the MSD of the real shots
+/// above that of their noise-twin nulls (`chain::null_case`, re-placed the same way), with every
+/// segment re-placed as one (before) and every shot on its own (after). The null absorbs what
+/// re-placement gains by fitting noise; what remains is what per-shot offsets explain.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Spread {
+    /// MSD (m²) of the real shots, segments re-placed / shots re-placed.
+    pub msd: [f64; 2],
+    /// MSD (m²) of the nulls, likewise.
+    pub floor: [f64; 2],
+}
+
+impl Spread {
+    /// Excess MSD (m²) before and after.
+    pub fn excess(&self) -> [f64; 2] {
+        [self.msd[0] - self.floor[0], self.msd[1] - self.floor[1]]
+    }
+}
+
+/// 1 − after/before of the excess MSD, and the gain in excess RMS (m: √before − √after, each
+/// clipped at 0); (0, 0) without excess before.
+fn spread_shrink(s: &Spread) -> (f64, f64) {
+    let [b, a] = s.excess();
+    if !(b > 1e-12) || !a.is_finite() {
+        return (0.0, 0.0);
+    }
+    (1.0 - a / b, b.sqrt() - a.max(0.0).sqrt())
 }
 
 impl Comparison {
@@ -142,6 +179,9 @@ impl Comparison {
     /// waveform-level shrink, or the RH shrink alone for an effect that leaves the waveforms
     /// unchanged.
     pub fn score(&self) -> f64 {
+        if self.spread.is_some() {
+            return self.shrink;
+        }
         match self.profile_shrink() {
             Some(p) => 0.5 * (self.shrink + p),
             None => self.shrink,
@@ -175,7 +215,60 @@ pub fn compare(folds: &Folds, before: &[ShotGap], after: &[ShotGap], seed_label:
         }
     }
     let profile_chi2 = [profile_sums(before).chi2(), profile_sums(after).chi2()];
-    Comparison { before: b, after: a, shrink, ci95: interval(shrinks), gain_ci95: interval(gains), shrink_mean_abs_bias, profile_chi2 }
+    Comparison { before: b, after: a, shrink, ci95: interval(shrinks), gain_ci95: interval(gains), shrink_mean_abs_bias, profile_chi2, spread: None }
+}
+
+/// The held-out comparison of `geolocation` (`models`: the state's fold models with it): the
+/// RH gap as [`compare`] gives it against the state's, and the shrink, intervals and gain from
+/// the spread ([`Spread`]) with a bootstrap over tracks.
+fn compare_spread(folds: &Folds, state: &State, models: &[Model; 2], after: &[ShotGap]) -> Comparison {
+    let n = folds.cases.len();
+    let mut real_before = vec![ShotGap::default(); n];
+    let mut null_track: Vec<usize> = Vec::new();
+    let (mut null_before, mut null_after) = (Vec::new(), Vec::new());
+    for f in 0..2 {
+        let idx: Vec<usize> = (0..n).filter(|&i| folds.fold[i] == f).collect();
+        let cases: Vec<&ShotCase> = idx.iter().map(|&i| folds.cases[i]).collect();
+        let beam = state.folds[f].with(geolocation(GeoLevel::Beam));
+        let placed = reposition(&cases, &beam);
+        for (&i, g) in idx.iter().zip(evaluate(&cases, &placed)) {
+            real_before[i] = g;
+        }
+        let nulls = null_cases(&cases, &placed);
+        let refs: Vec<&ShotCase> = nulls.iter().map(|(_, c)| c).collect();
+        null_track.extend(nulls.iter().map(|(j, _)| folds.track[idx[*j]]));
+        null_before.extend(evaluate(&refs, &reposition(&refs, &beam)));
+        null_after.extend(evaluate(&refs, &reposition(&refs, &models[f])));
+    }
+    let tracks = |gaps: &[ShotGap], track: &[usize]| {
+        let mut t = vec![GapSums::default(); folds.n_tracks];
+        gaps.iter().zip(track).for_each(|(g, &i)| t[i].merge(&g.sums));
+        t
+    };
+    let sets = [
+        tracks(&real_before, &folds.track),
+        tracks(after, &folds.track),
+        tracks(&null_before, &null_track),
+        tracks(&null_after, &null_track),
+    ];
+    let spread_of = |pick: &[usize]| {
+        let m: Vec<f64> = sets.iter().map(|t| sum_of(t, pick).metrics().msd).collect();
+        Spread { msd: [m[0], m[1]], floor: [m[2], m[3]] }
+    };
+    let all: Vec<usize> = (0..folds.n_tracks).collect();
+    let spread = spread_of(&all);
+    let (shrink, _) = spread_shrink(&spread);
+    let (mut shrinks, mut gains) = (Vec::new(), Vec::new());
+    for pick in folds.resamples("geolocation") {
+        let s = spread_of(&pick);
+        if s.msd.iter().chain(&s.floor).all(|v| v.is_finite()) {
+            let (sh, g) = spread_shrink(&s);
+            shrinks.push(sh);
+            gains.push(g);
+        }
+    }
+    let base = compare(folds, &state.gaps, after, "geolocation");
+    Comparison { shrink, ci95: interval(shrinks), gain_ci95: interval(gains), spread: Some(spread), ..base }
 }
 
 /// Order trials: those that explain first, each group by its held-out score
@@ -208,8 +301,12 @@ pub struct Trial {
 impl Trial {
     /// The intervals admit a real gain: shrink ≥ [`MIN_SHRINK_LOWER`] and gain ≥ [`MIN_GAIN_M`]
     /// at their lower ends.
+    /// An effect judged on spread (`geolocation`) must also be resolved: its per-shot offsets,
+    /// fitted on each calibration fold, at least [`MIN_SHOT_SIGMA_M`].
     pub fn explains(&self) -> bool {
-        self.held_out.ci95[0] >= MIN_SHRINK_LOWER && self.held_out.gain_ci95[0] >= MIN_GAIN_M
+        let resolved = self.held_out.spread.is_none()
+            || self.fold_effects.iter().all(|e| matches!(e, Some(Effect::Geolocation { shot_sigma_m, .. }) if *shot_sigma_m >= MIN_SHOT_SIGMA_M));
+        resolved && self.held_out.ci95[0] >= MIN_SHRINK_LOWER && self.held_out.gain_ci95[0] >= MIN_GAIN_M
     }
 }
 
@@ -240,7 +337,7 @@ pub fn try_effect(folds: &Folds, state: &State, name: &str) -> Option<Trial> {
         None => state.folds[f].clone(),
     });
     let gaps = folds.held_out(&models);
-    let held_out = compare(folds, &state.gaps, &gaps, name);
+    let held_out = if name == "geolocation" { compare_spread(folds, state, &models, &gaps) } else { compare(folds, &state.gaps, &gaps, name) };
     Some(Trial { effect, fold_effects: fitted, held_out, gaps })
 }
 
@@ -327,6 +424,7 @@ mod tests {
             gain_ci95: [0.05, 0.1],
             shrink_mean_abs_bias: 0.5,
             profile_chi2: chi2,
+            spread: None,
         };
         assert_eq!(c([1000.0, 1000.0]).profile_shrink(), None);
         assert_eq!(c([1000.0, 1000.0]).score(), 0.6);
