@@ -739,11 +739,13 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
         let best = d.ranking.effects.first();
         lines.push(match best {
             Some(t) => format!(
-                "Which: unexplained — the best candidate, {}, shrinks the held-out gap by {:.0} % (95 % CI {:.0} to {:.0} %), not enough to name it.",
+                "Which: unexplained — the best candidate, {}, shrinks the held-out {} by {:.0} % (95 % CI {:.0} to {:.0} %), not enough to name it{}.",
                 t.effect.name(),
+                if t.held_out.spread.is_some() { "excess spread" } else { "gap" },
                 100.0 * t.held_out.shrink,
                 100.0 * t.held_out.ci95[0],
-                100.0 * t.held_out.ci95[1]
+                100.0 * t.held_out.ci95[1],
+                if t.held_out.spread.is_some() { format!(" (or its per-shot offsets are under {} m)", crate::diagnose::rank::MIN_SHOT_SIGMA_M) } else { String::new() }
             ),
             None => "Which: unexplained — no effect could be fitted.".into(),
         });
@@ -758,13 +760,15 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
                     other => format!("{k} = {other}"),
                 })
                 .collect();
+            let gap = match &t.held_out.spread {
+                Some(s) => format!("held-out MSD above the noise floor {:.2} → {:.2} m²", s.excess()[0], s.excess()[1]),
+                None => format!("held-out gap {:.2} → {:.2} m", t.held_out.before.mean_abs_bias, t.held_out.after.mean_abs_bias),
+            };
             lines.push(format!(
-                "{} {} ({}): held-out gap {:.2} → {:.2} m, shrink {:.0} % (95 % CI {:.0}–{:.0} %).",
+                "{} {} ({}): {gap}, shrink {:.0} % (95 % CI {:.0}–{:.0} %).",
                 if i == 0 { "Which:" } else { "  then" },
                 t.effect.name(),
                 params.join(", "),
-                t.held_out.before.mean_abs_bias,
-                t.held_out.after.mean_abs_bias,
                 100.0 * t.held_out.shrink,
                 100.0 * t.held_out.ci95[0],
                 100.0 * t.held_out.ci95[1]
