@@ -243,12 +243,12 @@ pub fn reposition(cases: &[&ShotCase], model: &Model) -> Model {
         .collect();
     // Per unit moved as one (segment or shot): summed r per site (NaN once any shot lacks the
     // site) and its shots.
-    let mut units: HashMap<String, (Vec<f64>, Vec<u64>)> = HashMap::new();
+    let mut units: HashMap<(&str, u64), (Vec<f64>, Vec<u64>)> = HashMap::new();
     for (c, sc) in cases.iter().zip(&scores) {
         if sc.is_empty() {
             continue;
         }
-        let key = if level == Some(GeoLevel::Shot) { c.real.shot_number.to_string() } else { c.real.segment.clone() };
+        let key = (c.real.segment.as_str(), if level == Some(GeoLevel::Shot) { c.real.shot_number } else { 0 });
         let (sum, shots) = units.entry(key).or_insert_with(|| (vec![0.0; sc.len()], Vec::new()));
         if sum.len() == sc.len() {
             sum.iter_mut().zip(sc).for_each(|(a, b)| *a += b);

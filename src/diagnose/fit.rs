@@ -161,23 +161,26 @@ pub fn fit(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
 fn fit_geolocation(base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
     let beam = base.with(geolocation(GeoLevel::Beam));
     let shot = base.with(geolocation(GeoLevel::Shot));
-    let mean_square = |cases: &[&ShotCase]| -> Option<f64> {
-        let (b, s) = (reposition(cases, &beam), reposition(cases, &shot));
-        let d: Vec<f64> = cases
-            .iter()
-            .filter(|c| c.sim.sites.len() > 1)
-            .map(|c| {
-                let (p, q) = (b.site(c).offset, s.site(c).offset);
-                0.5 * ((q.0 - p.0).powi(2) + (q.1 - p.1).powi(2))
-            })
-            .collect();
-        (!d.is_empty()).then(|| d.iter().sum::<f64>() / d.len() as f64)
-    };
-    let real = mean_square(cases)?;
-    let nulls = null_cases(cases, &reposition(cases, &beam));
-    let null_refs: Vec<&ShotCase> = nulls.iter().map(|(_, c)| c).collect();
-    let floor = mean_square(&null_refs).unwrap_or(0.0);
+    let placed = reposition(cases, &beam);
+    let real = mean_square_move(cases, &placed, &reposition(cases, &shot))?;
+    let nulls = null_cases(cases, &placed);
+    let refs: Vec<&ShotCase> = nulls.iter().map(|(_, c)| c).collect();
+    let floor = mean_square_move(&refs, &reposition(&refs, &beam), &reposition(&refs, &shot)).unwrap_or(0.0);
     Some(Effect::Geolocation { level: GeoLevel::Shot, shot_sigma_m: (real - floor).max(0.0).sqrt() })
+}
+
+/// Mean over the shots that have sites of ½|site offset under `to` − under `from`|² (m², per
+/// axis); `None` without such shots.
+fn mean_square_move(cases: &[&ShotCase], from: &Model, to: &Model) -> Option<f64> {
+    let d: Vec<f64> = cases
+        .iter()
+        .filter(|c| c.sim.sites.len() > 1)
+        .map(|c| {
+            let (p, q) = (from.site(c).offset, to.site(c).offset);
+            0.5 * ((q.0 - p.0).powi(2) + (q.1 - p.1).powi(2))
+        })
+        .collect();
+    (!d.is_empty()).then(|| d.iter().sum::<f64>() / d.len() as f64)
 }
 
 /// Fit the effect `name` on top of `base` (positions as `base` places them) to `cases`.

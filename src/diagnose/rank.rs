@@ -86,8 +86,13 @@ impl<'a> Folds<'a> {
     }
 
     fn per_track(&self, gaps: &[ShotGap]) -> Vec<GapSums> {
+        self.per_track_of(gaps, &self.track)
+    }
+
+    /// Sums per track of `gaps`, the track of gap i being `track[i]`.
+    fn per_track_of(&self, gaps: &[ShotGap], track: &[usize]) -> Vec<GapSums> {
         let mut t = vec![GapSums::default(); self.n_tracks];
-        for (g, &i) in gaps.iter().zip(&self.track) {
+        for (g, &i) in gaps.iter().zip(track) {
             t[i].merge(&g.sums);
         }
         t
@@ -240,16 +245,11 @@ fn compare_spread(folds: &Folds, state: &State, models: &[Model; 2], after: &[Sh
         null_before.extend(evaluate(&refs, &reposition(&refs, &beam)));
         null_after.extend(evaluate(&refs, &reposition(&refs, &models[f])));
     }
-    let tracks = |gaps: &[ShotGap], track: &[usize]| {
-        let mut t = vec![GapSums::default(); folds.n_tracks];
-        gaps.iter().zip(track).for_each(|(g, &i)| t[i].merge(&g.sums));
-        t
-    };
     let sets = [
-        tracks(&real_before, &folds.track),
-        tracks(after, &folds.track),
-        tracks(&null_before, &null_track),
-        tracks(&null_after, &null_track),
+        folds.per_track(&real_before),
+        folds.per_track(after),
+        folds.per_track_of(&null_before, &null_track),
+        folds.per_track_of(&null_after, &null_track),
     ];
     let spread_of = |pick: &[usize]| {
         let m: Vec<f64> = sets.iter().map(|t| sum_of(t, pick).metrics().msd).collect();
