@@ -12,7 +12,7 @@ mod nasa;
 use std::hint::black_box;
 use std::time::Instant;
 
-use gedisim::process::l2a::{AlgorithmSettings, GaussianKernel, L2aProcessor};
+use gedisim::kernels::waveform::l2a::{AlgorithmSettings, GaussianKernel, L2aProcessor};
 
 /// Repetitions of each measurement; the best is reported (least disturbed by other processes).
 const REPEATS: usize = 3;

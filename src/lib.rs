@@ -1,29 +1,20 @@
 //! gedisim: simulate NASA GEDI waveforms from airborne lidar (ALS), process real and simulated
 //! waveforms the way GEDI L2A does, and measure the sim-to-real gap.
 //!
-//! Layout (see `docs/ARCHITECTURE.md`): pure kernels (`sim`, `process`, `collocate`) know nothing
-//! of files or Arrow; adapters (`ingest`, `dataset`, `sql`) convert between files, Arrow and kernels.
+//! Layout (docs/ARCHITECTURE.md), dependencies pointing one way (`tests/layout.rs` checks it):
+//! - [`ops`]: one operation per command, files in and files out; the only place that sequences steps.
+//! - [`kernels`]: pure computation (simulator, L2A, collocation, study, scenario, diagnosis).
+//! - [`io`]: foreign formats (LAS/LAZ, GEDI HDF5, CSV) read and written.
+//! - [`dataset`]: the store: table folders, schemas, atomic Parquet writes.
+//! - [`sql`]: the DataFusion session and gedisim's SQL functions.
+//!
+//! The command line (`src/main.rs`, `src/cli/`) parses arguments and calls `ops`.
 
-pub mod als_table;
-pub mod collocate;
-pub mod collocation;
 pub mod dataset;
-pub mod demo;
-pub mod diagnose;
-pub mod diagnosis;
 pub mod error;
-pub mod gedi;
-pub mod geo;
-pub mod ingest;
-pub mod process;
-pub mod report;
-pub mod run;
-pub mod scenario;
-pub mod scenario_io;
-pub mod sim;
-pub mod simulate;
+pub mod io;
+pub mod kernels;
+pub mod ops;
 pub mod sql;
-pub mod study;
-pub mod tables;
 
 pub use error::{Error, Result};

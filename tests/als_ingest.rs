@@ -14,7 +14,7 @@ use parquet::file::statistics::Statistics;
 
 use common::{data, files_with_suffix, gedisim};
 use gedisim::dataset::Dataset;
-use gedisim::ingest::als::{ingest_tiles, AlsOptions, TileOutcome};
+use gedisim::ops::ingest_als::{ingest_tiles, AlsOptions, TileOutcome};
 
 fn ingest(dir: &Path, files: &[&Path], opts: &AlsOptions) -> gedisim::Result<Vec<TileOutcome>> {
     let ds = Dataset::create(dir).unwrap();

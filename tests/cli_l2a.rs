@@ -28,7 +28,7 @@ fn l2a_cli_rows_agree_with_nasa() {
     assert!(!ok && err.contains("--algorithms"), "{err}");
 
     // NASA's values per (shot, algorithm), through our own ingest.
-    let (batches, _) = gedisim::ingest::gedi::read_gedi(&[l1b], &[l2a], &Default::default()).unwrap();
+    let (batches, _) = gedisim::ops::ingest_gedi::read_gedi(&[l1b], &[l2a], &Default::default()).unwrap();
     let mut nasa: HashMap<(u64, u8), (f64, Vec<f32>)> = HashMap::new();
     for b in &batches {
         let sn = b.column_by_name("shot_number").unwrap().as_primitive::<UInt64Type>();
@@ -75,7 +75,7 @@ fn l2a_cli_rows_agree_with_nasa() {
 /// `no_result: <reason>` status and null values, never a failed run or a panic.
 #[test]
 fn l2a_cli_reports_bad_waveforms_as_no_result_rows() {
-    use gedisim::gedi::granule::{v2_file_name, write_l1b_v2, Beam, GranuleMeta, L1bShot};
+    use gedisim::io::granule::{v2_file_name, write_l1b_v2, Beam, GranuleMeta, L1bShot};
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join(v2_file_name("01_B", "2023100120000", 1, 1, 1));
     let signal: Vec<f32> = (0..600).map(|i| 220.0 + 400.0 * (-0.5 * ((i as f32 - 300.0) / 6.0).powi(2)).exp()).collect();

@@ -7,9 +7,9 @@
 mod common;
 
 use common::data;
-use gedisim::collocate::raster::offset_waves;
-use gedisim::collocate::CollocateConfig;
-use gedisim::sim::{self, Footprint, Weighting};
+use gedisim::kernels::collocate::raster::offset_waves;
+use gedisim::kernels::collocate::CollocateConfig;
+use gedisim::kernels::sim::{self, Footprint, Weighting};
 
 /// Largest |raster − brute force| over the peak of the brute-force waveform, both normalised to a
 /// unit integral, on the absolute bins.
@@ -47,8 +47,8 @@ fn raster_matches_brute_force_simulation_at_every_tested_offset() {
     let offsets = [(10, 10), (14, 7), (0, 0), (20, 20), (0, 20), (3, 16), (10, 0)];
     let mut report = Vec::new();
     for (tile, centre) in [("lidarforfuel_1_42", (817622.0, 6460817.0)), ("lidarforfuel_2_bas_lig", (368528.0, 6807456.0))] {
-        let points = gedisim::ingest::las::read_points(&data(&format!("als/{tile}.laz"))).unwrap();
-        let points = gedisim::simulate::drop_ingest_classes(&points);
+        let points = gedisim::io::las::read_points(&data(&format!("als/{tile}.laz"))).unwrap();
+        let points = gedisim::ops::simulate::drop_ingest_classes(&points);
         let worst = max_relative_difference(&points, centre, &offsets, 0.0);
         report.push(format!("{tile}: {worst:.2e}"));
         assert!(worst < 1e-4, "{tile}: raster differs from the brute-force simulator by {worst:e} of the peak");
@@ -101,7 +101,7 @@ fn base_dataset() -> &'static Path {
         let base = tmp.join("collocate-base");
         let _ = std::fs::remove_dir_all(&base);
         let ds = Dataset::create(&base).unwrap();
-        gedisim::ingest::als::ingest_tiles(&ds, &[scene], &Default::default(), &|_| {}).unwrap();
+        gedisim::ops::ingest_als::ingest_tiles(&ds, &[scene], &Default::default(), &|_| {}).unwrap();
         base
     })
 }
@@ -117,7 +117,7 @@ fn planted_dataset(geoid_offset: Option<&str>) -> tempfile::TempDir {
         std::fs::copy(&f, als.join(f.file_name().unwrap())).unwrap();
     }
     let ds = Dataset::open(tmp.path()).unwrap();
-    let l1b = tmp.path().join(gedisim::gedi::granule::v2_file_name("01_B", "2019108080338", 1964, 2, 5337));
+    let l1b = tmp.path().join(gedisim::io::granule::v2_file_name("01_B", "2019108080338", 1964, 2, 5337));
     write_planted_l1b(&ds, &beams(), &PLANT, &l1b);
     let mut args = vec!["ingest", "gedi", "--l1b", l1b.to_str().unwrap(), "--out", tmp.path().to_str().unwrap()];
     if let Some(n) = geoid_offset {
@@ -290,7 +290,7 @@ fn shot_level_gives_every_shot_an_offset_from_its_neighbours() {
 fn one_tile_dataset() -> tempfile::TempDir {
     let tmp = tempfile::tempdir().unwrap();
     let ds = Dataset::create(tmp.path()).unwrap();
-    gedisim::ingest::als::ingest_tiles(&ds, &[data("als/lidarforfuel_2_bas_lig.laz")], &Default::default(), &|_| {}).unwrap();
+    gedisim::ops::ingest_als::ingest_tiles(&ds, &[data("als/lidarforfuel_2_bas_lig.laz")], &Default::default(), &|_| {}).unwrap();
     tmp
 }
 
@@ -350,7 +350,7 @@ fn shots_off_the_als_and_short_runs_are_reported_not_solved() {
     let ds = Dataset::open(tmp.path()).unwrap();
     let (x0, y0) = TILE_MIN;
     let beam = PlantedBeam { name: "BEAM1011", start: (x0 + 35.0, y0 + 35.0), end: (x0 + 65.0, y0 + 65.0), shots: 10, energy: 6000.0 };
-    let l1b = tmp.path().join(gedisim::gedi::granule::v2_file_name("01_B", "2019108080338", 1964, 2, 5337));
+    let l1b = tmp.path().join(gedisim::io::granule::v2_file_name("01_B", "2019108080338", 1964, 2, 5337));
     write_planted_l1b(&ds, &[beam], &PLANT, &l1b);
     let dir = tmp.path().to_str().unwrap();
     let (ok, _, err) = gedisim(&["ingest", "gedi", "--l1b", l1b.to_str().unwrap(), "--out", dir]);

@@ -1,5 +1,5 @@
 //! GEDI L1B/L2A ingest: the real V1 subsets in tests/data/gedi (provenance there), V2 fixtures
-//! written with `gedisim::gedi::granule`, and bad inputs derived from those fixtures.
+//! written with `gedisim::io::granule`, and bad inputs derived from those fixtures.
 
 use std::path::{Path, PathBuf};
 use std::slice::from_ref;
@@ -7,11 +7,11 @@ use std::slice::from_ref;
 use arrow::array::{Array, AsArray, RecordBatch};
 use arrow::compute::concat_batches;
 use arrow::datatypes::{DataType, Float64Type, Int16Type, Int8Type, UInt32Type, UInt64Type, UInt8Type};
-use gedisim::gedi::granule::{
+use gedisim::io::granule::{
     v2_file_name, write_l1b_v2, write_l2a_v2, write_values, Beam, GranuleMeta, L1bShot, L2aShot, Values,
 };
-use gedisim::geo::projection::Projector;
-use gedisim::ingest::gedi::{granule_key, ingest_gedi, read_gedi, shots_schema, GediOptions, IngestReport};
+use gedisim::kernels::geo::projection::Projector;
+use gedisim::ops::ingest_gedi::{granule_key, ingest_gedi, read_gedi, shots_schema, GediOptions, IngestReport};
 use hdf5::types::{IntSize, TypeDescriptor};
 
 // ---------------------------------------------------------------------------------------------
@@ -379,7 +379,7 @@ fn laea_europe_origin() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// V2 fixtures (written by gedisim::gedi::granule)
+// V2 fixtures (written by gedisim::io::granule)
 // ---------------------------------------------------------------------------------------------
 
 const SHOT0: u64 = 29_320_600_200_465_601; // > 2^53, not representable in f64

@@ -9,7 +9,7 @@
 mod common;
 
 use common::nasa::{load_real_shots, RealShot};
-use gedisim::process::l2a::{AlgorithmSettings, L2aOutcome, L2aProcessor, RH_COUNT};
+use gedisim::kernels::waveform::l2a::{AlgorithmSettings, L2aOutcome, L2aProcessor, RH_COUNT};
 
 /// Tolerances of the agreement rates (the definitions).
 const POSITION_TOL: f64 = 0.5;

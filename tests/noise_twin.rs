@@ -10,9 +10,9 @@
 mod common;
 
 use common::nasa::{load_real_shots, RealShot};
-use gedisim::process::denoise::{denoise, DenoiseSettings};
-use gedisim::process::l2a::{AlgorithmSettings, GaussianKernel, L2aOutcome, L2aProcessor};
-use gedisim::process::noise_twin::{LinkMarginTwin, NoiseShape, ShotTwin, GEDI_BIN_M, SIM_BIN_M};
+use gedisim::kernels::waveform::denoise::{denoise, DenoiseSettings};
+use gedisim::kernels::waveform::l2a::{AlgorithmSettings, GaussianKernel, L2aOutcome, L2aProcessor};
+use gedisim::kernels::waveform::noise_twin::{LinkMarginTwin, NoiseShape, ShotTwin, GEDI_BIN_M, SIM_BIN_M};
 
 const SENSITIVITY_TOL: f64 = 0.01;
 const RH_TOL_CM: i32 = 30;
@@ -227,7 +227,7 @@ fn real_record_noise_has_the_measured_shape() {
                 .collect(),
         );
         let twin_sd = |shape: NoiseShape| {
-            let noise = gedisim::process::l2a::Noise {
+            let noise = gedisim::kernels::waveform::l2a::Noise {
                 mean: 200.0,
                 stddev: 3.0,
             };
@@ -275,7 +275,7 @@ fn link_margin_twin_is_processed_like_a_gedi_waveform() {
     for db in [8.0, 3.0] {
         let twin = LinkMarginTwin::new(db, 0.5);
         let made = twin.apply(&sim, SIM_BIN_M, 11).expect("link-margin twin");
-        let geo = gedisim::process::l2a::WaveformGeolocation::from_spacing(
+        let geo = gedisim::kernels::waveform::l2a::WaveformGeolocation::from_spacing(
             made.wave.len(),
             100.0,
             GEDI_BIN_M,

@@ -12,11 +12,11 @@ use std::path::{Path, PathBuf};
 use arrow::array::{Array, AsArray, RecordBatch};
 use arrow::datatypes::{DataType, Float32Type, Float64Type, Int64Type};
 use common::{data, files_with_suffix, gedisim};
-use gedisim::collocate::segments::Level;
-use gedisim::collocation::CollocateOptions;
+use gedisim::kernels::collocate::segments::Level;
+use gedisim::ops::collocate::CollocateOptions;
 use gedisim::dataset::Dataset;
-use gedisim::run::{run_study, NoProgress, RunOptions, RunReport};
-use gedisim::study::select::{Filter, StudyRules};
+use gedisim::ops::run::{run_study, NoProgress, RunOptions, RunReport};
+use gedisim::kernels::study::select::{Filter, StudyRules};
 
 /// A small flat leaf-off tile keeps the worlds fast.
 const TILE: &str = "als/lidarforfuel_2_bas_lig.laz";
@@ -181,7 +181,7 @@ fn run_keeps_exactly_what_passes_the_filters_and_the_report_contracts_hold() {
 
     // The report on the run's output: the two table contracts and the MSD identity.
     let ds = Dataset::open(&ds_dir).unwrap();
-    let summary = gedisim::report::run_report(&ds, None, &|_| {}).unwrap();
+    let summary = gedisim::ops::report::run_report(&ds, None, &|_| {}).unwrap();
     let gd = read_parquet(&summary.dir.join("ground_detection.parquet"));
     assert_eq!(
         columns(&gd),
@@ -233,7 +233,7 @@ fn rerun_does_nothing_and_a_granule_added_later_is_processed_alone() {
     let ds_dir = tmp.path().join("ds");
     let all = files_with_suffix(&world.join("gedi"), ".h5");
     assert_eq!(all.len(), 6);
-    let key = |f: &Path| gedisim::ingest::gedi::granule_key(f);
+    let key = |f: &Path| gedisim::ops::ingest_gedi::granule_key(f);
     let last = key(&all[2]);
     let first_two: Vec<PathBuf> = all.iter().filter(|f| key(f) != last).cloned().collect();
 

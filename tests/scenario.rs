@@ -7,8 +7,8 @@ use std::path::Path;
 
 use arrow::array::{Array, Float64Array, StringArray};
 use common::{data, files_with_suffix, gedisim};
-use gedisim::ingest::gedi::{read_gedi, GediOptions};
-use gedisim::scenario::real;
+use gedisim::ops::ingest_gedi::{read_gedi, GediOptions};
+use gedisim::kernels::scenario::real;
 
 /// A small flat leaf-off tile keeps the worlds fast.
 const TILE: &str = "als/lidarforfuel_2_bas_lig.laz";

@@ -9,9 +9,9 @@ use std::collections::HashMap;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
-use gedisim::ingest::las::read_points;
-use gedisim::sim::pulse::parse_pulse_text;
-use gedisim::sim::{
+use gedisim::io::las::read_points;
+use gedisim::kernels::sim::pulse::parse_pulse_text;
+use gedisim::kernels::sim::{
     simulate, AlsPoints, Footprint, Profile, Pulse, Quirks, SimConfig, SimulatedFootprint, Weighting,
 };
 
@@ -264,7 +264,7 @@ struct Effect {
     skipped: usize,
 }
 
-fn effect(base: &[Result<SimulatedFootprint, gedisim::sim::SkipReason>], other: &[Result<SimulatedFootprint, gedisim::sim::SkipReason>], e: &mut Effect) {
+fn effect(base: &[Result<SimulatedFootprint, gedisim::kernels::sim::SkipReason>], other: &[Result<SimulatedFootprint, gedisim::kernels::sim::SkipReason>], e: &mut Effect) {
     for (a, b) in base.iter().zip(other) {
         let (Ok(a), Ok(b)) = (a, b) else {
             e.skipped += usize::from(a.is_ok() != b.is_ok());

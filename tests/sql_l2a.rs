@@ -197,7 +197,7 @@ fn session_with(
     }
     let schema = Arc::new(Schema::new(vec![
         Field::new("id", DataType::Int64, false),
-        Field::new("wave", gedisim::tables::list_f32(), true),
+        Field::new("wave", gedisim::dataset::list_f32(), true),
         Field::new("mean", DataType::Float64, false),
         Field::new("sd", DataType::Float64, false),
     ]));

@@ -10,8 +10,8 @@ use arrow::array::{
 use arrow::datatypes::{DataType, Field, Float32Type, Float64Type, Schema};
 
 use gedisim::dataset::{self, Dataset};
-use gedisim::process::l2a::{AlgorithmSettings, L2aProcessor, Noise, WaveformGeolocation};
-use gedisim::process::noise_twin::{LinkMarginTwin, NoiseShape, ShotTwin, GEDI_BIN_M};
+use gedisim::kernels::waveform::l2a::{AlgorithmSettings, L2aProcessor, Noise, WaveformGeolocation};
+use gedisim::kernels::waveform::noise_twin::{LinkMarginTwin, NoiseShape, ShotTwin, GEDI_BIN_M};
 
 const DZ: f64 = 0.15;
 const Z0: f64 = 350.0;
@@ -41,7 +41,7 @@ fn dataset() -> (tempfile::TempDir, Dataset) {
     list.append_null();
     let schema = Arc::new(Schema::new(vec![
         Field::new("id", DataType::UInt64, false),
-        Field::new("wave", gedisim::tables::list_f32(), true),
+        Field::new("wave", gedisim::dataset::list_f32(), true),
         Field::new("z0", DataType::Float64, false),
         Field::new("dz", DataType::Float64, false),
         Field::new("seed", DataType::UInt64, false),
@@ -268,7 +268,7 @@ fn simulated_l2a_query_processes_twins_of_simulations() {
     let tmp = tempfile::tempdir().unwrap();
     let ds = Dataset::create(tmp.path()).unwrap();
     let tile = common::data("als/lidarforfuel_2_bas_lig.laz");
-    gedisim::ingest::als::ingest_tiles(&ds, &[tile], &Default::default(), &|_| {}).unwrap();
+    gedisim::ops::ingest_als::ingest_tiles(&ds, &[tile], &Default::default(), &|_| {}).unwrap();
     let real = common::nasa::load_real_shots();
     let n = 12;
     let pos = |k: usize| {

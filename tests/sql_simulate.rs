@@ -10,8 +10,8 @@ use arrow::datatypes::{DataType, Field, Float32Type, Float64Type, Schema};
 
 use common::data;
 use gedisim::dataset::{self, Dataset};
-use gedisim::ingest::als::{ingest_tiles, AlsOptions};
-use gedisim::sim::{self, Footprint, Profile, SimConfig, Weighting};
+use gedisim::ops::ingest_als::{ingest_tiles, AlsOptions};
+use gedisim::kernels::sim::{self, Footprint, Profile, SimConfig, Weighting};
 
 /// A dataset with one real tile and a `shots` table of 12 positions on it (plus one off it).
 fn dataset() -> (tempfile::TempDir, Dataset, Vec<Footprint>) {
@@ -58,8 +58,8 @@ fn sql_query_matches_the_direct_path_and_the_kernels() {
     assert_eq!(rows, fps.len() * 3);
 
     // Direct path: every point of the tile minus the classes ingest drops, default profile.
-    let points = gedisim::ingest::las::read_points(&data("als/lidarforfuel_2_bas_lig.laz")).unwrap();
-    let points = gedisim::simulate::drop_ingest_classes(&points);
+    let points = gedisim::io::las::read_points(&data("als/lidarforfuel_2_bas_lig.laz")).unwrap();
+    let points = gedisim::ops::simulate::drop_ingest_classes(&points);
     let direct = sim::simulate(&points, &fps, &SimConfig::new(Profile::Default)).unwrap();
 
     let mut compared = 0;

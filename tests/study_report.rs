@@ -13,7 +13,7 @@ use std::path::Path;
 use arrow::array::{Array, AsArray, RecordBatch};
 use arrow::datatypes::{DataType, Float32Type, Float64Type, Int64Type, UInt64Type};
 use gedisim::dataset::Dataset;
-use gedisim::report::run_report;
+use gedisim::ops::report::run_report;
 
 const N_SHOTS: usize = 90;
 
@@ -175,7 +175,7 @@ fn report_tables_contracts_and_msd_identity() {
         // and matches the library's own kernel
         let y: Vec<f64> = sel.iter().map(|r| r.y[50]).collect();
         let yh: Vec<f64> = sel.iter().map(|r| r.yhat[50]).collect();
-        let k = gedisim::study::msd::msd_split(&y, &yh).unwrap();
+        let k = gedisim::kernels::study::msd::msd_split(&y, &yh).unwrap();
         assert!((k.sb - psb[i]).abs() < 1e-9 && (k.sdsd - psd[i]).abs() < 1e-9 && (k.lcs - plc[i]).abs() < 1e-9);
         checked += 1;
     }

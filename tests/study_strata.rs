@@ -9,8 +9,8 @@ use std::sync::Arc;
 use arrow::array::{AsArray, Float64Array, RecordBatch, UInt64Array};
 use arrow::datatypes::{DataType, Field, Schema, UInt16Type, UInt64Type};
 use gedisim::dataset::{write_parquet, Dataset};
-use gedisim::geo::projection::Projector;
-use gedisim::ingest::strata::{ingest_strata, PixelSample};
+use gedisim::kernels::geo::projection::Projector;
+use gedisim::ops::ingest_strata::{ingest_strata, PixelSample};
 use tiff::encoder::{colortype, TiffEncoder};
 use tiff::tags::Tag;
 
@@ -379,12 +379,12 @@ fn tiled_raster_including_edge_tiles() {
         assert_eq!(got[k].1, expected, "shot {k} at {px:?}");
     }
     // Every pixel centre, including those of the partial right-hand and bottom tiles.
-    let mut raster = gedisim::ingest::strata::LandCoverRaster::open(&tif).unwrap();
+    let mut raster = gedisim::ops::ingest_strata::LandCoverRaster::open(&tif).unwrap();
     let centres: Vec<(f64, f64)> = (0..30)
         .flat_map(|r| (0..40).map(move |c| (x0 + 100.0 * c as f64 + 50.0, y0 - 100.0 * r as f64 - 50.0)))
         .collect();
     let samples = raster.sample_xy(&centres, &|_| {}).unwrap();
-    let clc = |v: u8| gedisim::study::classes::clc_code_of_grid_code(v as u16).unwrap();
+    let clc = |v: u8| gedisim::kernels::study::classes::clc_code_of_grid_code(v as u16).unwrap();
     for (k, s) in samples.iter().enumerate() {
         let (c, r) = ((k % 40) as u32, (k / 40) as u32);
         assert_eq!(*s, PixelSample::Clc(clc(grid(c, r))), "pixel ({c}, {r})");

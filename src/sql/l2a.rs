@@ -1,7 +1,7 @@
 //! `gedi_l2a(rxwaveform, noise_mean, noise_stddev, algorithm [, elevation_bin0, elevation_lastbin])`:
 //! GEDI L2A (algorithm 1..6) of each waveform as a struct, a thin wrapper over
-//! [`crate::process::l2a`]. The struct's fields and types are those of the `l2a` table
-//! ([`crate::tables::l2a::l2a_struct_fields`]); `no_result_reason` is null when the waveform was
+//! [`crate::kernels::waveform::l2a`]. The struct's fields and types are those of the `l2a` table
+//! ([`crate::dataset::l2a::l2a_struct_fields`]); `no_result_reason` is null when the waveform was
 //! processed and says why otherwise. A null argument gives a null struct.
 //!
 //! Without elevations the waveform is placed on GEDI's nominal 1 ns grid ([`GEDI_BIN_M`]): RH are
@@ -16,10 +16,10 @@ use datafusion::logical_expr::{
     ColumnarValue, ScalarFunctionArgs, ScalarUDFImpl, Signature, Volatility,
 };
 
-use crate::process::l2a::{AlgorithmSettings, L2aProcessor, NoResult, Noise, WaveformGeolocation};
-use crate::process::noise_twin::GEDI_BIN_M;
-use crate::tables::l2a::{l2a_struct_fields, L2aColumns};
-use crate::tables::list_f32;
+use crate::kernels::waveform::l2a::{AlgorithmSettings, L2aProcessor, NoResult, Noise, WaveformGeolocation};
+use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
+use crate::dataset::l2a::{l2a_struct_fields, L2aColumns};
+use crate::dataset::list_f32;
 
 /// The `gedi_l2a` scalar function.
 #[derive(Debug, PartialEq, Eq, Hash)]

@@ -1,6 +1,6 @@
 //! The noise twin as SQL: GEDI-like received waveforms from noise-free simulated ones, as a
 //! struct that `gedi_l2a` can process in the same query. Thin wrappers over
-//! [`crate::process::noise_twin`]:
+//! [`crate::kernels::waveform::noise_twin`]:
 //! - `gedi_noise_twin(wave, z0, dz, energy_total, noise_mean, noise_stddev, sample_count, start,
 //!   seed [, quantum [, noise_correlation, noise_ratio]])`: mode (a), the twin of one real shot
 //!   ([`ShotTwin`]); the noise is correlated like real GEDI records ([`NoiseShape::GEDI_V1`])
@@ -29,11 +29,11 @@ use datafusion::logical_expr::{
 };
 
 use super::l2a::{coerce_number, coerce_waveform};
-use crate::process::l2a::Noise;
-use crate::process::noise_twin::{
+use crate::kernels::waveform::l2a::Noise;
+use crate::kernels::waveform::noise_twin::{
     LinkMarginTwin, NoiseShape, ShotTwin, TwinError, TwinWaveform, GEDI_BIN_M,
 };
-use crate::tables::{list_f32, list_f32_builder};
+use crate::dataset::{list_f32, list_f32_builder};
 
 /// Fields of the struct both twin functions return.
 pub fn twin_struct_fields() -> Fields {

@@ -8,8 +8,8 @@ use arrow::datatypes::{DataType, Float32Type, Float64Type};
 use datafusion::common::{exec_err, Result as DfResult};
 use datafusion::logical_expr::{ColumnarValue, ScalarFunctionArgs, ScalarUDFImpl, Signature, Volatility};
 
-use crate::process::rh::rh_profile;
-use crate::tables::{list_f32, list_f32_builder};
+use crate::kernels::waveform::rh::rh_profile;
+use crate::dataset::{list_f32, list_f32_builder};
 
 /// The `gedi_rh` scalar function.
 #[derive(Debug, PartialEq, Eq, Hash)]

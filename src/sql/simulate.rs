@@ -1,5 +1,5 @@
 //! `gedi_simulate([profile])`: the simulation as a SQL table function. It streams the `sim`
-//! rows of every ingested shot, block by block ([`crate::simulate::BlockSimulation`]): each
+//! rows of every ingested shot, block by block ([`crate::ops::simulate::BlockSimulation`]): each
 //! block reads only the ALS row groups its footprints touch, then the simulation kernel. Shots are moved by
 //! their collocation offsets when the dataset has an `offsets/` table.
 
@@ -18,9 +18,9 @@ use datafusion::physical_plan::streaming::{PartitionStream, StreamingTableExec};
 use datafusion::physical_plan::{ExecutionPlan, SendableRecordBatchStream};
 
 use crate::dataset::Dataset;
-use crate::sim::{Profile, SimConfig};
-use crate::simulate::{shot_footprints, BlockSimulation};
-use crate::tables::sim::sim_schema;
+use crate::kernels::sim::{Profile, SimConfig};
+use crate::ops::simulate::{shot_footprints, BlockSimulation};
+use crate::dataset::sim::sim_schema;
 
 /// The `gedi_simulate` table function of one dataset.
 #[derive(Debug)]

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use gedisim::process::l2a::{Noise, WaveformGeolocation};
+use gedisim::kernels::waveform::l2a::{Noise, WaveformGeolocation};
 
 /// L1B file of the shared pair.
 pub const L1B: &str = "GEDI01_B_2019108080338_O01964_T05337_02_003_01_sub.h5";

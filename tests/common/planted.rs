@@ -4,13 +4,13 @@
 
 use std::path::Path;
 
-use gedisim::als_table::{AlsTable, BBox};
+use gedisim::dataset::als::{AlsTable, BBox};
 use gedisim::dataset::Dataset;
-use gedisim::gedi::granule::{write_l1b_v2, Beam, GranuleMeta, L1bShot};
-use gedisim::geo::projection::Projector;
-use gedisim::process::l2a::Noise;
-use gedisim::process::noise_twin::{NoiseShape, ShotTwin, GEDI_BIN_M};
-use gedisim::sim::{self, Footprint, Profile, SimConfig, Weighting};
+use gedisim::io::granule::{write_l1b_v2, Beam, GranuleMeta, L1bShot};
+use gedisim::kernels::geo::projection::Projector;
+use gedisim::kernels::waveform::l2a::Noise;
+use gedisim::kernels::waveform::noise_twin::{NoiseShape, ShotTwin, GEDI_BIN_M};
+use gedisim::kernels::sim::{self, Footprint, Profile, SimConfig, Weighting};
 
 /// One planted beam: shots evenly spaced on a segment, reported positions.
 #[derive(Debug, Clone)]

@@ -1,0 +1,85 @@
+//! `gedisim collocate`.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::Args;
+
+use gedisim::dataset::Dataset;
+use gedisim::Result;
+
+use super::reporters::{cpu_seconds, peak_rss_mb, progress};
+
+#[derive(Args)]
+pub struct CollocateArgs {
+    /// Dataset directory with ingested shots (with L1B waveforms) and ALS.
+    #[arg(long)]
+    pub dataset: PathBuf,
+    /// beam: each beam cut into segments; track: all beams of a granule share an offset per
+    /// along-track segment; shot: one offset per shot from it and its neighbours.
+    #[arg(long, value_enum, default_value = "beam")]
+    pub level: LevelArg,
+    /// Longest segment: shots (beam level) or along-track shot steps (track level).
+    #[arg(long, default_value_t = 40)]
+    pub segment: usize,
+    /// Largest horizontal shift searched (m).
+    #[arg(long, default_value_t = 10.0)]
+    pub max_shift: f64,
+    /// Horizontal grid step (m).
+    #[arg(long, default_value_t = 1.0)]
+    pub step: f64,
+    /// Fewest shots of a segment: shorter runs are reported and not solved (1: solve every run).
+    #[arg(long, default_value_t = gedisim::kernels::collocate::segments::MIN_SEGMENT)]
+    pub min_segment: usize,
+    /// Print wall time and peak memory at the end.
+    #[arg(long)]
+    pub stats: bool,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum LevelArg {
+    Beam,
+    Track,
+    Shot,
+}
+
+pub fn collocate(a: CollocateArgs) -> Result<()> {
+    use gedisim::ops::collocate::{CollocateOptions, Collocation};
+    let start = Instant::now();
+    let level = collocate_level(a.level);
+    let ds = Dataset::open(&a.dataset)?;
+    let opts = CollocateOptions { level, segment: a.segment, max_shift: a.max_shift, step: a.step, min_segment: a.min_segment };
+    let plan = Collocation::plan(&ds, &opts)?;
+    let bar = progress(plan.shots_to_process() as u64, "shots");
+    let result = plan.run(&|| bar.inc(1));
+    bar.finish_and_clear();
+    let report = result?;
+    for s in &report.short_runs {
+        eprintln!("too short, not collocated: {s}");
+    }
+    let skipped: Vec<String> = report.skipped.iter().map(|(k, v)| format!("{k} {v}")).collect();
+    if !skipped.is_empty() {
+        eprintln!("shots not used: {}", skipped.join(", "));
+    }
+    eprintln!("{} shots read, {} {} offsets → {}", report.shots, report.segments, level.name(), report.table.display());
+    if a.stats {
+        println!(
+            "collocate: {:.2} s, CPU {:.2} s, peak RSS {:.1} MB, {} ALS points kept from {} row groups",
+            start.elapsed().as_secs_f64(),
+            cpu_seconds(),
+            peak_rss_mb(),
+            report.als_points_read,
+            report.als_row_groups_read
+        );
+    }
+    Ok(())
+}
+
+pub fn collocate_level(l: LevelArg) -> gedisim::kernels::collocate::segments::Level {
+    use gedisim::kernels::collocate::segments::Level;
+    match l {
+        LevelArg::Beam => Level::Beam,
+        LevelArg::Track => Level::Track,
+        LevelArg::Shot => Level::Shot,
+    }
+}

@@ -1,0 +1,153 @@
+//! `gedisim ingest als|gedi|strata`.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::Args;
+
+use gedisim::dataset::Dataset;
+use gedisim::ops::ingest_als::{self as als, AlsOptions, TileOutcome};
+use gedisim::{Error, Result};
+
+use super::reporters::{peak_rss_mb, progress};
+
+#[derive(Args)]
+pub struct IngestAlsArgs {
+    /// LAS/LAZ files, or folders holding them.
+    #[arg(required = true)]
+    pub inputs: Vec<PathBuf>,
+    /// Dataset directory (created if needed).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Keep noise (7, 18) and IGN artefact/virtual classes (64–67).
+    #[arg(long)]
+    pub keep_all_classes: bool,
+    /// EPSG code of tiles that carry no CRS record.
+    #[arg(long)]
+    pub epsg: Option<u32>,
+    /// Print wall time, points/s and peak memory at the end.
+    #[arg(long)]
+    pub stats: bool,
+}
+
+#[derive(Args)]
+pub struct IngestGediArgs {
+    /// L1B files or folders holding them.
+    #[arg(long, num_args = 1..)]
+    l1b: Vec<PathBuf>,
+    /// L2A files or folders holding them.
+    #[arg(long, num_args = 1..)]
+    l2a: Vec<PathBuf>,
+    /// Dataset directory (created if needed).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Projected CRS of the shots' x, y (default: the dataset's ALS CRS, else 2154).
+    #[arg(long)]
+    pub epsg: Option<u32>,
+    /// Geoid offset N (m, ellipsoid − orthometric) for every shot, instead of each shot's L1B geoid.
+    #[arg(long, allow_hyphen_values = true)]
+    pub geoid_offset: Option<f64>,
+    /// Fail when a shot of a paired granule is in only one of L1B and L2A (default: keep it, warn).
+    #[arg(long)]
+    pub strict_join: bool,
+}
+
+#[derive(Args)]
+pub struct IngestStrataArgs {
+    /// Corine Land Cover GeoTIFF in EPSG:3035 (.tif), or a CSV with columns shot_number, forest_type (.csv).
+    #[arg(long)]
+    pub landcover: PathBuf,
+    /// Dataset directory (with a shots table for a raster).
+    #[arg(long)]
+    pub dataset: PathBuf,
+}
+
+pub fn ingest_als(a: IngestAlsArgs) -> Result<()> {
+    let start = Instant::now();
+    let files = als::expand_inputs(&a.inputs)?;
+    if files.is_empty() {
+        return Err(Error::Usage("no LAS/LAZ file found in the inputs".into()));
+    }
+    let mut total = 0u64;
+    for f in &files {
+        total += gedisim::io::las::TileReader::open(f)?.header().number_of_points;
+    }
+    let ds = Dataset::create(&a.out)?;
+    let bar = progress(total, "points");
+    let opts = AlsOptions { keep_all_classes: a.keep_all_classes, epsg: a.epsg };
+    let outcomes = als::ingest_tiles(&ds, &files, &opts, &|n| bar.inc(n));
+    bar.finish_and_clear();
+    let outcomes = outcomes?;
+    let mut written = 0;
+    for o in &outcomes {
+        match o {
+            TileOutcome::Ingested { tile, points, dropped } => {
+                written += points;
+                eprintln!("{tile}: {points} points ({dropped} dropped by class)");
+            }
+            TileOutcome::AlreadyIngested { tile } => eprintln!("{tile}: already ingested (same content), skipped"),
+        }
+    }
+    if a.stats {
+        let s = start.elapsed().as_secs_f64();
+        println!(
+            "ingest: {} files, {total} points read, {written} written, {s:.2} s, {:.0} points/s, peak RSS {:.1} MB",
+            files.len(),
+            total as f64 / s,
+            peak_rss_mb()
+        );
+    }
+    Ok(())
+}
+
+pub fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
+    use gedisim::ops::ingest_gedi::{self as gedi, GediOptions, GranuleOutcome};
+    if a.l1b.is_empty() && a.l2a.is_empty() {
+        return Err(Error::Usage("give --l1b and/or --l2a files".into()));
+    }
+    let l1b = gedi::expand_granule_inputs(&a.l1b, "GEDI01_B")?;
+    let l2a = gedi::expand_granule_inputs(&a.l2a, "GEDI02_A")?;
+    let ds = Dataset::create(&a.out)?;
+    let epsg = match a.epsg {
+        Some(e) => e,
+        None => als::dataset_epsg(&ds)?.unwrap_or(2154),
+    };
+    let opts = GediOptions { epsg, geoid_offset: a.geoid_offset, strict_join: a.strict_join };
+    let n = gedi::pair_granules(&l1b, &l2a)?.0.len() as u64;
+    let bar = progress(n, "granules");
+    let result = gedi::ingest_into_dataset(&ds, &l1b, &l2a, &opts, &|| bar.inc(1));
+    bar.finish_and_clear();
+    let (outcomes, report) = result?;
+    for w in report.warnings() {
+        eprintln!("warning: {w}");
+    }
+    for o in outcomes {
+        match o {
+            GranuleOutcome::Ingested { granule, shots } => eprintln!("{granule}: {shots} shots"),
+            GranuleOutcome::AlreadyIngested { granule } => eprintln!("{granule}: already ingested (same content), skipped"),
+        }
+    }
+    Ok(())
+}
+
+pub fn ingest_strata(a: IngestStrataArgs) -> Result<()> {
+    let ds = Dataset::open(&a.dataset)?;
+    let bar = progress(0, "shots");
+    let report = gedisim::ops::ingest_strata::ingest_strata(&ds, &a.landcover, &|n, total| {
+        bar.set_length(total);
+        bar.inc(n);
+    });
+    bar.finish_and_clear();
+    let report = report?;
+    let mut counts: Vec<_> = report.counts.iter().collect();
+    counts.sort();
+    let counts: Vec<String> = counts.iter().map(|(k, v)| format!("{k} {v}")).collect();
+    eprintln!("{} shots → {} ({})", report.rows, report.path.display(), counts.join(", "));
+    if report.outside > 0 || report.no_position > 0 {
+        eprintln!("{} shots outside the raster and {} without a position: forest type `unknown`", report.outside, report.no_position);
+    }
+    if report.not_in_dataset > 0 {
+        eprintln!("warning: {} CSV rows name shots that are not in the dataset's shots table", report.not_in_dataset);
+    }
+    Ok(())
+}

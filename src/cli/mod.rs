@@ -1,0 +1,120 @@
+//! The `gedisim` command line: clap types and one file per subcommand, each turning arguments
+//! into options for one operation (`gedisim::ops`) and printing what it did.
+
+mod bench;
+mod collocate;
+mod demo;
+mod diagnose;
+mod export;
+mod ingest;
+mod l2a;
+mod reporters;
+mod report;
+mod run;
+mod scenario;
+mod simulate;
+mod sql;
+
+use std::path::PathBuf;
+
+use clap::{Parser, Subcommand};
+
+use gedisim::Result;
+
+use collocate::CollocateArgs;
+use demo::DemoArgs;
+use diagnose::DiagnoseArgs;
+use export::ExportGeoArgs;
+use ingest::{IngestAlsArgs, IngestGediArgs, IngestStrataArgs};
+use l2a::L2aArgs;
+use report::ReportArgs;
+use run::RunArgs;
+use scenario::ScenarioArgs;
+use simulate::SimulateArgs;
+use sql::SqlArgs;
+
+#[derive(Parser)]
+#[command(name = "gedisim", version, about = "Simulate GEDI waveforms from ALS, process them like GEDI L2A, and diagnose the sim-to-real gap")]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand)]
+pub enum Command {
+    /// Ingest ALS tiles or GEDI granules into a dataset's Parquet tables.
+    #[command(subcommand)]
+    Ingest(IngestCommand),
+    /// Simulate GEDI waveforms from ALS: direct mode (--als, --footprints, --out) or dataset mode (--dataset).
+    Simulate(SimulateArgs),
+    /// Geolocation offsets (dx, dy, dz) of the shots against the ALS → <dataset>/offsets/.
+    Collocate(CollocateArgs),
+    /// GEDI L2A processing (algorithms a1–a6) of the waveforms of an L1B file.
+    L2a(L2aArgs),
+    /// Run SQL over a dataset's tables (with gedisim's functions).
+    Sql(SqlArgs),
+    /// The study's tables (queries/*.sql over results/), figures and report.html → <dataset>/report/.
+    Report(ReportArgs),
+    /// Hand a table off in another format.
+    #[command(subcommand)]
+    Export(ExportCommand),
+    /// The study end to end: ingest → collocate → simulate → filters → <dataset>/results/
+    /// (only new granules are processed on a re-run).
+    Run(RunArgs),
+    /// The whole study on the bundled LiDAR HD tiles with generated GEDI granules: scenario,
+    /// run, report; prints the headline tables and the path of report.html.
+    Demo(DemoArgs),
+    /// Build a test world: real ALS tiles + pseudo-real GEDI L1B/L2A granules with one withheld
+    /// effect, and truth.json (docs/scenario.md).
+    Scenario(ScenarioArgs),
+    /// Where the sim-to-real gap lies, which unmodelled effect causes it and how far it shrinks
+    /// once modelled (held-out tracks) → <out>/diagnosis.json, tables, figures (docs/diagnosis.md).
+    Diagnose(DiagnoseArgs),
+    /// Measurements used by the benchmarks.
+    #[command(subcommand, hide = true)]
+    Bench(BenchCommand),
+}
+
+#[derive(Subcommand)]
+pub enum IngestCommand {
+    /// LAS/LAZ files or folders → <dataset>/als/ and <dataset>/tiles/.
+    Als(IngestAlsArgs),
+    /// GEDI L1B and/or L2A granules (V1 or V2) → <dataset>/shots/ and <dataset>/granules/.
+    Gedi(IngestGediArgs),
+    /// Forest type of every shot from a Corine Land Cover GeoTIFF (EPSG:3035) or a CSV
+    /// `shot_number,forest_type` → <dataset>/strata/.
+    Strata(IngestStrataArgs),
+}
+
+#[derive(Subcommand)]
+pub enum ExportCommand {
+    /// A table (shots or results) as GeoParquet 1.1: WKB point geometry (lon, lat; OGC:CRS84) and a bbox covering column.
+    Geoparquet(ExportGeoArgs),
+}
+
+#[derive(Subcommand)]
+pub enum BenchCommand {
+    /// Decode a LAS/LAZ file with the las crate alone (the baseline of the ingest benchmark).
+    Decode {
+        file: PathBuf,
+    },
+}
+
+pub fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Ingest(IngestCommand::Als(a)) => ingest::ingest_als(a),
+        Command::Ingest(IngestCommand::Gedi(a)) => ingest::ingest_gedi(a),
+        Command::Ingest(IngestCommand::Strata(a)) => ingest::ingest_strata(a),
+        Command::Simulate(a) => simulate::simulate(a),
+        Command::Collocate(a) => collocate::collocate(a),
+        Command::L2a(a) => l2a::l2a(a),
+        Command::Sql(a) => sql::sql(a),
+        Command::Report(a) => report::report(a),
+        Command::Export(ExportCommand::Geoparquet(a)) => export::export_geoparquet(a),
+        Command::Run(a) => run::run_command(a),
+        Command::Demo(a) => demo::demo(a),
+        Command::Scenario(a) => scenario::scenario(a),
+        Command::Diagnose(a) => diagnose::diagnose(a),
+        Command::Bench(BenchCommand::Decode { file }) => bench::bench_decode(file),
+    }
+}

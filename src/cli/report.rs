@@ -1,0 +1,45 @@
+//! `gedisim report`.
+
+use std::path::PathBuf;
+
+use clap::Args;
+use indicatif::ProgressBar;
+
+use gedisim::dataset::Dataset;
+use gedisim::Result;
+
+
+#[derive(Args)]
+pub struct ReportArgs {
+    /// Dataset directory (with a results table).
+    #[arg(long)]
+    pub dataset: PathBuf,
+    /// Output directory (default <dataset>/report).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+pub fn report(a: ReportArgs) -> Result<()> {
+    let ds = Dataset::open(&a.dataset)?;
+    let bar = ProgressBar::new_spinner();
+    let s = gedisim::ops::report::run_report(&ds, a.out.as_deref(), &|step| bar.set_message(step.to_string()));
+    bar.finish_and_clear();
+    let s = s?;
+    for (name, rows) in &s.tables {
+        eprintln!("{name}: {rows} rows");
+    }
+    for (name, missing) in &s.skipped {
+        eprintln!("{name}: skipped (no {} table)", missing.join(", "));
+    }
+    for note in &s.figure_notes {
+        eprintln!("figure not drawn: {note}");
+    }
+    eprintln!(
+        "{} tables, {} figures (PNG + SVG), {} GeoParquet files → {}",
+        s.tables.len(),
+        s.figures.len() / 2,
+        s.geoparquet.len(),
+        s.html.display()
+    );
+    Ok(())
+}

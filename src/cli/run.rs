@@ -1,0 +1,151 @@
+//! `gedisim run`, and the printing of what a run did (shared with `demo` and `diagnose`).
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use gedisim::Result;
+
+use super::collocate::{collocate_level, LevelArg};
+use super::reporters::Bars;
+
+/// Options of the ingest chain shared by `run` and `diagnose --als`.
+#[derive(Args)]
+pub struct ChainArgs {
+    /// Corine Land Cover GeoTIFF (EPSG:3035) or CSV shot_number,forest_type: forest type of every shot.
+    #[arg(long)]
+    pub landcover: Option<PathBuf>,
+    /// Projected CRS (default: the dataset's ALS CRS, else 2154).
+    #[arg(long)]
+    pub epsg: Option<u32>,
+    /// Geoid offset N (m, ellipsoid − orthometric) for every shot, instead of each shot's L1B geoid.
+    #[arg(long, allow_hyphen_values = true)]
+    pub geoid_offset: Option<f64>,
+}
+
+#[derive(Args)]
+pub struct RunArgs {
+    /// LAS/LAZ tiles or folders (may be left out once the dataset holds the tiles).
+    #[arg(long, num_args = 1..)]
+    pub als: Vec<PathBuf>,
+    /// GEDI L1B files or folders.
+    #[arg(long, num_args = 1..)]
+    l1b: Vec<PathBuf>,
+    /// GEDI L2A files or folders.
+    #[arg(long, num_args = 1..)]
+    l2a: Vec<PathBuf>,
+    #[command(flatten)]
+    pub chain: ChainArgs,
+    /// Dataset directory (created if needed).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Keep shots at most this many days before the start or after the end of the ALS acquisition
+    /// of their footprint (not applied where the tiles carry no date).
+    #[arg(long, allow_hyphen_values = true, default_value_t = gedisim::kernels::study::select::DEFAULT_MAX_DAYS_APART)]
+    pub max_days_apart: f64,
+    /// Collocation level of new granules (see `collocate`).
+    #[arg(long, value_enum, default_value = "beam")]
+    pub level: LevelArg,
+    /// Longest collocation segment (see `collocate`).
+    #[arg(long, default_value_t = 40)]
+    pub segment: usize,
+    /// Fewest shots of a collocation segment (see `collocate`; 1: solve every run).
+    #[arg(long, default_value_t = gedisim::kernels::collocate::segments::MIN_SEGMENT)]
+    pub min_segment: usize,
+}
+
+pub fn run_command(a: RunArgs) -> Result<()> {
+    use gedisim::ops::collocate::CollocateOptions;
+    use gedisim::ops::run::RunOptions;
+    let opts = RunOptions {
+        als: a.als,
+        l1b: a.l1b,
+        l2a: a.l2a,
+        landcover: a.chain.landcover,
+        epsg: a.chain.epsg,
+        geoid_offset: a.chain.geoid_offset,
+        collocate: CollocateOptions {
+            level: collocate_level(a.level),
+            segment: a.segment,
+            min_segment: a.min_segment,
+            ..CollocateOptions::default()
+        },
+        rules: gedisim::kernels::study::select::StudyRules { max_days_apart: a.max_days_apart, ..Default::default() },
+        ..RunOptions::new(&a.out)
+    };
+    let report = gedisim::ops::run::run_study(&opts, &Bars::new())?;
+    print_run(&report);
+    Ok(())
+}
+
+/// What the ingest and collocation of a run did (stderr).
+pub fn print_ingest_and_collocation(r: &gedisim::ops::run::RunReport) {
+    use gedisim::ops::ingest_als::TileOutcome;
+    use gedisim::ops::ingest_gedi::GranuleOutcome;
+    if !r.tiles.is_empty() {
+        let new: Vec<u64> = r.tiles.iter().filter_map(|t| if let TileOutcome::Ingested { points, .. } = t { Some(*points) } else { None }).collect();
+        eprintln!("ALS: {} tiles ingested ({} points), {} already ingested", new.len(), new.iter().sum::<u64>(), r.tiles.len() - new.len());
+    }
+    if !r.ingested.is_empty() {
+        let new: Vec<usize> = r.ingested.iter().filter_map(|g| if let GranuleOutcome::Ingested { shots, .. } = g { Some(*shots) } else { None }).collect();
+        eprintln!("GEDI: {} granules ingested ({} shots), {} already ingested", new.len(), new.iter().sum::<usize>(), r.ingested.len() - new.len());
+    }
+    for w in &r.warnings {
+        eprintln!("warning: {w}");
+    }
+    if let Some(s) = &r.strata {
+        let mut counts: Vec<_> = s.counts.iter().collect();
+        counts.sort();
+        let counts: Vec<String> = counts.iter().map(|(k, v)| format!("{k} {v}")).collect();
+        eprintln!("strata: {} shots ({})", s.rows, counts.join(", "));
+    }
+    match &r.collocation {
+        Some(c) => {
+            let skipped: Vec<String> = c.skipped.iter().map(|(k, v)| format!("{k} {v}")).collect();
+            let skipped = if skipped.is_empty() { String::new() } else { format!("; shots not used: {}", skipped.join(", ")) };
+            eprintln!(
+                "collocation: {} granules, {} shots read, {} segments solved, {} runs too short{skipped} → {}",
+                r.collocated.len(),
+                c.shots,
+                c.segments,
+                c.short_runs.len(),
+                c.table.display()
+            );
+        }
+        None => eprintln!("collocation: every granule already collocated"),
+    }
+}
+
+/// What a run did (stderr), then the filters and the results (stdout).
+pub fn print_run(r: &gedisim::ops::run::RunReport) {
+    use gedisim::kernels::study::select::Filter;
+    print_ingest_and_collocation(r);
+    let simulated: Vec<&gedisim::ops::run::GranuleRun> = r.granules.iter().filter(|g| g.simulated.is_some()).collect();
+    if simulated.is_empty() {
+        let covered: usize = r.granules.iter().map(|g| g.covered).sum();
+        if covered == 0 {
+            eprintln!("simulation: no shot footprint is covered by the ALS, nothing simulated");
+        } else {
+            eprintln!("simulation: up to date, nothing simulated ({covered} covered shots)");
+        }
+    } else {
+        let (ok, skipped) = simulated.iter().filter_map(|g| g.simulated).fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        eprintln!("simulation: {} shots of {} granules ({ok} simulated, {skipped} skipped by the simulator)", ok + skipped, simulated.len());
+    }
+    let written = r.granules_processed();
+    eprintln!("results: {written} granules written, {} up to date", r.granules.len() - written);
+    if r.nothing_new() {
+        eprintln!("nothing new since the last run: no ingest, collocation or simulation; results unchanged");
+    }
+    let t = &r.totals;
+    println!("Filters over the {} granules of the dataset (rows = shots × 3 weightings × 7 algorithms; a row counts at the first filter it fails):", r.granules.len());
+    println!("  {:>10}  candidate rows ({} shots)", t.candidates, t.shots);
+    for f in Filter::ALL {
+        let mut line = format!("− {:>10}  {}", t.removed_by(f), f.describe(&r.rules));
+        if f == Filter::AcquisitionWindow && t.window_unknown > 0 {
+            line += &format!(" (not applied to {} rows: no ALS date or shot date)", t.window_unknown);
+        }
+        println!("{line}");
+    }
+    println!("= {:>10}  rows kept ({} shots) → {}", t.kept, t.shots_kept, r.dataset.join("results").display());
+}

@@ -1,0 +1,279 @@
+//! Reading ALS points back from the dataset's `als/` table around footprints, touching only the
+//! row groups whose x/y statistics intersect a footprint's box (the table is clustered by cell).
+
+use std::collections::HashMap;
+use std::fs::File;
+use std::path::{Path, PathBuf};
+
+use arrow::array::{Array, AsArray};
+use arrow::datatypes::{Float32Type, Float64Type, UInt16Type, UInt8Type};
+use parquet::arrow::arrow_reader::{ArrowReaderMetadata, ArrowReaderOptions, ParquetRecordBatchReaderBuilder};
+use parquet::arrow::ProjectionMask;
+use rayon::prelude::*;
+use parquet::file::metadata::ParquetMetaData;
+use parquet::file::statistics::Statistics;
+
+use crate::dataset::{self, tables, Dataset};
+use crate::error::{Error, Result};
+use crate::kernels::collocate::PointCloud;
+use crate::kernels::sim::AlsPoints;
+
+/// Axis-aligned box [xmin, ymin, xmax, ymax].
+pub type BBox = [f64; 4];
+
+/// One Parquet file of `als/` with the x/y extent of each row group.
+struct AlsFile {
+    path: PathBuf,
+    groups: Vec<BBox>,
+    meta: ArrowReaderMetadata,
+}
+
+/// The `als/` table's files and row-group extents, read once.
+pub struct AlsTable {
+    files: Vec<AlsFile>,
+    /// (file, row group) of the extents meeting each [`COVER_CELL`] cell (extents grown by
+    /// [`COVER_TOLERANCE`]).
+    cover_index: HashMap<(i64, i64), Vec<(usize, usize)>>,
+}
+
+/// Cell of the coverage index (m): the ingest's cell size.
+const COVER_CELL: f64 = crate::ops::ingest_als::CELL_SIZE_M;
+
+/// Gap (m) between the extents of neighbouring row groups still counted as covered: row-group
+/// extents are those of their points, so neighbouring cells leave gaps of the point spacing.
+const COVER_TOLERANCE: f64 = 1.0;
+
+/// How much a query read.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ReadStats {
+    /// Row groups read.
+    pub row_groups_read: usize,
+    /// Row groups in the table.
+    pub row_groups_total: usize,
+}
+
+impl AlsTable {
+    /// Open the `als/` table of a dataset (reads only the footers).
+    pub fn open(ds: &Dataset) -> Result<Self> {
+        let dir = ds.root().join(tables::ALS);
+        let paths = dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no ALS table ({e}): run `gedisim ingest als`")))?;
+        let mut files = Vec::new();
+        let mut cover_index: HashMap<(i64, i64), Vec<(usize, usize)>> = HashMap::new();
+        for path in paths {
+            let file = File::open(&path).map_err(|e| Error::file(&path, e))?;
+            let meta = ArrowReaderMetadata::load(&file, ArrowReaderOptions::new()).map_err(|e| Error::table(&path, e))?;
+            let groups = row_group_boxes(meta.metadata(), &path)?;
+            for (g, b) in groups.iter().enumerate() {
+                let cell = |v: f64| (v / COVER_CELL).floor() as i64;
+                let t = COVER_TOLERANCE;
+                for cx in cell(b[0] - t)..=cell(b[2] + t) {
+                    for cy in cell(b[1] - t)..=cell(b[3] + t) {
+                        cover_index.entry((cx, cy)).or_default().push((files.len(), g));
+                    }
+                }
+            }
+            files.push(AlsFile { path, groups, meta });
+        }
+        Ok(AlsTable { files, cover_index })
+    }
+
+    /// Whether the row groups' extents cover the disc of `radius` around (x, y): its centre and
+    /// eight points on its rim each lie in some extent (grown by 1 m). A quick test from the
+    /// footers that reads no point.
+    pub fn covers(&self, x: f64, y: f64, radius: f64) -> bool {
+        if !(x.is_finite() && y.is_finite()) {
+            return false;
+        }
+        let inside = |px: f64, py: f64| {
+            let key = ((px / COVER_CELL).floor() as i64, (py / COVER_CELL).floor() as i64);
+            let t = COVER_TOLERANCE;
+            self.cover_index.get(&key).is_some_and(|v| {
+                v.iter().any(|&(f, g)| {
+                    let b = self.files[f].groups[g];
+                    px >= b[0] - t && px <= b[2] + t && py >= b[1] - t && py <= b[3] + t
+                })
+            })
+        };
+        inside(x, y)
+            && (0..8).all(|k| {
+                let a = k as f64 * std::f64::consts::FRAC_PI_4;
+                inside(x + radius * a.cos(), y + radius * a.sin())
+            })
+    }
+
+    /// x, y, z of the points inside any of `boxes` (inclusive), reading only those three columns
+    /// of the row groups that meet a box, in parallel.
+    pub fn xyz_in_boxes(&self, boxes: &[BBox]) -> Result<(PointCloud, ReadStats)> {
+        let meets = |g: &BBox, b: &BBox| g[0] <= b[2] && g[2] >= b[0] && g[1] <= b[3] && g[3] >= b[1];
+        let mut jobs: Vec<(usize, usize, Vec<BBox>)> = Vec::new();
+        for (fi, f) in self.files.iter().enumerate() {
+            for (g, gb) in f.groups.iter().enumerate() {
+                let hit: Vec<BBox> = boxes.iter().filter(|b| meets(gb, b)).copied().collect();
+                if !hit.is_empty() {
+                    jobs.push((fi, g, hit));
+                }
+            }
+        }
+        let parts = jobs
+            .par_iter()
+            .map(|(fi, g, hit)| self.read_xyz(*fi, *g, hit))
+            .collect::<Result<Vec<PointCloud>>>()?;
+        let n = parts.iter().map(PointCloud::len).sum();
+        let mut out = PointCloud { x: Vec::with_capacity(n), y: Vec::with_capacity(n), z: Vec::with_capacity(n) };
+        for p in parts {
+            out.x.extend_from_slice(&p.x);
+            out.y.extend_from_slice(&p.y);
+            out.z.extend_from_slice(&p.z);
+        }
+        Ok((out, ReadStats { row_groups_read: jobs.len(), row_groups_total: self.row_groups() }))
+    }
+
+    /// x, y, z of row group `g` of file `fi`, kept when inside one of `boxes`.
+    fn read_xyz(&self, fi: usize, g: usize, boxes: &[BBox]) -> Result<PointCloud> {
+        let f = &self.files[fi];
+        let file = File::open(&f.path).map_err(|e| Error::file(&f.path, e))?;
+        let builder = ParquetRecordBatchReaderBuilder::new_with_metadata(file, f.meta.clone());
+        let mask = ProjectionMask::columns(builder.parquet_schema(), ["x", "y", "z"]);
+        let reader = builder
+            .with_projection(mask)
+            .with_row_groups(vec![g])
+            .with_batch_size(1 << 16)
+            .build()
+            .map_err(|e| Error::table(&f.path, e))?;
+        let mut out = PointCloud::default();
+        for batch in reader {
+            let batch = batch.map_err(|e| Error::table(&f.path, e))?;
+            let col = |name: &str| {
+                batch
+                    .column_by_name(name)
+                    .and_then(|c| c.as_primitive_opt::<Float64Type>())
+                    .ok_or_else(|| Error::field(&f.path, name, "missing or not float64 in the ALS table"))
+            };
+            let (x, y, z) = (col("x")?.values(), col("y")?.values(), col("z")?.values());
+            for i in 0..batch.num_rows() {
+                let (px, py) = (x[i], y[i]);
+                if boxes.iter().any(|b| px >= b[0] && px <= b[2] && py >= b[1] && py <= b[3]) {
+                    out.x.push(px);
+                    out.y.push(py);
+                    out.z.push(z[i]);
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Number of row groups in the table.
+    pub fn row_groups(&self) -> usize {
+        self.files.iter().map(|f| f.groups.len()).sum()
+    }
+
+    /// Every point of the row groups that intersect any of `boxes` (a superset of the points
+    /// inside the boxes, in table order).
+    pub fn points_near(&self, boxes: &[BBox]) -> Result<(AlsPoints, ReadStats)> {
+        self.read(boxes, None)
+    }
+
+    /// The points inside `bbox` (edges included), reading only the row groups that intersect it.
+    pub fn points_in(&self, bbox: BBox) -> Result<(AlsPoints, ReadStats)> {
+        self.read(&[bbox], Some(bbox))
+    }
+
+    fn read(&self, boxes: &[BBox], keep: Option<BBox>) -> Result<(AlsPoints, ReadStats)> {
+        let mut out = AlsPoints::default();
+        let mut stats = ReadStats { row_groups_read: 0, row_groups_total: self.row_groups() };
+        for f in &self.files {
+            let wanted: Vec<usize> = f
+                .groups
+                .iter()
+                .enumerate()
+                .filter(|(_, g)| boxes.iter().any(|b| g[0] <= b[2] && g[2] >= b[0] && g[1] <= b[3] && g[3] >= b[1]))
+                .map(|(i, _)| i)
+                .collect();
+            if wanted.is_empty() {
+                continue;
+            }
+            stats.row_groups_read += wanted.len();
+            let file = File::open(&f.path).map_err(|e| Error::file(&f.path, e))?;
+            let reader = ParquetRecordBatchReaderBuilder::try_new(file)
+                .and_then(|b| {
+                    // The point attributes only: `tile` and `cell` are constant per row group.
+                    let columns = POINT_COLUMNS.iter().copied();
+                    let mask = parquet::arrow::ProjectionMask::columns(b.parquet_schema(), columns);
+                    b.with_row_groups(wanted).with_projection(mask).with_batch_size(1 << 16).build()
+                })
+                .map_err(|e| Error::table(&f.path, e))?;
+            for batch in reader {
+                let batch = batch.map_err(|e| Error::table(&f.path, e))?;
+                append(&mut out, &batch, keep, &f.path)?;
+            }
+        }
+        Ok((out, stats))
+    }
+}
+
+/// The columns of `als/` that make an [`AlsPoints`].
+const POINT_COLUMNS: [&str; 10] = [
+    "x",
+    "y",
+    "z",
+    "intensity",
+    "return_number",
+    "number_of_returns",
+    "classification",
+    "scan_angle_deg",
+    "gps_time",
+    "point_source_id",
+];
+
+fn row_group_boxes(meta: &ParquetMetaData, path: &Path) -> Result<Vec<BBox>> {
+    let schema = meta.file_metadata().schema_descr();
+    let col = |name: &str| {
+        (0..schema.num_columns())
+            .find(|&i| schema.column(i).name() == name)
+            .ok_or_else(|| Error::field(path, name, "column missing from the ALS table"))
+    };
+    let (xi, yi) = (col("x")?, col("y")?);
+    let range = |g: usize, i: usize, name: &str| match meta.row_group(g).column(i).statistics() {
+        Some(Statistics::Double(s)) => match (s.min_opt(), s.max_opt()) {
+            (Some(a), Some(b)) => Ok((*a, *b)),
+            _ => Err(Error::field(path, name, "row group without min/max statistics")),
+        },
+        _ => Err(Error::field(path, name, "row group without f64 statistics")),
+    };
+    (0..meta.num_row_groups())
+        .map(|g| {
+            let (x0, x1) = range(g, xi, "x")?;
+            let (y0, y1) = range(g, yi, "y")?;
+            Ok([x0, y0, x1, y1])
+        })
+        .collect()
+}
+
+/// Append the rows of `b` (those inside `keep`, when given) to `out`.
+fn append(out: &mut AlsPoints, b: &arrow::record_batch::RecordBatch, keep: Option<BBox>, path: &Path) -> Result<()> {
+    let col = |name: &str| b.column_by_name(name).ok_or_else(|| Error::field(path, name, "column missing from the ALS table"));
+    let (x, y) = (col("x")?.as_primitive::<Float64Type>().values(), col("y")?.as_primitive::<Float64Type>().values());
+    let rows: Vec<usize> = match keep {
+        Some(k) => (0..b.num_rows()).filter(|&i| x[i] >= k[0] && x[i] <= k[2] && y[i] >= k[1] && y[i] <= k[3]).collect(),
+        None => (0..b.num_rows()).collect(),
+    };
+    fn put<T: Copy>(dst: &mut Vec<T>, src: &[T], rows: &[usize]) {
+        if rows.len() == src.len() {
+            dst.extend_from_slice(src);
+        } else {
+            dst.extend(rows.iter().map(|&i| src[i]));
+        }
+    }
+    put(&mut out.x, x, &rows);
+    put(&mut out.y, y, &rows);
+    put(&mut out.z, col("z")?.as_primitive::<Float64Type>().values(), &rows);
+    put(&mut out.intensity, col("intensity")?.as_primitive::<UInt16Type>().values(), &rows);
+    put(&mut out.return_number, col("return_number")?.as_primitive::<UInt8Type>().values(), &rows);
+    put(&mut out.number_of_returns, col("number_of_returns")?.as_primitive::<UInt8Type>().values(), &rows);
+    put(&mut out.classification, col("classification")?.as_primitive::<UInt8Type>().values(), &rows);
+    put(&mut out.scan_angle_deg, col("scan_angle_deg")?.as_primitive::<Float32Type>().values(), &rows);
+    let gps = col("gps_time")?.as_primitive::<Float64Type>();
+    out.gps_time.extend(rows.iter().map(|&i| if gps.is_null(i) { f64::NAN } else { gps.value(i) }));
+    put(&mut out.point_source_id, col("point_source_id")?.as_primitive::<UInt16Type>().values(), &rows);
+    Ok(())
+}

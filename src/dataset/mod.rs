@@ -1,0 +1,302 @@
+//! The dataset directory: table names, atomic Parquet writes, and the content-hash registry.
+//!
+//! A dataset is a directory; each table is a folder of Parquet files (zstd). Every file is
+//! written under a temporary name (`*.parquet.tmp`, which readers ignore) and renamed when
+//! complete, so a crash never leaves a half-written table.
+//!
+//! Table modules: [`als`] (reading ALS points back around footprints), [`sim`], [`l2a`],
+//! [`offsets`], [`results`] (schemas of the derived tables and kernel outputs as Arrow).
+
+pub mod als;
+pub mod l2a;
+pub mod offsets;
+pub mod results;
+pub mod sim;
+
+use std::collections::HashMap;
+use std::fs::File;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use arrow::datatypes::SchemaRef;
+use arrow::record_batch::RecordBatch;
+use parquet::arrow::arrow_writer::{compute_leaves, ArrowColumnChunk, ArrowRowGroupWriterFactory};
+use parquet::arrow::ArrowWriter;
+use parquet::file::writer::SerializedFileWriter;
+use rayon::prelude::*;
+use parquet::basic::{Compression, ZstdLevel};
+use parquet::file::metadata::KeyValue;
+use parquet::file::properties::{EnabledStatistics, WriterProperties};
+use sha2::{Digest, Sha256};
+
+use crate::error::{Error, Result};
+
+/// Tables of a dataset, one folder each.
+pub mod tables {
+    /// ALS points, clustered by spatial cell.
+    pub const ALS: &str = "als";
+    /// One row per ingested ALS file.
+    pub const TILES: &str = "tiles";
+    /// One row per GEDI shot.
+    pub const SHOTS: &str = "shots";
+    /// One row per ingested GEDI granule file.
+    pub const GRANULES: &str = "granules";
+    /// Simulated waveforms and RH.
+    pub const SIM: &str = "sim";
+    /// Shot → forest type (`ingest strata`).
+    pub const STRATA: &str = "strata";
+    /// One row per shot × weighting × algorithm: the study's input (`run`).
+    pub const RESULTS: &str = "results";
+    /// Collocation offsets per track segment (`collocate`).
+    pub const OFFSETS: &str = "offsets";
+    /// Report outputs (`report`): not a table; the SQL session does not register it.
+    pub const REPORT: &str = "report";
+}
+
+/// A dataset directory.
+#[derive(Debug, Clone)]
+pub struct Dataset {
+    root: PathBuf,
+}
+
+impl Dataset {
+    /// Open (and create if needed) the dataset at `root`.
+    pub fn create(root: &Path) -> Result<Self> {
+        std::fs::create_dir_all(root).map_err(|e| Error::file(root, format!("cannot create dataset directory: {e}")))?;
+        Ok(Dataset { root: root.to_path_buf() })
+    }
+
+    /// Open an existing dataset.
+    pub fn open(root: &Path) -> Result<Self> {
+        if !root.is_dir() {
+            return Err(Error::file(root, "not a dataset directory (run `gedisim ingest` first)"));
+        }
+        Ok(Dataset { root: root.to_path_buf() })
+    }
+
+    /// The dataset's directory.
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    /// Folder of table `name` (created if needed).
+    pub fn table_dir(&self, name: &str) -> Result<PathBuf> {
+        let dir = self.root.join(name);
+        std::fs::create_dir_all(&dir).map_err(|e| Error::file(&dir, format!("cannot create table directory: {e}")))?;
+        Ok(dir)
+    }
+
+    /// Whether table `name` has at least one complete Parquet file.
+    pub fn has_table(&self, name: &str) -> bool {
+        table_files(&self.root.join(name)).map(|f| !f.is_empty()).unwrap_or(false)
+    }
+
+    /// Path of the Parquet file `stem` of table `name`.
+    pub fn table_file(&self, name: &str, stem: &str) -> Result<PathBuf> {
+        Ok(self.table_dir(name)?.join(format!("{stem}.parquet")))
+    }
+}
+
+/// The complete Parquet files of a table folder, sorted by name.
+pub fn table_files(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    for entry in std::fs::read_dir(dir)? {
+        let path = entry?.path();
+        if path.extension().and_then(|e| e.to_str()) == Some("parquet") {
+            files.push(path);
+        }
+    }
+    files.sort();
+    Ok(files)
+}
+
+/// Writer properties shared by every table: zstd, page-level statistics, the given
+/// key-value metadata and row-group size.
+pub fn writer_properties(metadata: &HashMap<String, String>, max_row_group_rows: usize) -> WriterProperties {
+    let mut kv: Vec<KeyValue> = metadata.iter().map(|(k, v)| KeyValue::new(k.clone(), v.clone())).collect();
+    kv.sort_by(|a, b| a.key.cmp(&b.key));
+    WriterProperties::builder()
+        .set_compression(Compression::ZSTD(ZstdLevel::try_new(3).expect("valid zstd level")))
+        .set_statistics_enabled(EnabledStatistics::Page)
+        .set_max_row_group_row_count(Some(max_row_group_rows))
+        .set_key_value_metadata(Some(kv))
+        .build()
+}
+
+/// A Parquet file being written under a temporary name; [`AtomicParquet::finish`] renames it
+/// into place. Dropping it unfinished removes the temporary file.
+///
+/// Batches go through [`write`](Self::write) (buffered into row groups by the writer) or
+/// [`write_row_group`](Self::write_row_group) (one row group per call, columns encoded in
+/// parallel); a file uses one or the other.
+pub struct AtomicParquet {
+    writer: Option<Writer>,
+    tmp: PathBuf,
+    dest: PathBuf,
+}
+
+enum Writer {
+    Buffered(ArrowWriter<File>),
+    RowGroups(SerializedFileWriter<File>, ArrowRowGroupWriterFactory),
+}
+
+impl AtomicParquet {
+    /// Start writing `dest` with `schema` and `props`.
+    pub fn create(dest: &Path, schema: SchemaRef, props: WriterProperties) -> Result<Self> {
+        let tmp = tmp_path(dest);
+        let file = File::create(&tmp).map_err(|e| Error::file(&tmp, format!("cannot create: {e}")))?;
+        let writer = ArrowWriter::try_new(file, schema, Some(props)).map_err(|e| Error::table(dest, e))?;
+        Ok(AtomicParquet { writer: Some(Writer::Buffered(writer)), tmp, dest: dest.to_path_buf() })
+    }
+
+    /// Append a batch.
+    pub fn write(&mut self, batch: &RecordBatch) -> Result<()> {
+        match self.writer.as_mut().expect("writer is present until finish") {
+            Writer::Buffered(w) => w.write(batch).map_err(|e| Error::table(&self.dest, e)),
+            Writer::RowGroups(..) => Err(Error::table(&self.dest, "write after write_row_group")),
+        }
+    }
+
+    /// Close the current row group (the next batch starts a new one).
+    pub fn flush_row_group(&mut self) -> Result<()> {
+        match self.writer.as_mut().expect("writer is present until finish") {
+            Writer::Buffered(w) => w.flush().map_err(|e| Error::table(&self.dest, e)),
+            Writer::RowGroups(..) => Ok(()),
+        }
+    }
+
+    /// Write `batch` as one row group, encoding and compressing its columns in parallel.
+    pub fn write_row_group(&mut self, batch: &RecordBatch) -> Result<()> {
+        let table_err = |e: parquet::errors::ParquetError| Error::table(&self.dest, e);
+        if let Some(Writer::Buffered(_)) = self.writer {
+            let Some(Writer::Buffered(w)) = self.writer.take() else { unreachable!() };
+            let (file, factory) = w.into_serialized_writer().map_err(table_err)?;
+            self.writer = Some(Writer::RowGroups(file, factory));
+        }
+        let Some(Writer::RowGroups(file, factory)) = self.writer.as_mut() else { unreachable!() };
+        let writers = factory.create_column_writers(file.flushed_row_groups().len()).map_err(table_err)?;
+        let schema = batch.schema();
+        // One leaf per column: the tables written this way have no nested columns.
+        let chunks: Vec<ArrowColumnChunk> = writers
+            .into_par_iter()
+            .zip(schema.fields().par_iter().zip(batch.columns().par_iter()))
+            .map(|(mut writer, (field, column))| {
+                for leaf in compute_leaves(field, column)? {
+                    writer.write(&leaf)?;
+                }
+                writer.close()
+            })
+            .collect::<std::result::Result<_, _>>()
+            .map_err(table_err)?;
+        let mut row_group = file.next_row_group().map_err(table_err)?;
+        for chunk in chunks {
+            chunk.append_to_row_group(&mut row_group).map_err(table_err)?;
+        }
+        row_group.close().map_err(table_err)?;
+        Ok(())
+    }
+
+    /// Write the footer, sync, and rename into place.
+    pub fn finish(mut self) -> Result<PathBuf> {
+        let file = match self.writer.take().expect("writer is present until finish") {
+            Writer::Buffered(w) => w.into_inner(),
+            Writer::RowGroups(w, _) => w.into_inner(),
+        }
+        .map_err(|e| Error::table(&self.dest, e))?;
+        file.sync_all().map_err(|e| Error::file(&self.tmp, e))?;
+        std::fs::rename(&self.tmp, &self.dest).map_err(|e| Error::file(&self.dest, format!("cannot rename into place: {e}")))?;
+        Ok(self.dest.clone())
+    }
+}
+
+impl Drop for AtomicParquet {
+    fn drop(&mut self) {
+        if self.writer.is_some() {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+}
+
+/// Write `batches` to `dest` atomically.
+pub fn write_parquet(dest: &Path, schema: SchemaRef, batches: &[RecordBatch], metadata: &HashMap<String, String>) -> Result<PathBuf> {
+    let mut w = AtomicParquet::create(dest, schema, writer_properties(metadata, 1 << 17))?;
+    for b in batches {
+        w.write(b)?;
+    }
+    w.finish()
+}
+
+fn tmp_path(dest: &Path) -> PathBuf {
+    let mut name = dest.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+    name.push(format!(".{}.tmp", std::process::id()));
+    dest.with_file_name(name)
+}
+
+/// SHA-256 of a file's content, lowercase hex: the key that makes ingest idempotent.
+pub fn content_hash(path: &Path) -> Result<String> {
+    let mut file = File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
+    let mut hasher = Sha256::new();
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        let n = file.read(&mut buf).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
+        if n == 0 {
+            break;
+        }
+        hasher.update(&buf[..n]);
+    }
+    Ok(hex::encode(hasher.finalize()))
+}
+
+/// Shorthand for an Arc'd schema.
+pub fn schema_ref(s: arrow::datatypes::Schema) -> SchemaRef {
+    Arc::new(s)
+}
+
+/// Write query results to `out`: Parquet when it ends in `.parquet`, CSV otherwise (atomically).
+pub fn write_result(out: &Path, batches: &[RecordBatch]) -> Result<()> {
+    let schema = match batches.first() {
+        Some(b) => b.schema(),
+        None => Arc::new(arrow::datatypes::Schema::empty()),
+    };
+    if out.extension().and_then(|e| e.to_str()) == Some("parquet") {
+        write_parquet(out, schema, batches, &HashMap::new())?;
+        return Ok(());
+    }
+    let tmp = tmp_path(out);
+    let file = File::create(&tmp).map_err(|e| Error::file(&tmp, format!("cannot create: {e}")))?;
+    let mut w = arrow::csv::Writer::new(file);
+    for b in batches {
+        w.write(b).map_err(|e| Error::table(out, e))?;
+    }
+    drop(w);
+    std::fs::rename(&tmp, out).map_err(|e| Error::file(out, format!("cannot rename into place: {e}")))
+}
+
+/// A Parquet row selection of the sorted row indices `rows` of a file of `total` rows
+/// (consecutive rows merged into one range).
+pub fn row_selection(rows: &[usize], total: usize) -> parquet::arrow::arrow_reader::RowSelection {
+    let mut ranges: Vec<std::ops::Range<usize>> = Vec::new();
+    for &r in rows {
+        match ranges.last_mut() {
+            Some(last) if last.end == r => last.end = r + 1,
+            _ => ranges.push(r..r + 1),
+        }
+    }
+    parquet::arrow::arrow_reader::RowSelection::from_consecutive_ranges(ranges.into_iter(), total)
+}
+
+// Column types shared by the derived tables.
+
+use arrow::array::{Float32Builder, ListBuilder};
+use arrow::datatypes::{DataType, Field};
+
+/// `list<float32>` with nullable items, the type of every waveform and RH column.
+pub fn list_f32() -> DataType {
+    DataType::List(Arc::new(Field::new_list_field(DataType::Float32, true)))
+}
+
+/// A builder of `list<float32>` columns.
+pub fn list_f32_builder(capacity: usize) -> ListBuilder<Float32Builder> {
+    ListBuilder::with_capacity(Float32Builder::new(), capacity)
+}

@@ -1,0 +1,512 @@
+//! Writer of GEDI **V2-layout** L1B and L2A HDF5 granules from in-memory shots.
+//!
+//! Used by the tests (small V2 fixtures, since no real V2 granule is shared) and by the scenario
+//! generator (pseudo-real granules). Dataset names and dtypes follow gedi-products.md §2–§3 for
+//! V2: `rx_sample_start_index` is 1-based uint64, `rh` float32 metres, `geolocation/rh_aN` int16
+//! centimetres, `land_cover_data/leaf_off_flag` uint8, and so on. Anything the typed shot structs
+//! do not cover can be added per beam as an [`ExtraDataset`].
+
+use std::path::Path;
+use std::str::FromStr;
+
+use hdf5::types::{H5Type, VarLenUnicode};
+use hdf5::{File, Group, Location};
+
+use crate::kernels::gedi::{beam_number, BeamType, N_ALGORITHMS, RH_LEN};
+use crate::error::{Error, Result};
+
+/// GPS seconds of the GEDI epoch 2018-01-01T00:00:00 UTC (L1B `ancillary/master_time_epoch`).
+pub const MASTER_TIME_EPOCH: f64 = 1_198_800_018.0;
+
+/// One L1B shot: the waveforms and their geolocation.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct L1bShot {
+    /// Unique shot identifier (the L1B/L2A join key).
+    pub shot_number: u64,
+    /// Seconds since 2018-01-01T00:00:00 UTC.
+    pub delta_time: f64,
+    /// Received waveform, digitizer counts, top to bottom, noise not removed.
+    pub rx_waveform: Vec<f32>,
+    /// Transmitted pulse, digitizer counts.
+    pub tx_waveform: Vec<f32>,
+    /// Latitude of the first (top) waveform sample, degrees.
+    pub latitude_bin0: f64,
+    /// Longitude of the first waveform sample, degrees.
+    pub longitude_bin0: f64,
+    /// Latitude of the last waveform sample, degrees.
+    pub latitude_lastbin: f64,
+    /// Longitude of the last waveform sample, degrees.
+    pub longitude_lastbin: f64,
+    /// Elevation of the first sample, m above the WGS84 ellipsoid.
+    pub elevation_bin0: f64,
+    /// Elevation of the last sample, m above the WGS84 ellipsoid.
+    pub elevation_lastbin: f64,
+    /// Noise mean, counts.
+    pub noise_mean_corrected: f64,
+    /// Noise standard deviation, counts.
+    pub noise_stddev_corrected: f64,
+    /// 1 = stale return (filter out).
+    pub stale_return_flag: u8,
+    /// Non-zero = degraded pointing or positioning.
+    pub degrade: i8,
+    /// Geoid height above the WGS84 ellipsoid (N), m.
+    pub geoid: f32,
+    /// TanDEM-X elevation, m.
+    pub digital_elevation_model: f32,
+}
+
+/// The outputs of one L2A algorithm setting (aN) for one shot.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct L2aAlgorithm {
+    /// Elevation of the lowest (ground) mode, m WGS84.
+    pub elev_lowestmode: f32,
+    /// Latitude of the lowest mode, degrees.
+    pub lat_lowestmode: f64,
+    /// Longitude of the lowest mode, degrees.
+    pub lon_lowestmode: f64,
+    /// RH0..RH100 in **centimetres** (101 values), as stored in `geolocation/rh_aN`.
+    pub rh_cm: Vec<i16>,
+    /// Sensitivity (0..1).
+    pub sensitivity: f32,
+    /// 1 = valid.
+    pub quality_flag: u8,
+    /// Signal start, 0-based fractional sample position.
+    pub toploc: f32,
+    /// Signal end, 0-based fractional sample position.
+    pub botloc: f32,
+    /// Ground mode, 0-based fractional sample position.
+    pub zcross: f32,
+}
+
+/// V2 `land_cover_data` values of one shot.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LandCover {
+    /// 1 = leaf-off conditions.
+    pub leaf_off_flag: u8,
+    /// Day of year of leaf-off start.
+    pub leaf_off_doy: i16,
+    /// Day of year of leaf-on start.
+    pub leaf_on_doy: i16,
+    /// Leaf-on cycle.
+    pub leaf_on_cycle: u8,
+    /// Plant functional type class.
+    pub pft_class: u8,
+    /// Region class.
+    pub region_class: u8,
+    /// Urban proportion, percent.
+    pub urban_proportion: u8,
+    /// Landsat water persistence, percent.
+    pub landsat_water_persistence: u8,
+}
+
+/// One L2A shot: the root (selected-algorithm) fields, the six algorithms and land cover.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct L2aShot {
+    /// Unique shot identifier (the L1B/L2A join key).
+    pub shot_number: u64,
+    /// Seconds since 2018-01-01T00:00:00 UTC.
+    pub delta_time: f64,
+    /// 1 = valid (for the selected algorithm).
+    pub quality_flag: u8,
+    /// Non-zero = degraded (per shot).
+    pub degrade_flag: u8,
+    /// Sensitivity of the selected algorithm.
+    pub sensitivity: f32,
+    /// Selected algorithm, 1..6 (0 = none).
+    pub selected_algorithm: u8,
+    /// Elevation of the lowest mode of the selected algorithm, m WGS84.
+    pub elev_lowestmode: f32,
+    /// Latitude of the lowest mode, degrees.
+    pub lat_lowestmode: f64,
+    /// Longitude of the lowest mode, degrees.
+    pub lon_lowestmode: f64,
+    /// RH0..RH100 in **metres** (101 values) of the selected algorithm.
+    pub rh: Vec<f32>,
+    /// Waveform energy above the noise mean, counts.
+    pub energy_total: f32,
+    /// Algorithms a1..a6 (index 0 is a1).
+    pub algorithms: [L2aAlgorithm; N_ALGORITHMS],
+    /// V2 land-cover data.
+    pub land_cover: LandCover,
+}
+
+impl L2aShot {
+    /// Set `selected_algorithm` to `alg` (1..=6) and copy that algorithm's values into the root
+    /// fields, as NASA's L2A does (root `rh` = `rh_aN` / 100, etc.).
+    pub fn select_algorithm(&mut self, alg: u8) {
+        let Some(a) = (alg as usize).checked_sub(1).and_then(|i| self.algorithms.get(i)) else {
+            self.selected_algorithm = 0;
+            return;
+        };
+        self.elev_lowestmode = a.elev_lowestmode;
+        self.lat_lowestmode = a.lat_lowestmode;
+        self.lon_lowestmode = a.lon_lowestmode;
+        self.rh = a.rh_cm.iter().map(|&cm| (f64::from(cm) / 100.0) as f32).collect();
+        self.sensitivity = a.sensitivity;
+        self.quality_flag = a.quality_flag;
+        self.selected_algorithm = alg;
+    }
+}
+
+/// Typed values of one dataset, flattened row-major.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Values {
+    U8(Vec<u8>),
+    I8(Vec<i8>),
+    U16(Vec<u16>),
+    I16(Vec<i16>),
+    U32(Vec<u32>),
+    U64(Vec<u64>),
+    I64(Vec<i64>),
+    F32(Vec<f32>),
+    F64(Vec<f64>),
+}
+
+impl Values {
+    /// Number of scalar values.
+    pub fn len(&self) -> usize {
+        match self {
+            Values::U8(v) => v.len(),
+            Values::I8(v) => v.len(),
+            Values::U16(v) => v.len(),
+            Values::I16(v) => v.len(),
+            Values::U32(v) => v.len(),
+            Values::U64(v) => v.len(),
+            Values::I64(v) => v.len(),
+            Values::F32(v) => v.len(),
+            Values::F64(v) => v.len(),
+        }
+    }
+
+    /// Whether there are no values.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// A dataset to write in a beam group beyond the typed fields (e.g. `rx_processing_a1/rx_cumulative`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExtraDataset {
+    /// Path relative to the beam group, e.g. `geolocation/elev_highestreturn_a1`.
+    pub path: String,
+    /// The values, row-major.
+    pub values: Values,
+    /// Values per row: 1 for a 1-D dataset, 101 for an N×101 one. `values.len()` must be a multiple.
+    pub row_len: usize,
+}
+
+impl ExtraDataset {
+    /// A 1-D dataset.
+    pub fn new(path: impl Into<String>, values: Values) -> Self {
+        ExtraDataset { path: path.into(), values, row_len: 1 }
+    }
+}
+
+/// One beam group to write: its name (`BEAM0101`…), shots in order, and extra datasets.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Beam<S> {
+    /// Group name, one of [`super::BEAM_NAMES`].
+    pub name: String,
+    /// The shots, in acquisition order.
+    pub shots: Vec<S>,
+    /// Additional datasets written as given.
+    pub extra: Vec<ExtraDataset>,
+}
+
+impl<S> Beam<S> {
+    /// A beam with shots and no extra datasets.
+    pub fn new(name: impl Into<String>, shots: Vec<S>) -> Self {
+        Beam { name: name.into(), shots, extra: Vec::new() }
+    }
+}
+
+/// Granule-level identification written to `METADATA/DatasetIdentification`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GranuleMeta {
+    /// `PGEVersion` attribute ("005" for V2 L1B).
+    pub pge_version: String,
+    /// `VersionID` attribute ("002" for V2).
+    pub version_id: String,
+}
+
+impl Default for GranuleMeta {
+    fn default() -> Self {
+        GranuleMeta { pge_version: "005".into(), version_id: "002".into() }
+    }
+}
+
+/// A V2 granule file name, e.g. `GEDI01_B_2019170155833_O02932_02_T02267_02_005_01_V002.h5`.
+///
+/// `level` is `"01_B"` or `"02_A"`; `start` the acquisition start `YYYYDDDHHMMSS`. The reader pairs
+/// L1B and L2A files whose names agree up to the track field.
+pub fn v2_file_name(level: &str, start: &str, orbit: u32, sub_orbit: u8, track: u32) -> String {
+    format!("GEDI{level}_{start}_O{orbit:05}_{sub_orbit:02}_T{track:05}_02_005_01_V002.h5")
+}
+
+/// Write a V2-layout L1B granule with the given beams.
+pub fn write_l1b_v2(path: &Path, beams: &[Beam<L1bShot>], meta: &GranuleMeta) -> Result<()> {
+    write_granule(path, "GEDI_L1B", beams, meta, l1b_datasets)
+}
+
+/// Write a V2-layout L2A granule with the given beams.
+pub fn write_l2a_v2(path: &Path, beams: &[Beam<L2aShot>], meta: &GranuleMeta) -> Result<()> {
+    write_granule(path, "GEDI_L2A", beams, meta, l2a_datasets)
+}
+
+/// Write a granule of product `short_name`: per beam, the product's datasets plus the beam's extras.
+fn write_granule<S>(
+    path: &Path,
+    short_name: &str,
+    beams: &[Beam<S>],
+    meta: &GranuleMeta,
+    datasets: fn(&Path, &Beam<S>) -> Result<Vec<ExtraDataset>>,
+) -> Result<()> {
+    let file = create_granule(path, short_name, meta)?;
+    for beam in beams {
+        let mut sets = datasets(path, beam)?;
+        sets.extend(beam.extra.iter().cloned());
+        write_beam(path, &file, &beam.name, &sets)?;
+    }
+    Ok(())
+}
+
+/// The per-shot time fields every beam carries, split as GEDI does.
+fn time_datasets(prefix: &str, name: &str, delta_time: &[f64]) -> Vec<ExtraDataset> {
+    let beam = beam_number(name).unwrap_or(0);
+    vec![
+        ExtraDataset::new(format!("{prefix}beam"), Values::U16(vec![beam; delta_time.len()])),
+        ExtraDataset::new(format!("{prefix}channel"), Values::U8(vec![0; delta_time.len()])),
+        ExtraDataset::new(format!("{prefix}delta_time"), Values::F64(delta_time.to_vec())),
+        ExtraDataset::new(
+            format!("{prefix}master_int"),
+            Values::U32(delta_time.iter().map(|t| t.floor().max(0.0) as u32).collect()),
+        ),
+        ExtraDataset::new(
+            format!("{prefix}master_frac"),
+            Values::F64(delta_time.iter().map(|t| t - t.floor()).collect()),
+        ),
+    ]
+}
+
+/// Flatten waveforms into (samples, counts as uint16, 1-based start indices as uint64).
+fn pack_waveforms(path: &Path, field: &str, waves: impl Iterator<Item = (u64, Vec<f32>)>) -> Result<[Values; 3]> {
+    let (mut flat, mut count, mut start) = (Vec::new(), Vec::new(), Vec::new());
+    for (shot, w) in waves {
+        let n = u16::try_from(w.len()).map_err(|_| {
+            Error::field(path, field, format!("shot {shot}: {} samples exceed the uint16 count", w.len()))
+        })?;
+        // GEDI's start index is 1-based (gedi-products.md §1).
+        start.push(flat.len() as u64 + 1);
+        count.push(n);
+        flat.extend_from_slice(&w);
+    }
+    Ok([Values::F32(flat), Values::U16(count), Values::U64(start)])
+}
+
+fn l1b_datasets(path: &Path, beam: &Beam<L1bShot>) -> Result<Vec<ExtraDataset>> {
+    let s = &beam.shots;
+    let f64s = |f: fn(&L1bShot) -> f64| Values::F64(s.iter().map(f).collect());
+    let shot_number: Vec<u64> = s.iter().map(|x| x.shot_number).collect();
+    let delta_time: Vec<f64> = s.iter().map(|x| x.delta_time).collect();
+
+    let mut out = vec![ExtraDataset::new("shot_number", Values::U64(shot_number.clone()))];
+    out.extend(time_datasets("", &beam.name, &delta_time));
+    let field = format!("{}/rxwaveform", beam.name);
+    let [rx, rx_count, rx_start] =
+        pack_waveforms(path, &field, s.iter().map(|x| (x.shot_number, x.rx_waveform.clone())))?;
+    let field = format!("{}/txwaveform", beam.name);
+    let [tx, tx_count, tx_start] =
+        pack_waveforms(path, &field, s.iter().map(|x| (x.shot_number, x.tx_waveform.clone())))?;
+    out.extend([
+        ExtraDataset::new("rxwaveform", rx),
+        ExtraDataset::new("rx_sample_count", rx_count),
+        ExtraDataset::new("rx_sample_start_index", rx_start),
+        ExtraDataset::new("txwaveform", tx),
+        ExtraDataset::new("tx_sample_count", tx_count),
+        ExtraDataset::new("tx_sample_start_index", tx_start),
+        ExtraDataset::new("noise_mean_corrected", f64s(|x| x.noise_mean_corrected)),
+        ExtraDataset::new("noise_stddev_corrected", f64s(|x| x.noise_stddev_corrected)),
+        ExtraDataset::new("stale_return_flag", Values::U8(s.iter().map(|x| x.stale_return_flag).collect())),
+        ExtraDataset::new("ancillary/master_time_epoch", Values::F64(vec![MASTER_TIME_EPOCH])),
+        ExtraDataset::new("geolocation/shot_number", Values::U64(shot_number)),
+        ExtraDataset::new("geolocation/delta_time", Values::F64(delta_time.clone())),
+        ExtraDataset::new("geolocation/elevation_bin0", f64s(|x| x.elevation_bin0)),
+        ExtraDataset::new("geolocation/elevation_lastbin", f64s(|x| x.elevation_lastbin)),
+        ExtraDataset::new("geolocation/latitude_bin0", f64s(|x| x.latitude_bin0)),
+        ExtraDataset::new("geolocation/longitude_bin0", f64s(|x| x.longitude_bin0)),
+        ExtraDataset::new("geolocation/latitude_lastbin", f64s(|x| x.latitude_lastbin)),
+        ExtraDataset::new("geolocation/longitude_lastbin", f64s(|x| x.longitude_lastbin)),
+        ExtraDataset::new("geolocation/degrade", Values::I8(s.iter().map(|x| x.degrade).collect())),
+        ExtraDataset::new(
+            "geolocation/digital_elevation_model",
+            Values::F32(s.iter().map(|x| x.digital_elevation_model).collect()),
+        ),
+        ExtraDataset::new("geophys_corr/delta_time", Values::F64(delta_time)),
+        ExtraDataset::new("geophys_corr/geoid", Values::F32(s.iter().map(|x| x.geoid).collect())),
+    ]);
+    Ok(out)
+}
+
+/// Check that every shot has `len` values in a list field, and flatten them.
+fn flatten_rows<T: Copy>(
+    path: &Path,
+    field: &str,
+    rows: impl Iterator<Item = (u64, Vec<T>)>,
+    len: usize,
+) -> Result<Vec<T>> {
+    let mut flat = Vec::new();
+    for (shot, row) in rows {
+        if row.len() != len {
+            return Err(Error::field(path, field, format!("shot {shot}: {} values, expected {len}", row.len())));
+        }
+        flat.extend_from_slice(&row);
+    }
+    Ok(flat)
+}
+
+fn l2a_datasets(path: &Path, beam: &Beam<L2aShot>) -> Result<Vec<ExtraDataset>> {
+    let s = &beam.shots;
+    let u8s = |f: fn(&L2aShot) -> u8| Values::U8(s.iter().map(f).collect());
+    let delta_time: Vec<f64> = s.iter().map(|x| x.delta_time).collect();
+
+    let mut out = vec![ExtraDataset::new("shot_number", Values::U64(s.iter().map(|x| x.shot_number).collect()))];
+    out.extend(time_datasets("", &beam.name, &delta_time));
+    let rh = flatten_rows(path, &format!("{}/rh", beam.name), s.iter().map(|x| (x.shot_number, x.rh.clone())), RH_LEN)?;
+    out.extend([
+        ExtraDataset::new("quality_flag", u8s(|x| x.quality_flag)),
+        ExtraDataset::new("degrade_flag", u8s(|x| x.degrade_flag)),
+        ExtraDataset::new("sensitivity", Values::F32(s.iter().map(|x| x.sensitivity).collect())),
+        ExtraDataset::new("selected_algorithm", u8s(|x| x.selected_algorithm)),
+        ExtraDataset::new("elev_lowestmode", Values::F32(s.iter().map(|x| x.elev_lowestmode).collect())),
+        ExtraDataset::new("lat_lowestmode", Values::F64(s.iter().map(|x| x.lat_lowestmode).collect())),
+        ExtraDataset::new("lon_lowestmode", Values::F64(s.iter().map(|x| x.lon_lowestmode).collect())),
+        ExtraDataset { path: "rh".into(), values: Values::F32(rh), row_len: RH_LEN },
+        ExtraDataset::new("energy_total", Values::F32(s.iter().map(|x| x.energy_total).collect())),
+        ExtraDataset::new("ancillary/l2a_alg_count", Values::U8(vec![N_ALGORITHMS as u8])),
+    ]);
+    for a in 0..N_ALGORITHMS {
+        let n = a + 1;
+        let alg = |x: &L2aShot| x.algorithms[a].clone();
+        let algs: Vec<L2aAlgorithm> = s.iter().map(alg).collect();
+        let rh_cm = flatten_rows(
+            path,
+            &format!("{}/geolocation/rh_a{n}", beam.name),
+            s.iter().zip(&algs).map(|(x, a)| (x.shot_number, a.rh_cm.clone())),
+            RH_LEN,
+        )?;
+        let f32s = |f: fn(&L2aAlgorithm) -> f32| Values::F32(algs.iter().map(f).collect());
+        let f64s = |f: fn(&L2aAlgorithm) -> f64| Values::F64(algs.iter().map(f).collect());
+        out.extend([
+            ExtraDataset::new(format!("geolocation/elev_lowestmode_a{n}"), f32s(|a| a.elev_lowestmode)),
+            ExtraDataset::new(format!("geolocation/lat_lowestmode_a{n}"), f64s(|a| a.lat_lowestmode)),
+            ExtraDataset::new(format!("geolocation/lon_lowestmode_a{n}"), f64s(|a| a.lon_lowestmode)),
+            ExtraDataset { path: format!("geolocation/rh_a{n}"), values: Values::I16(rh_cm), row_len: RH_LEN },
+            ExtraDataset::new(format!("geolocation/sensitivity_a{n}"), f32s(|a| a.sensitivity)),
+            ExtraDataset::new(
+                format!("geolocation/quality_flag_a{n}"),
+                Values::U8(algs.iter().map(|a| a.quality_flag).collect()),
+            ),
+            ExtraDataset::new(format!("rx_processing_a{n}/toploc"), f32s(|a| a.toploc)),
+            ExtraDataset::new(format!("rx_processing_a{n}/botloc"), f32s(|a| a.botloc)),
+            ExtraDataset::new(format!("rx_processing_a{n}/zcross"), f32s(|a| a.zcross)),
+        ]);
+    }
+    let lc = |f: fn(&LandCover) -> u8| Values::U8(s.iter().map(|x| f(&x.land_cover)).collect());
+    let lc16 = |f: fn(&LandCover) -> i16| Values::I16(s.iter().map(|x| f(&x.land_cover)).collect());
+    out.extend([
+        ExtraDataset::new("land_cover_data/leaf_off_flag", lc(|l| l.leaf_off_flag)),
+        ExtraDataset::new("land_cover_data/leaf_off_doy", lc16(|l| l.leaf_off_doy)),
+        ExtraDataset::new("land_cover_data/leaf_on_doy", lc16(|l| l.leaf_on_doy)),
+        ExtraDataset::new("land_cover_data/leaf_on_cycle", lc(|l| l.leaf_on_cycle)),
+        ExtraDataset::new("land_cover_data/pft_class", lc(|l| l.pft_class)),
+        ExtraDataset::new("land_cover_data/region_class", lc(|l| l.region_class)),
+        ExtraDataset::new("land_cover_data/urban_proportion", lc(|l| l.urban_proportion)),
+        ExtraDataset::new("land_cover_data/landsat_water_persistence", lc(|l| l.landsat_water_persistence)),
+    ]);
+    Ok(out)
+}
+
+fn h5err<'a>(path: &'a Path, what: &str) -> impl Fn(hdf5::Error) -> Error + 'a {
+    let what = what.to_string();
+    move |e| Error::file(path, format!("{what}: {e}"))
+}
+
+/// Create the file with the root `short_name` and `METADATA/DatasetIdentification` attributes.
+fn create_granule(path: &Path, short_name: &str, meta: &GranuleMeta) -> Result<File> {
+    let file = File::create(path).map_err(h5err(path, "cannot create HDF5 file"))?;
+    write_str_attr(&file, "short_name", short_name).map_err(h5err(path, "short_name"))?;
+    let ident = file
+        .create_group("METADATA")
+        .and_then(|g| g.create_group("DatasetIdentification"))
+        .map_err(h5err(path, "METADATA/DatasetIdentification"))?;
+    let file_name = path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    for (k, v) in [
+        ("PGEVersion", meta.pge_version.as_str()),
+        ("VersionID", meta.version_id.as_str()),
+        ("fileName", file_name.as_str()),
+        ("shortName", short_name),
+    ] {
+        write_str_attr(&ident, k, v).map_err(h5err(path, k))?;
+    }
+    Ok(file)
+}
+
+/// Write a scalar UTF-8 string attribute.
+pub fn write_str_attr(loc: &Location, name: &str, value: &str) -> hdf5::Result<()> {
+    let v = VarLenUnicode::from_str(value).map_err(|e| hdf5::Error::from(e.to_string().as_str()))?;
+    loc.new_attr::<VarLenUnicode>().shape(()).create(name)?.write_scalar(&v)
+}
+
+fn write_beam(path: &Path, file: &File, name: &str, sets: &[ExtraDataset]) -> Result<()> {
+    let beam_type = BeamType::from_name(name)
+        .ok_or_else(|| Error::field(path, name, "not a GEDI beam name (BEAM0000..BEAM1011)"))?;
+    let group = file.create_group(name).map_err(h5err(path, name))?;
+    write_str_attr(&group, "description", beam_type.description()).map_err(h5err(path, name))?;
+    for d in sets {
+        let field = format!("{name}/{}", d.path);
+        if d.row_len == 0 || d.values.len() % d.row_len != 0 {
+            return Err(Error::field(path, &field, format!("{} values are not rows of {}", d.values.len(), d.row_len)));
+        }
+        write_values(&group, &d.path, &d.values, d.row_len).map_err(|e| Error::field(path, &field, e))?;
+    }
+    Ok(())
+}
+
+/// Write one dataset (creating intermediate groups), 1-D when `row_len == 1`, else N×row_len.
+pub fn write_values(root: &Group, rel: &str, values: &Values, row_len: usize) -> hdf5::Result<()> {
+    fn typed<T: H5Type>(parent: &Group, name: &str, data: &[T], row_len: usize) -> hdf5::Result<()> {
+        let rows = data.len() / row_len.max(1);
+        let builder = parent.new_dataset::<T>();
+        let ds = if row_len == 1 {
+            builder.shape(rows).create(name)?
+        } else {
+            builder.shape((rows, row_len)).create(name)?
+        };
+        if !data.is_empty() {
+            ds.write_raw(data)?;
+        }
+        Ok(())
+    }
+    let (parent, name) = parent_group(root, rel)?;
+    match values {
+        Values::U8(v) => typed(&parent, name, v, row_len),
+        Values::I8(v) => typed(&parent, name, v, row_len),
+        Values::U16(v) => typed(&parent, name, v, row_len),
+        Values::I16(v) => typed(&parent, name, v, row_len),
+        Values::U32(v) => typed(&parent, name, v, row_len),
+        Values::U64(v) => typed(&parent, name, v, row_len),
+        Values::I64(v) => typed(&parent, name, v, row_len),
+        Values::F32(v) => typed(&parent, name, v, row_len),
+        Values::F64(v) => typed(&parent, name, v, row_len),
+    }
+}
+
+/// The group holding `rel` (created if needed) and the last path component.
+fn parent_group<'a>(root: &Group, rel: &'a str) -> hdf5::Result<(Group, &'a str)> {
+    let (dirs, name) = rel.rsplit_once('/').unwrap_or(("", rel));
+    let mut g = root.clone();
+    for part in dirs.split('/').filter(|p| !p.is_empty()) {
+        g = if g.link_exists(part) { g.group(part)? } else { g.create_group(part)? };
+    }
+    Ok((g, name))
+}

@@ -1,0 +1,236 @@
+//! LAS/LAZ files: header facts, CRS, and points decoded in chunks (memory bounded by the chunk).
+
+use std::path::{Path, PathBuf};
+
+use las::{PointData, PointDataBuilder, Reader};
+
+use crate::error::{Error, Result};
+use crate::kernels::sim::AlsPoints;
+
+/// Points decoded per chunk when streaming a tile.
+pub const CHUNK_POINTS: u64 = 1 << 20;
+
+/// What a tile's header and VLRs say, before any point is read.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TileHeader {
+    pub path: PathBuf,
+    /// "1.4" etc.
+    pub version: String,
+    pub point_format: u8,
+    pub compressed: bool,
+    /// Point count announced by the header.
+    pub number_of_points: u64,
+    /// Header bounds [xmin, ymin, zmin, xmax, ymax, zmax].
+    pub bounds: [f64; 6],
+    /// Horizontal CRS as an EPSG code, when the WKT or GeoTIFF records give one.
+    pub epsg: Option<u32>,
+    /// The WKT CRS record, when present.
+    pub crs_wkt: Option<String>,
+    /// Names of the extra-bytes dimensions.
+    pub extra_bytes: Vec<String>,
+    /// Number of EVLRs (stored after the points).
+    pub n_evlrs: usize,
+}
+
+/// A tile opened for streaming.
+pub struct TileReader {
+    header: TileHeader,
+    reader: Reader,
+    buffer: PointData,
+    read_so_far: u64,
+}
+
+impl TileReader {
+    /// Open a LAS or LAZ file and read its header.
+    pub fn open(path: &Path) -> Result<Self> {
+        Self::open_with(path, false)
+    }
+
+    /// Open a file; `parallel` decodes LAZ chunks on the rayon pool.
+    pub fn open_with(path: &Path, parallel: bool) -> Result<Self> {
+        let file = std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
+        let laz_parallelism = if parallel { las::LazParallelism::Yes } else { las::LazParallelism::No };
+        let options = las::ReaderOptions::default().with_laz_parallelism(laz_parallelism);
+        let reader = Reader::with_options(std::io::BufReader::with_capacity(1 << 20, file), options)
+            .map_err(|e| {
+                Error::field(
+                    path,
+                    "header",
+                    format!("cannot read the header, VLRs or LAZ chunk table (truncated or not LAS/LAZ?): {}", crate::error::one_line(&e.to_string())),
+                )
+            })?;
+        let header = tile_header(path, reader.header())?;
+        let buffer = PointDataBuilder::new().for_header(reader.header()).build();
+        Ok(TileReader { header, reader, buffer, read_so_far: 0 })
+    }
+
+    /// The header facts.
+    pub fn header(&self) -> &TileHeader {
+        &self.header
+    }
+
+    /// Decode up to `n` further points; `None` once the header's count has been read.
+    ///
+    /// A file holding fewer points than its header announces (truncated, or a lying header)
+    /// gives an error naming `number_of_points`.
+    pub fn next_chunk(&mut self, n: u64) -> Result<Option<AlsPoints>> {
+        let left = self.header.number_of_points - self.read_so_far;
+        if left == 0 {
+            return Ok(None);
+        }
+        let want = n.min(left);
+        let path = self.header.path.clone();
+        let got = self.reader.fill_points(want, &mut self.buffer).map_err(|e| {
+            Error::field(
+                &path,
+                "points",
+                format!(
+                    "cannot decode points {}..{} (header number_of_points = {}): {}",
+                    self.read_so_far,
+                    self.read_so_far + want,
+                    self.header.number_of_points,
+                    crate::error::one_line(&e.to_string())
+                ),
+            )
+        })?;
+        if got < want {
+            return Err(Error::field(
+                &path,
+                "number_of_points",
+                format!("header announces {} points but the file holds {}", self.header.number_of_points, self.read_so_far + got),
+            ));
+        }
+        self.read_so_far += got;
+        Ok(Some(columns(&self.buffer)))
+    }
+
+    /// Read every remaining point into one set (for small files and the direct simulation mode).
+    pub fn read_all(mut self) -> Result<AlsPoints> {
+        let mut all = AlsPoints::with_capacity(self.header.number_of_points.min(1 << 28) as usize);
+        while let Some(chunk) = self.next_chunk(CHUNK_POINTS)? {
+            all.extend_from(&chunk);
+        }
+        Ok(all)
+    }
+}
+
+/// Read every point (every class) of a LAS/LAZ file.
+pub fn read_points(path: &Path) -> Result<AlsPoints> {
+    TileReader::open(path)?.read_all()
+}
+
+/// Copy the columns gedisim uses out of a decoded block.
+fn columns(pd: &PointData) -> AlsPoints {
+    let n = pd.len();
+    let mut p = AlsPoints::with_capacity(n);
+    p.x.extend(pd.x());
+    p.y.extend(pd.y());
+    p.z.extend(pd.z());
+    p.intensity.extend(pd.intensity());
+    p.return_number.extend(pd.return_number());
+    p.number_of_returns.extend(pd.number_of_returns());
+    p.classification.extend(pd.classification());
+    p.scan_angle_deg.extend(pd.scan_angle_degrees());
+    match pd.gps_time() {
+        Some(t) => p.gps_time.extend(t),
+        None => p.gps_time.resize(n, f64::NAN),
+    }
+    p.point_source_id.extend(pd.point_source_id());
+    p
+}
+
+fn tile_header(path: &Path, h: &las::Header) -> Result<TileHeader> {
+    let b = h.bounds();
+    let crs_wkt = h
+        .get_wkt_crs_bytes()
+        .map(|bytes| String::from_utf8_lossy(bytes).trim_end_matches('\0').trim().to_string())
+        .filter(|s| !s.is_empty());
+    let mut epsg = crs_wkt.as_deref().and_then(epsg_from_wkt);
+    if epsg.is_none() {
+        let geotiff = h.get_geotiff_crs().map_err(|e| las_error(path, "GeoKeyDirectory", e))?;
+        if let Some(g) = geotiff {
+            epsg = g
+                .get_projected_crs_geo_key_value()
+                .or_else(|| g.get_geodetic_crs_geo_key_value())
+                .filter(|&v| (1024..=32766).contains(&v))
+                .map(u32::from);
+        }
+    }
+    let version = h.version();
+    let format = h.point_format();
+    let extra_bytes = h
+        .all_vlrs()
+        .filter(|v| v.user_id == "LASF_Spec" && v.record_id == 4)
+        .flat_map(|v| extra_bytes_names(&v.data))
+        .collect();
+    Ok(TileHeader {
+        path: path.to_path_buf(),
+        version: format!("{}.{}", version.major, version.minor),
+        point_format: format.to_u8().map_err(|e| las_error(path, "point_format", e))?,
+        compressed: format.is_compressed,
+        number_of_points: h.number_of_points(),
+        bounds: [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z],
+        epsg,
+        crs_wkt,
+        extra_bytes,
+        n_evlrs: h.evlrs().len(),
+    })
+}
+
+/// Names of the extra-bytes dimensions in a LASF_Spec/4 record (192 bytes per dimension).
+fn extra_bytes_names(data: &[u8]) -> Vec<String> {
+    data.chunks_exact(192)
+        .map(|d| String::from_utf8_lossy(&d[4..36]).trim_end_matches('\0').to_string())
+        .collect()
+}
+
+/// The EPSG code of the outermost CRS of a WKT string (WKT1 `AUTHORITY["EPSG","n"]` or WKT2
+/// `ID["EPSG",n]`): the last such clause at nesting depth 1.
+pub fn epsg_from_wkt(wkt: &str) -> Option<u32> {
+    let bytes = wkt.as_bytes();
+    let mut depth = 0i32;
+    let mut found = None;
+    let mut i = 0;
+    while i < bytes.len() {
+        match bytes[i] {
+            b'[' | b'(' => depth += 1,
+            b']' | b')' => depth -= 1,
+            _ => {
+                if depth == 1 {
+                    let rest = &wkt[i..];
+                    let upper = rest.get(..10).unwrap_or(rest).to_ascii_uppercase();
+                    if upper.starts_with("AUTHORITY[") || upper.starts_with("ID[") {
+                        let open = rest.find('[').unwrap();
+                        if let Some(close) = rest[open..].find(']') {
+                            let inner = &rest[open + 1..open + close];
+                            let mut parts = inner.split(',').map(|s| s.trim().trim_matches('"'));
+                            if parts.next().map(|a| a.eq_ignore_ascii_case("EPSG")) == Some(true) {
+                                found = parts.next().and_then(|c| c.parse().ok()).or(found);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        i += 1;
+    }
+    found
+}
+
+fn las_error(path: &Path, field: &str, e: las::Error) -> Error {
+    Error::field(path, field, crate::error::one_line(&e.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn epsg_of_lambert93_wkt1_and_wkt2() {
+        let wkt1 = r#"PROJCS["RGF93 v1 / Lambert-93",GEOGCS["RGF93 v1",AUTHORITY["EPSG","4171"]],PROJECTION["Lambert_Conformal_Conic_2SP"],AUTHORITY["EPSG","2154"]]"#;
+        assert_eq!(epsg_from_wkt(wkt1), Some(2154));
+        let wkt2 = r#"PROJCRS["RGF93 v1 / Lambert-93",BASEGEOGCRS["RGF93 v1",ID["EPSG",4171]],ID["EPSG",2154]]"#;
+        assert_eq!(epsg_from_wkt(wkt2), Some(2154));
+        assert_eq!(epsg_from_wkt("LOCAL_CS[\"x\"]"), None);
+    }
+}

@@ -1,0 +1,36 @@
+//! I/O adapters: foreign formats (LAS/LAZ, GEDI HDF5, footprint CSV) read into kernel types and
+//! written from them. No sequencing of steps (that is `ops`), no Parquet tables (that is `dataset`).
+
+pub mod footprints;
+pub mod granule;
+pub mod las;
+
+use std::path::{Path, PathBuf};
+
+use crate::error::{Error, Result};
+
+/// Files as given; folders expanded (sorted) to the files they hold for which `wanted` is true.
+pub fn expand_inputs(inputs: &[PathBuf], wanted: impl Fn(&Path) -> bool) -> Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for p in inputs {
+        if p.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
+                .map_err(|e| Error::file(p, format!("cannot list folder: {e}")))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|f| f.is_file() && wanted(f))
+                .collect();
+            found.sort();
+            out.extend(found);
+        } else if p.is_file() {
+            out.push(p.clone());
+        } else {
+            return Err(Error::file(p, "no such file or folder"));
+        }
+    }
+    Ok(out)
+}
+
+/// Whether `path`'s extension is `ext` (case-insensitive).
+pub fn has_extension(path: &Path, ext: &str) -> bool {
+    path.extension().and_then(|e| e.to_str()).map(|e| e.eq_ignore_ascii_case(ext)).unwrap_or(false)
+}

@@ -1,0 +1,503 @@
+//! The forward model of one hypothesis: the nominal GEDI chain (ALS waveform → pulse → noise twin
+//! → L2A a1–a6) with a set of effects switched on, and the same effects undone on the real side.
+//!
+//! The nominal chain is what a scientist would simulate with the study's settings *and* process
+//! like GEDI: count weighting, 15 ns pulse, σ_f 5.5 m, noise at the level of the median real GEDI
+//! shot of the beam type with the shots' own spread (`case::set_nominal_noise`), the shot's own
+//! energy and record window, our L2A. A
+//! world without any unmodelled effect then differs from it only by noise, so a control is
+//! `unexplained`; every effect is a departure from it, through the hooks of the effect registry
+//! (`scenario::effects`) shared with the world generator.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use rayon::prelude::*;
+
+use super::case::{RealAlgorithm, ShotCase, Site, FSIGMA_GRID, SITE_STEP_M};
+use crate::kernels::gedi::{N_ALGORITHMS, RH_LEN};
+use crate::kernels::waveform::l2a::{AlgorithmSettings, L2aOutcome, L2aProcessor, Noise, WaveformGeolocation};
+use crate::kernels::waveform::noise_twin::{NoiseShape, ShotTwin, GEDI_BIN_M};
+use crate::kernels::scenario::effects::{Effect, GeoLevel, WaveParts, WeightMethod, NOMINAL_FSIGMA_M, NOMINAL_PULSE_SIGMA_M};
+use crate::kernels::scenario::EffectSet;
+use crate::kernels::sim::Weighting;
+
+/// A hypothesis: the effects added to the nominal chain (empty = the nominal chain), and where
+/// it places the shots of short collocation segments ([`reposition`]).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Model {
+    pub effects: Vec<Effect>,
+    /// Site index (`SimShot::sites`) of a shot, by shot number; absent = the collocated position.
+    pub placement: Arc<HashMap<u64, usize>>,
+}
+
+impl Model {
+    /// This model with `e` added (same placement).
+    pub fn with(&self, e: Effect) -> Model {
+        let mut effects = self.effects.clone();
+        effects.push(e);
+        Model { effects, placement: self.placement.clone() }
+    }
+
+    /// These effects with the placement of `other`.
+    pub fn placed_as(&self, other: &Model) -> Model {
+        Model { effects: self.effects.clone(), placement: other.placement.clone() }
+    }
+
+    /// The site at which this model simulates `case`.
+    pub fn site<'a>(&self, case: &'a ShotCase) -> &'a Site {
+        let k = self.placement.get(&case.real.shot_number).copied().unwrap_or(0);
+        case.sim.sites.get(k).unwrap_or(&case.sim.sites[0])
+    }
+
+    fn set(&self) -> EffectSet {
+        EffectSet { effects: self.effects.clone() }
+    }
+
+    /// GEDI − ALS vertical offset (m) of the model's effects.
+    pub fn vertical_offset_m(&self) -> f64 {
+        self.set().vertical_offset_m()
+    }
+
+    /// Level of the model's `geolocation` effect, if it has one: how finely it re-places shots.
+    pub fn geolocation_level(&self) -> Option<GeoLevel> {
+        self.effects.iter().rev().find_map(|e| e.extra_offset()).map(|(level, _)| level)
+    }
+
+    /// Footprint σ (m).
+    pub fn fsigma(&self) -> f64 {
+        self.effects.iter().rev().find_map(|e| if let Effect::Footprint { fsigma_m } = e { Some(*fsigma_m) } else { None }).unwrap_or(NOMINAL_FSIGMA_M)
+    }
+
+    /// Effective pulse σ (m, range).
+    pub fn pulse_sigma(&self) -> f64 {
+        self.effects.iter().rev().find_map(|e| if let Effect::Pulse { pulse_sigma_m } = e { Some(*pulse_sigma_m) } else { None }).unwrap_or(NOMINAL_PULSE_SIGMA_M)
+    }
+
+    /// Weighting and ρg/ρv.
+    pub fn weighting(&self) -> (Weighting, f64) {
+        self.effects
+            .iter()
+            .rev()
+            .find_map(|e| match *e {
+                Effect::Weighting { method, rho_ground_over_veg } => Some((
+                    match method {
+                        WeightMethod::Count | WeightMethod::Ratio => Weighting::Count,
+                        WeightMethod::Frac => Weighting::Frac,
+                        WeightMethod::Int => Weighting::Int,
+                    },
+                    rho_ground_over_veg,
+                )),
+                _ => None,
+            })
+            .unwrap_or((Weighting::Count, 1.0))
+    }
+}
+
+/// One algorithm's products: a ground elevation (m, ALS datum) and RH0..RH100 (m).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Products {
+    pub ground: f64,
+    pub rh: [f32; RH_LEN],
+}
+
+/// Reusable buffers of one worker.
+#[derive(Debug, Default)]
+pub struct Scratch {
+    l2a: L2aProcessor,
+    outcomes: Vec<L2aOutcome>,
+    settings: Vec<AlgorithmSettings>,
+}
+
+impl Scratch {
+    pub fn new() -> Scratch {
+        Scratch { settings: AlgorithmSettings::all_gedi(), ..Default::default() }
+    }
+}
+
+/// Seed of a shot's noise draws: the same for every hypothesis, so that hypotheses are compared
+/// on the same noise (common random numbers).
+fn noise_seed(shot_number: u64) -> u64 {
+    shot_number.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0xD1A6_0000_5EED
+}
+
+/// The pulse-free parts of weighting `w` at footprint σ `fsigma`, interpolated linearly between
+/// the two nearest simulated widths (a site simulated at the nominal width only gives that one).
+fn parts_at(site: &Site, w: Weighting, fsigma: f64) -> (Vec<f64>, Vec<f64>) {
+    if let [only] = site.variants.as_slice() {
+        let p = &only.weightings[w as usize];
+        return (p.ground.iter().map(|&v| f64::from(v)).collect(), p.canopy.iter().map(|&v| f64::from(v)).collect());
+    }
+    let grid = &FSIGMA_GRID;
+    let f = fsigma.clamp(grid[0], grid[grid.len() - 1]);
+    let i = grid.windows(2).position(|p| f <= p[1]).unwrap_or(grid.len() - 2);
+    let t = (f - grid[i]) / (grid[i + 1] - grid[i]);
+    let (a, b) = (&site.variants[i].weightings[w as usize], &site.variants[i + 1].weightings[w as usize]);
+    let mix = |x: &[f32], y: &[f32]| -> Vec<f64> { x.iter().zip(y).map(|(&p, &q)| (1.0 - t) * f64::from(p) + t * f64::from(q)).collect() };
+    (mix(&a.ground, &b.ground), mix(&a.canopy, &b.canopy))
+}
+
+/// Convolve with a unit-sum Gaussian of σ `sigma` (m) on bins of `dz` (same length, zero outside).
+pub fn gaussian_blur(x: &[f64], sigma: f64, dz: f64) -> Vec<f64> {
+    if !(sigma > 0.0) || x.is_empty() {
+        return x.to_vec();
+    }
+    let half = (4.0 * sigma / dz).ceil() as isize;
+    let mut kernel: Vec<f64> = (-half..=half).map(|i| (-0.5 * (i as f64 * dz / sigma).powi(2)).exp()).collect();
+    let sum: f64 = kernel.iter().sum();
+    kernel.iter_mut().for_each(|k| *k /= sum);
+    let n = x.len() as isize;
+    let mut out = vec![0.0; x.len()];
+    for (i, &v) in x.iter().enumerate() {
+        if v == 0.0 {
+            continue;
+        }
+        for (j, &k) in kernel.iter().enumerate() {
+            let o = i as isize + j as isize - half;
+            if o >= 0 && o < n {
+                out[o as usize] += v * k;
+            }
+        }
+    }
+    out
+}
+
+/// The noise-free simulated waveform of `case` under `model` at the model's site of the case
+/// (bins of the site's grid), with the canopy effects applied after the pulse as in the world
+/// generator.
+pub fn simulated_wave(case: &ShotCase, model: &Model) -> Vec<f64> {
+    simulated_wave_at(case.sim.dz, model.site(case), model)
+}
+
+/// The noise-free simulated waveform at `site` (bins of `dz` from `site.z0`).
+pub fn simulated_wave_at(dz: f64, site: &Site, model: &Model) -> Vec<f64> {
+    let (w, rho) = model.weighting();
+    let (ground, canopy) = parts_at(site, w, model.fsigma());
+    let sigma = model.pulse_sigma();
+    let mut parts = WaveParts {
+        ground: gaussian_blur(&ground, sigma, dz),
+        canopy: gaussian_blur(&canopy, sigma, dz),
+        z0: site.z0,
+        dz,
+        ground_z: site.als_ground,
+    };
+    model.set().apply_waveform(&mut parts);
+    parts.compose(rho).into_iter().map(|v| v.max(0.0)).collect()
+}
+
+/// Pearson correlation between the real waveform of `case` (elevations through the nominal geoid
+/// and the model's vertical offset) and `wave` (bins of `dz` from `z0`), read at the real
+/// samples by linear interpolation: the collocation's measure of fit of a position.
+fn correlation(case: &ShotCase, model: &Model, wave: &[f64], z0: f64, dz: f64) -> f64 {
+    let real = &case.real;
+    let top = real.bin0 - model.vertical_offset_m();
+    let (mut n, mut sx, mut sy, mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    for (s, &r) in real.wave.iter().enumerate() {
+        let p = (z0 - (top - s as f64 * GEDI_BIN_M)) / dz;
+        let i = p.floor();
+        let m = if i >= 0.0 && (i as usize) + 1 < wave.len() {
+            let (i, t) = (i as usize, p - i);
+            (1.0 - t) * wave[i] + t * wave[i + 1]
+        } else {
+            0.0
+        };
+        let r = f64::from(r);
+        n += 1.0;
+        sx += r;
+        sy += m;
+        sxx += r * r;
+        syy += m * m;
+        sxy += r * m;
+    }
+    let cov = sxy - sx * sy / n;
+    let var = (sxx - sx * sx / n) * (syy - sy * sy / n);
+    if n > 1.0 && var > 0.0 { cov / var.sqrt() } else { f64::NAN }
+}
+
+/// Re-place the shots for `model`, each to the site (`SimShot::sites`) where the model's waveform
+/// correlates best with the real one — the collocation redone with the hypothesis instead of the
+/// nominal simulation:
+/// - without a `geolocation` effect, the shots of short collocation segments, each segment as
+///   one (the same site offset for all its shots, correlations summed). On tracks of one or two
+///   shots the nominal collocation fits each position to the nominal waveform and so absorbs much
+///   of a waveform-shape effect; re-placing gives every hypothesis the same freedom;
+/// - with `geolocation` at level `beam`, every segment that has sites, as one;
+/// - with `geolocation` at level `shot`, every shot that has sites, on its own.
+///
+/// Ties keep the lowest site (the collocated position first). Other shots keep their placement
+/// in `model`.
+pub fn reposition(cases: &[&ShotCase], model: &Model) -> Model {
+    let level = model.geolocation_level();
+    let movable = |c: &ShotCase| c.sim.sites.len() > 1 && (level.is_some() || c.sim.short_segment);
+    let scores: Vec<Vec<f64>> = cases
+        .par_iter()
+        .map(|c| {
+            if !movable(c) {
+                return Vec::new();
+            }
+            c.sim.sites
+                .iter()
+                .map(|s| if s.variants.is_empty() { f64::NAN } else { correlation(c, model, &simulated_wave_at(c.sim.dz, s, model), s.z0, c.sim.dz) })
+                .collect()
+        })
+        .collect();
+    // Per unit moved as one (segment or shot): summed r per site (NaN once any shot lacks the
+    // site) and its shots.
+    let mut units: HashMap<(&str, u64), (Vec<f64>, Vec<u64>)> = HashMap::new();
+    for (c, sc) in cases.iter().zip(&scores) {
+        if sc.is_empty() {
+            continue;
+        }
+        let key = (c.real.segment.as_str(), if level == Some(GeoLevel::Shot) { c.real.shot_number } else { 0 });
+        let (sum, shots) = units.entry(key).or_insert_with(|| (vec![0.0; sc.len()], Vec::new()));
+        if sum.len() == sc.len() {
+            sum.iter_mut().zip(sc).for_each(|(a, b)| *a += b);
+        } else {
+            sum.iter_mut().for_each(|v| *v = f64::NAN);
+        }
+        shots.push(c.real.shot_number);
+    }
+    let mut placement = (*model.placement).clone();
+    for (sum, shots) in units.into_values() {
+        let best = (0..sum.len()).filter(|&k| sum[k].is_finite()).fold(0, |b, k| if !sum[b].is_finite() || sum[k] > sum[b] { k } else { b });
+        for s in shots {
+            placement.insert(s, best);
+        }
+    }
+    Model { effects: model.effects.clone(), placement: Arc::new(placement) }
+}
+
+/// The GEDI-processed simulation of `case` under `model`: one entry per algorithm a1..a6
+/// (`None` where L2A finds no result or the twin cannot be made).
+pub fn predict(case: &ShotCase, model: &Model, scratch: &mut Scratch) -> [Option<Products>; N_ALGORITHMS] {
+    let wave = simulated_wave(case, model);
+    match twin(case, model, &wave, model.site(case).z0, noise_seed(case.real.shot_number), scratch) {
+        Some((_, _, products)) => products,
+        None => std::array::from_fn(|_| None),
+    }
+}
+
+/// The noise twin of a noise-free waveform `wave` of `case` (bins of the case's `dz` from `z0`)
+/// under `model` with the noise draw `seed`, in the real shot's record window: the received
+/// waveform (DN), its noise, and its L2A products.
+#[allow(clippy::type_complexity)]
+fn twin(case: &ShotCase, model: &Model, wave: &[f64], z0: f64, seed: u64, scratch: &mut Scratch) -> Option<(Vec<f32>, Noise, [Option<Products>; N_ALGORITHMS])> {
+    let max = wave.iter().cloned().fold(0.0, f64::max);
+    if !(max > 0.0) {
+        return None;
+    }
+    let cut = max * 1e-9;
+    let first = wave.iter().position(|&v| v > cut)?;
+    let last = wave.iter().rposition(|&v| v > cut)?;
+    let real = &case.real;
+    let z_first = z0 - first as f64 * case.sim.dz;
+    let start = ((real.bin0 - z_first) / crate::kernels::waveform::noise_twin::GEDI_BIN_M).round() as isize;
+    let factor = model.set().noise_sigma_factor();
+    let twin = ShotTwin {
+        energy_total: real.energy,
+        noise: Noise { mean: real.noise.mean, stddev: real.nominal_noise_stddev * factor },
+        sample_count: real.sample_count,
+        tx_pulse: None,
+        quantum: 0.0,
+        noise_shape: NoiseShape::GEDI_V1,
+    };
+    let twin = twin.apply(&wave[first..=last], case.sim.dz, start, seed).ok()?;
+    let geo = WaveformGeolocation::vertical(real.sample_count, real.bin0, real.lastbin);
+    let Scratch { l2a, outcomes, settings } = scratch;
+    l2a.process_all(&twin.wave, twin.noise, &geo, settings, outcomes);
+    let products = std::array::from_fn(|a| match outcomes.get(a) {
+        Some(Ok(r)) if r.elev_lowestmode.is_finite() => Some(Products {
+            ground: r.elev_lowestmode,
+            rh: std::array::from_fn(|k| r.rh_cm[k] as f32 / 100.0),
+        }),
+        _ => None,
+    });
+    Some((twin.wave, twin.noise, products))
+}
+
+/// The noise-twin null of `case` under `model`: the same shot with its real side replaced by a
+/// second, independent noise twin of the model's simulation — a shot for which `model` is true
+/// up to the resolution of the sites: the twin is made at a random point of the model's site's
+/// cell (uniform within ± half the [`SITE_STEP_M`] per axis, waveforms interpolated bilinearly
+/// between the sites around it), as a real shot lies between the sites a placement can choose.
+/// Scored like the real shots, it gives the gap that noise and site resolution alone leave
+/// under a hypothesis's freedom (re-placement fits noise too): the floor against which an effect
+/// judged on spread (`geolocation`) is measured. `None` when no twin can be made.
+pub fn null_case(case: &ShotCase, model: &Model, scratch: &mut Scratch) -> Option<ShotCase> {
+    let seed = noise_seed(case.real.shot_number) ^ NULL_SEED;
+    let mut rng = crate::kernels::scenario::rng::Stream::new(seed, &["null position"]);
+    let here = model.site(case).offset;
+    let target = (here.0 + (rng.uniform() - 0.5) * SITE_STEP_M, here.1 + (rng.uniform() - 0.5) * SITE_STEP_M);
+    let (wave, z0) = wave_between(case, model, target)?;
+    let (wave, noise, products) = twin(case, model, &wave, z0, seed, scratch)?;
+    let set = model.set();
+    let vo = set.vertical_offset_m();
+    let mut real = case.real.clone();
+    // Stored the way the real side is, so that `real_products` and `correlation` undo the
+    // model's real-side offsets back to the twin's own frame.
+    real.algorithms = std::array::from_fn(|a| {
+        let p = products[a].as_ref()?;
+        let o = set.ground_offset_m(a as u8 + 1);
+        Some(RealAlgorithm { ground: p.ground + vo + o, rh: p.rh.iter().map(|&v| (f64::from(v) - o) as f32).collect() })
+    });
+    real.bin0 += vo;
+    real.lastbin += vo;
+    real.noise = noise;
+    real.wave = wave.iter().map(|&v| (f64::from(v) - noise.mean) as f32).collect();
+    real.collocation_dz = None;
+    Some(ShotCase { real, sim: case.sim.clone(), mismatch: case.mismatch })
+}
+
+/// The noise-free waveform of `case` under `model` at the horizontal offset `target` (m from the
+/// collocated position): the waveforms of the sites less than [`SITE_STEP_M`] away on each axis,
+/// weighted bilinearly, on one bin grid (the sites' grids share one lattice). Returns it with
+/// the elevation of its first bin; `None` when no site is near.
+fn wave_between(case: &ShotCase, model: &Model, target: (f64, f64)) -> Option<(Vec<f64>, f64)> {
+    let dz = case.sim.dz;
+    let near: Vec<(f64, &Site)> = case.sim.sites
+        .iter()
+        .filter(|s| !s.variants.is_empty())
+        .filter_map(|s| {
+            let w = (1.0 - (s.offset.0 - target.0).abs() / SITE_STEP_M) * (1.0 - (s.offset.1 - target.1).abs() / SITE_STEP_M);
+            (w > 0.0 && (s.offset.0 - target.0).abs() < SITE_STEP_M).then_some((w, s))
+        })
+        .collect();
+    let total: f64 = near.iter().map(|(w, _)| w).sum();
+    if !(total > 0.0) {
+        return None;
+    }
+    let waves: Vec<(f64, f64, Vec<f64>)> = near.iter().map(|(w, s)| (w / total, s.z0, simulated_wave_at(dz, s, model))).collect();
+    let top = waves.iter().map(|(_, z0, _)| *z0).fold(f64::NEG_INFINITY, f64::max);
+    let len = waves.iter().map(|(_, z0, v)| ((top - z0) / dz).round() as usize + v.len()).max()?;
+    let mut out = vec![0.0; len];
+    for (w, z0, v) in &waves {
+        let off = ((top - z0) / dz).round() as usize;
+        out[off..off + v.len()].iter_mut().zip(v).for_each(|(o, x)| *o += w * x);
+    }
+    Some((out, top))
+}
+
+/// The noise-twin nulls of `cases` under `model` (parallel), with the index of the case each
+/// comes from.
+pub fn null_cases(cases: &[&ShotCase], model: &Model) -> Vec<(usize, ShotCase)> {
+    cases.par_iter().enumerate().map_init(Scratch::new, |scratch, (i, c)| null_case(c, model, scratch).map(|n| (i, n))).flatten().collect()
+}
+
+/// Mixed into a shot's noise seed for its null twin (independent of the simulated side's draw).
+const NULL_SEED: u64 = 0x0A11_7717_u64;
+
+/// The real products of algorithm `alg` (1..6) of `case` with the model's real-side effects
+/// undone: the datum offset removed from the ground, the ground-detection offset removed from the
+/// ground and added back to RH.
+pub fn real_products(case: &ShotCase, model: &Model, alg: u8) -> Option<Products> {
+    let r = case.real.algorithms.get(usize::from(alg) - 1)?.as_ref()?;
+    let set = model.set();
+    let o = set.ground_offset_m(alg);
+    let ground = r.ground - set.vertical_offset_m() - o;
+    if r.rh.len() != RH_LEN {
+        return None;
+    }
+    Some(Products { ground, rh: std::array::from_fn(|k| (f64::from(r.rh[k]) + o) as f32) })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn blur_keeps_the_sum_and_the_centre() {
+        let mut x = vec![0.0; 101];
+        x[50] = 1.0;
+        let y = gaussian_blur(&x, 0.955, 0.15);
+        assert!((y.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        let mean: f64 = y.iter().enumerate().map(|(i, v)| i as f64 * v).sum();
+        assert!((mean - 50.0).abs() < 1e-9);
+        let var: f64 = y.iter().enumerate().map(|(i, v)| (i as f64 - 50.0).powi(2) * v).sum::<f64>() * 0.15 * 0.15;
+        assert!((var.sqrt() - 0.955).abs() < 0.01, "{}", var.sqrt());
+    }
+
+    use crate::kernels::diagnose::case::{site_grid, Parts, RealShot, SimShot, SimVariant, Strata};
+    use crate::kernels::gedi::BeamType;
+
+    /// A site at `offset` (m from the collocated position) whose canopy layer's height depends on
+    /// the position (unique on the site grid), over a ground at 100 m.
+    fn site(offset: (f64, f64)) -> Site {
+        let (n, z0) = (300, 140.0);
+        let top = 20.0 + offset.0 + 0.3 * offset.1;
+        let z = |k: usize| z0 - k as f64 * GEDI_BIN_M;
+        let ground = (0..n).map(|k| (-0.5 * ((z(k) - 100.0) / 0.3).powi(2)).exp() as f32).collect();
+        let canopy = (0..n).map(|k| (0.3 * (-0.5 * ((z(k) - 100.0 - top) / 1.5).powi(2)).exp()) as f32).collect();
+        let parts = Parts { ground, canopy };
+        Site { z0, variants: vec![SimVariant { weightings: std::array::from_fn(|_| parts.clone()) }], als_ground: 100.0, offset }
+    }
+
+    /// A shot of a long segment whose real waveform is the nominal one at `truth`.
+    fn case(shot: u64, segment: &str, truth: (f64, f64)) -> ShotCase {
+        let mut sites = vec![site((0.0, 0.0))];
+        sites.extend(site_grid().into_iter().map(site));
+        let sim = Arc::new(SimShot { dz: GEDI_BIN_M, sites, short_segment: false, rh_nominal: vec![0.0; RH_LEN] });
+        let wave: Vec<f32> = simulated_wave_at(GEDI_BIN_M, &site(truth), &Model::default()).iter().map(|&v| v as f32).collect();
+        let real = RealShot {
+            shot_number: shot,
+            track: "g/BEAM0000".into(),
+            beam_type: BeamType::Coverage,
+            noise: Noise { mean: 0.0, stddev: 1.0 },
+            nominal_noise_stddev: 1.0,
+            energy: 1.0,
+            sample_count: wave.len(),
+            bin0: 140.0,
+            lastbin: 140.0 - (wave.len() - 1) as f64 * GEDI_BIN_M,
+            wave,
+            selected: 1,
+            algorithms: std::array::from_fn(|_| None),
+            strata: Strata::default(),
+            segment: segment.into(),
+            collocation_dz: None,
+        };
+        ShotCase { real, sim, mismatch: [false; N_ALGORITHMS] }
+    }
+
+    fn offsets(cases: &[&ShotCase], model: &Model) -> Vec<(f64, f64)> {
+        let placed = reposition(cases, model);
+        cases.iter().map(|c| placed.site(c).offset).collect()
+    }
+
+    #[test]
+    fn geolocation_level_decides_what_moves() {
+        let (a, b) = (case(1, "s", (2.0, -2.0)), case(2, "s", (-4.0, 4.0)));
+        let cases = [&a, &b];
+        // Without geolocation a long segment keeps its collocated position.
+        assert_eq!(offsets(&cases, &Model::default()), vec![(0.0, 0.0); 2]);
+        // Level shot: each shot to its own position.
+        let shot = Model::default().with(Effect::Geolocation { level: GeoLevel::Shot, shot_sigma_m: 0.0 });
+        assert_eq!(offsets(&cases, &shot), vec![(2.0, -2.0), (-4.0, 4.0)]);
+        // Level beam: the segment moves as one, to where both its shots are.
+        let (c, d) = (case(3, "t", (2.0, -2.0)), case(4, "t", (2.0, -2.0)));
+        let beam = Model::default().with(Effect::Geolocation { level: GeoLevel::Beam, shot_sigma_m: 0.0 });
+        assert_eq!(offsets(&[&c, &d], &beam), vec![(2.0, -2.0); 2]);
+        let moved = offsets(&cases, &beam);
+        assert_eq!(moved[0], moved[1]);
+    }
+
+    #[test]
+    fn wave_between_interpolates_the_sites_bilinearly() {
+        let c = case(1, "s", (0.0, 0.0));
+        let m = Model::default();
+        let at = |x: f64, y: f64| wave_between(&c, &m, (x, y)).unwrap();
+        let node = simulated_wave_at(GEDI_BIN_M, &site((2.0, -2.0)), &m);
+        let (w, z0) = at(2.0, -2.0);
+        assert_eq!(z0, 140.0);
+        assert!(w.iter().zip(&node).all(|(a, b)| (a - b).abs() < 1e-12));
+        let right = simulated_wave_at(GEDI_BIN_M, &site((4.0, -2.0)), &m);
+        let (mid, _) = at(3.0, -2.0);
+        assert!(mid.iter().zip(node.iter().zip(&right)).all(|(v, (a, b))| (v - 0.5 * (a + b)).abs() < 1e-12));
+    }
+
+    #[test]
+    fn model_reads_its_effects() {
+        let m = Model::default().with(Effect::Footprint { fsigma_m: 7.0 }).with(Effect::Weighting { method: WeightMethod::Int, rho_ground_over_veg: 0.5 });
+        assert_eq!(m.fsigma(), 7.0);
+        assert_eq!(m.weighting(), (Weighting::Int, 0.5));
+        assert_eq!(m.pulse_sigma(), NOMINAL_PULSE_SIGMA_M);
+    }
+}

@@ -1,0 +1,87 @@
+//! The diagnosis of the sim-to-real gap (docs/diagnosis.md), as pure kernels over in-memory shots
+//! ([`case::ShotCase`]); `crate::ops::diagnose` reads them from a dataset and writes the results.
+//!
+//! - [`locate`]: **where** — the study's baseline gap by RH percentile, by stratum, and as the
+//!   waveform residual by height above the ALS ground.
+//! - [`chain`]: the forward model of a hypothesis — the nominal GEDI chain (ALS waveform, pulse,
+//!   noise twin, L2A a1–a6) with effects from the shared registry (`scenario::effects`), and the
+//!   hypothesis's placement of the shots of short collocation segments.
+//! - [`gap`]: the gap of a set of shots in the RH frame and the ALS frame, as additive sums.
+//! - [`profile`]: the waveform-level gap (mean normalised waveforms by height, as a χ²).
+//! - [`fit`]: each effect's parameters fitted to a calibration set.
+//! - [`rank`]: **which** and **how far** — cross-fitted on tracks, held-out shrink with bootstrap
+//!   intervals, the greedy ladder, `unexplained`.
+
+pub mod case;
+pub mod chain;
+pub mod fit;
+pub mod gap;
+pub mod locate;
+pub mod profile;
+pub mod rank;
+
+pub use case::ShotCase;
+
+/// The whole diagnosis of a set of shots.
+#[derive(Debug, Clone)]
+pub struct Diagnosis {
+    pub where_: locate::Where,
+    /// The nominal chain's held-out gap (what every effect's "before" is).
+    pub nominal: gap::GapMetrics,
+    pub ranking: rank::Ranking,
+    pub n_shots: usize,
+    /// Shots of short collocation segments, which each hypothesis re-places (`chain::reposition`).
+    pub n_replaceable: usize,
+    pub n_tracks: usize,
+    /// (shot, algorithm) pairs left out as ground mismatches.
+    pub mismatched: usize,
+}
+
+/// Diagnose `cases` with the effects `names` (normally [`fit::FITTED_EFFECTS`]); `on_step` hears
+/// each effect tried.
+pub fn diagnose(mut cases: Vec<ShotCase>, names: &[&str], on_step: &dyn Fn(&str)) -> Diagnosis {
+    let where_ = locate::locate(&cases);
+    case::set_nominal_noise(&mut cases);
+    let mismatched = flag_ground_mismatches(&mut cases);
+    let cases = &cases;
+    let folds = rank::Folds::new(cases);
+    let ranking = rank::rank(&folds, names, on_step);
+    let nominal = match ranking.effects.first() {
+        Some(t) => t.held_out.before.clone(),
+        None => fit::total(&rank::State::nominal(&folds).gaps).metrics(),
+    };
+    let n_replaceable = cases.iter().filter(|c| c.sim.short_segment && c.sim.sites.len() > 1).count();
+    Diagnosis { where_, nominal, ranking, n_shots: cases.len(), n_replaceable, n_tracks: folds.n_tracks, mismatched }
+}
+
+/// A pair is a ground mismatch when its ground difference (real − nominal chain) lies more than
+/// max([`MISMATCH_MIN_M`], 4 robust σ) from the median of its algorithm: one side found another
+/// mode. Such pairs shift all 99 RH of a shot by metres and would dominate every mean; a uniform
+/// offset (datum, ground detection of an algorithm) moves the median with them and flags nothing.
+/// Returns the number of pairs flagged.
+pub fn flag_ground_mismatches(cases: &mut [ShotCase]) -> usize {
+    let refs: Vec<&ShotCase> = cases.iter().collect();
+    let gaps = fit::evaluate(&refs, &chain::Model::default());
+    let mut flagged = 0;
+    for a in 0..crate::kernels::gedi::N_ALGORITHMS {
+        let mut g: Vec<f64> = gaps.iter().filter_map(|s| s.ground[a]).collect();
+        if g.len() < 3 {
+            continue;
+        }
+        g.sort_by(|x, y| x.total_cmp(y));
+        let med = g[g.len() / 2];
+        let mut dev: Vec<f64> = g.iter().map(|x| (x - med).abs()).collect();
+        dev.sort_by(|x, y| x.total_cmp(y));
+        let limit = MISMATCH_MIN_M.max(4.0 * 1.4826 * dev[dev.len() / 2]);
+        for (c, s) in cases.iter_mut().zip(&gaps) {
+            if s.ground[a].is_some_and(|x| (x - med).abs() > limit) {
+                c.mismatch[a] = true;
+                flagged += 1;
+            }
+        }
+    }
+    flagged
+}
+
+/// Smallest ground disagreement (m) counted as a mismatch.
+pub const MISMATCH_MIN_M: f64 = 1.5;

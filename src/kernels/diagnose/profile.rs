@@ -1,0 +1,189 @@
+//! The waveform-level gap: real and simulated waveforms, each normalised to unit energy, on a
+//! grid of heights above the ALS ground, and the misfit of their means as a χ².
+//!
+//! RH percentiles are a few noisy summaries of a waveform; several effects that reshape the
+//! waveform move them alike (docs/diagnosis.md). The mean normalised waveform keeps the shape —
+//! where energy is missing or extra, and how wide the ground return is — averaged over shots, so
+//! the noise of single waveforms cancels. It is kept per slope group, because a wider footprint
+//! broadens the ground return only on slopes while a wider pulse broadens it everywhere.
+//!
+//! Per shot, the difference d = real − simulated is stored; d's mean and its between-shot spread
+//! per height bin give χ² = Σ_bins mean(d)² / var(mean(d)), additive over shots through
+//! [`ProfileSums`] like the RH gap, so that tracks and bootstrap resamples combine by addition.
+
+use super::case::{ShotCase, Site};
+use super::chain::{simulated_wave, Model};
+use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
+
+/// Height grid: bins of this size (m) from [`PROFILE_MIN_M`].
+pub const PROFILE_BIN_M: f64 = 0.5;
+pub const PROFILE_MIN_M: f64 = -10.0;
+pub const PROFILE_BINS: usize = 140;
+/// Slope groups: < 10° (flat) and the rest (sloped or unknown).
+pub const PROFILE_GROUPS: usize = 2;
+
+/// Add `v` at height `h` to `acc`, shared between the two nearest bin centres (linear weights):
+/// 1 ns samples (0.15 m) do not tile 0.5 m bins, and nearest-bin counting would show a saw-tooth.
+pub fn add_at_height(acc: &mut [f64], h: f64, v: f64) {
+    let p = (h - PROFILE_MIN_M) / PROFILE_BIN_M - 0.5;
+    let i = p.floor();
+    let w = p - i;
+    for (j, f) in [(i, 1.0 - w), (i + 1.0, w)] {
+        if j >= 0.0 && (j as usize) < acc.len() {
+            acc[j as usize] += v * f;
+        }
+    }
+}
+
+/// Bin centres (m above the ALS ground).
+pub fn heights() -> Vec<f64> {
+    (0..PROFILE_BINS).map(|i| PROFILE_MIN_M + (i as f64 + 0.5) * PROFILE_BIN_M).collect()
+}
+
+/// The real waveform of `case` (noise mean removed) on the height grid above the ALS ground of
+/// `site`, normalised to unit sum, its elevations corrected by `vertical_offset_m` (GEDI − ALS).
+/// `None` without energy.
+pub fn real_profile(case: &ShotCase, site: &Site, vertical_offset_m: f64) -> Option<Vec<f64>> {
+    let g = site.als_ground + vertical_offset_m;
+    let mut r = vec![0.0; PROFILE_BINS];
+    for (s, &v) in case.real.wave.iter().enumerate() {
+        add_at_height(&mut r, case.real.bin0 - s as f64 * GEDI_BIN_M - g, f64::from(v));
+    }
+    normalised(r)
+}
+
+/// The model's noise-free simulated waveform of `case` on the height grid, normalised.
+pub fn simulated_profile(case: &ShotCase, model: &Model) -> Option<Vec<f64>> {
+    let site = model.site(case);
+    let mut m = vec![0.0; PROFILE_BINS];
+    for (k, &v) in simulated_wave(case, model).iter().enumerate() {
+        add_at_height(&mut m, site.z0 - k as f64 * case.sim.dz - site.als_ground, v);
+    }
+    normalised(m)
+}
+
+fn normalised(mut v: Vec<f64>) -> Option<Vec<f64>> {
+    let s: f64 = v.iter().sum();
+    if !(s > 0.0 && s.is_finite()) {
+        return None;
+    }
+    v.iter_mut().for_each(|x| *x /= s);
+    Some(v)
+}
+
+/// Slope group of a case.
+pub fn group(case: &ShotCase) -> usize {
+    usize::from(case.real.strata.slope_class != crate::kernels::study::classes::slope_class(Some(0.0)))
+}
+
+/// One shot's profile difference (real − simulated) and its slope group.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShotProfile {
+    pub group: usize,
+    pub diff: Vec<f32>,
+}
+
+/// The profile difference of `case` under `model`.
+pub fn shot_profile(case: &ShotCase, model: &Model) -> Option<ShotProfile> {
+    let r = real_profile(case, model.site(case), model.vertical_offset_m())?;
+    let m = simulated_profile(case, model)?;
+    Some(ShotProfile { group: group(case), diff: r.iter().zip(&m).map(|(a, b)| (a - b) as f32).collect() })
+}
+
+/// Σd and Σd² per group and bin, and the shot counts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProfileSums {
+    pub n: [f64; PROFILE_GROUPS],
+    pub sd: Vec<f64>,
+    pub sdd: Vec<f64>,
+}
+
+impl Default for ProfileSums {
+    fn default() -> Self {
+        ProfileSums { n: [0.0; PROFILE_GROUPS], sd: vec![0.0; PROFILE_GROUPS * PROFILE_BINS], sdd: vec![0.0; PROFILE_GROUPS * PROFILE_BINS] }
+    }
+}
+
+impl ProfileSums {
+    pub fn add(&mut self, p: &ShotProfile) {
+        if p.group >= PROFILE_GROUPS || p.diff.len() != PROFILE_BINS {
+            return;
+        }
+        self.n[p.group] += 1.0;
+        let o = p.group * PROFILE_BINS;
+        for (i, &d) in p.diff.iter().enumerate() {
+            let d = f64::from(d);
+            self.sd[o + i] += d;
+            self.sdd[o + i] += d * d;
+        }
+    }
+
+    pub fn merge(&mut self, o: &ProfileSums) {
+        for g in 0..PROFILE_GROUPS {
+            self.n[g] += o.n[g];
+        }
+        self.sd.iter_mut().zip(&o.sd).for_each(|(a, b)| *a += b);
+        self.sdd.iter_mut().zip(&o.sdd).for_each(|(a, b)| *a += b);
+    }
+
+    /// χ² of the mean difference, Σ mean² / (var / n) over the bins of groups with ≥ 3 shots;
+    /// bins whose difference never varies (no energy on either side) count nothing. Its
+    /// expectation is about the number of bins used when the model is right.
+    pub fn chi2(&self) -> f64 {
+        let mut chi2 = 0.0;
+        for g in 0..PROFILE_GROUPS {
+            let n = self.n[g];
+            if n < 3.0 {
+                continue;
+            }
+            for i in g * PROFILE_BINS..(g + 1) * PROFILE_BINS {
+                let mean = self.sd[i] / n;
+                let var = (self.sdd[i] / n - mean * mean).max(0.0) * n / (n - 1.0);
+                if var > 1e-18 {
+                    chi2 += mean * mean / (var / n);
+                }
+            }
+        }
+        chi2
+    }
+}
+
+/// The profile χ² of `model` on `cases` (in parallel).
+pub fn chi2(cases: &[&ShotCase], model: &Model) -> f64 {
+    use rayon::prelude::*;
+    let profiles: Vec<Option<ShotProfile>> = cases.par_iter().map(|c| shot_profile(c, model)).collect();
+    let mut s = ProfileSums::default();
+    profiles.iter().flatten().for_each(|p| s.add(p));
+    s.chi2()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn linear_binning_keeps_the_sum_and_the_mean_height() {
+        let mut acc = vec![0.0; PROFILE_BINS];
+        add_at_height(&mut acc, 3.3, 2.0);
+        assert!((acc.iter().sum::<f64>() - 2.0).abs() < 1e-12);
+        let h = heights();
+        let mean: f64 = acc.iter().zip(&h).map(|(v, h)| v * h).sum::<f64>() / 2.0;
+        assert!((mean - 3.3).abs() < 1e-9, "{mean}");
+    }
+
+    #[test]
+    fn chi2_is_zero_for_equal_profiles_and_grows_with_a_shift() {
+        let mut same = ProfileSums::default();
+        let mut off = ProfileSums::default();
+        for i in 0..20 {
+            let noise = |k: usize| ((i * 7 + k * 13) % 11) as f32 * 1e-4 - 5e-4;
+            same.add(&ShotProfile { group: 0, diff: (0..PROFILE_BINS).map(|k| noise(k) * 0.0).collect() });
+            off.add(&ShotProfile { group: 0, diff: (0..PROFILE_BINS).map(|k| noise(k) + if k == 20 { 0.01 } else { 0.0 }).collect() });
+        }
+        assert_eq!(same.chi2(), 0.0);
+        let mut merged = ProfileSums::default();
+        merged.merge(&off);
+        assert_eq!(merged.chi2(), off.chi2());
+        assert!(off.chi2() > 100.0, "{}", off.chi2());
+    }
+}

@@ -1,0 +1,135 @@
+//! `gedisim demo`: the study end to end on the bundled LiDAR HD tiles (`tests/data/als`) with GEDI
+//! granules generated for them by the scenario generator: `scenario` → `run` → `report`, then the
+//! headline tables. `<out>/world/` holds the world (tiles, granules, truth.json), `<out>/dataset/`
+//! the dataset and `<out>/dataset/report/` the report. Re-running with the same effect and seed
+//! reuses the world, and `run` finds nothing new.
+
+use std::path::{Path, PathBuf};
+
+use crate::kernels::collocate::segments::Level;
+use crate::ops::collocate::CollocateOptions;
+use crate::dataset::Dataset;
+use crate::error::{Error, Result};
+use crate::ops::report::headline::Headline;
+use crate::ops::report::ReportSummary;
+use crate::ops::run::{run_study, Progress, RunOptions, RunReport, Step};
+use crate::kernels::scenario::EffectSet;
+use crate::ops::scenario::{make_scenario, ScenarioOptions, ScenarioReport, DEFAULT_GEOID_M};
+
+/// The tiles bundled with the source (`tests/data/als`).
+pub fn bundled_tiles() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/als")
+}
+
+/// Options of `gedisim demo`.
+#[derive(Debug, Clone)]
+pub struct DemoOptions {
+    /// Output folder: `world/`, `dataset/`.
+    pub out: PathBuf,
+    /// The scenario's withheld effect (`ground_detection` by default).
+    pub effect: String,
+    pub seed: u64,
+    /// Granules per tile.
+    pub passes: usize,
+    /// Replace a world of another effect or seed in `out`.
+    pub force: bool,
+}
+
+impl Default for DemoOptions {
+    fn default() -> Self {
+        DemoOptions { out: PathBuf::from("gedisim-demo"), effect: "ground_detection".into(), seed: 1, passes: 8, force: false }
+    }
+}
+
+/// What the demo did.
+#[derive(Debug, Clone)]
+pub struct DemoReport {
+    /// The world built (`None`: the one in `<out>/world` was reused).
+    pub world: Option<ScenarioReport>,
+    pub world_dir: PathBuf,
+    pub run: RunReport,
+    pub report: ReportSummary,
+    pub headline: Headline,
+}
+
+/// The world's folder and the dataset's.
+pub fn layout(out: &Path) -> (PathBuf, PathBuf) {
+    (out.join("world"), out.join("dataset"))
+}
+
+/// Collocation of the demo: the bundled tiles are 50–100 m wide, so each beam of a granule
+/// crosses a tile with 0–3 shots, fewer than a beam segment's default minimum (20): every run is
+/// solved (`min_segment` 1), one offset per beam of a granule.
+pub fn demo_collocation() -> CollocateOptions {
+    CollocateOptions { level: Level::Beam, min_segment: 1, ..CollocateOptions::default() }
+}
+
+/// scenario → run → report on the bundled tiles. `on_report_step` follows the report's steps.
+pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress, on_report_step: &dyn Fn(&str)) -> Result<DemoReport> {
+    let effects = EffectSet::parse(&opts.effect, None, &[]).map_err(|e| Error::Usage(e.to_string()))?;
+    let (world_dir, ds_dir) = layout(&opts.out);
+    let truth = world_dir.join("truth.json");
+    let mut reuse = false;
+    if truth.exists() {
+        let t: serde_json::Value = std::fs::read_to_string(&truth)
+            .ok()
+            .and_then(|s| serde_json::from_str(&s).ok())
+            .ok_or_else(|| Error::file(&truth, "not a scenario truth file"))?;
+        let same = t["effect_spec"].as_str() == Some(opts.effect.as_str())
+            && t["seed"].as_u64() == Some(opts.seed)
+            && t["granules"].as_array().map(|g| g.len()) == t["tiles"].as_array().map(|t| t.len() * opts.passes);
+        if same {
+            reuse = true;
+        } else if opts.force {
+            for d in [&world_dir, &ds_dir] {
+                if d.exists() {
+                    std::fs::remove_dir_all(d).map_err(|e| Error::file(d, format!("cannot remove the previous demo: {e}")))?;
+                }
+            }
+        } else {
+            return Err(Error::file(
+                &opts.out,
+                format!(
+                    "holds a demo of effect {}, seed {}; use --force to replace it, or another --out",
+                    t["effect_spec"].as_str().unwrap_or("?"),
+                    t["seed"]
+                ),
+            ));
+        }
+    }
+    let world = if reuse {
+        None
+    } else {
+        let tiles = crate::ops::ingest_als::expand_inputs(&[bundled_tiles()])?;
+        progress.start(Step::Scenario, 0);
+        let r = make_scenario(&ScenarioOptions {
+            effect_spec: opts.effect.clone(),
+            effects,
+            magnitude: None,
+            params: Vec::new(),
+            seed: opts.seed,
+            tiles,
+            out: world_dir.clone(),
+            passes_per_tile: opts.passes,
+            geoid_m: DEFAULT_GEOID_M,
+            track_offset_sigma_m: 3.0,
+            default_epsg: 2154,
+            force: true,
+        });
+        progress.finish();
+        Some(r?)
+    };
+    let gedi = world_dir.join("gedi");
+    let run_opts = RunOptions {
+        als: vec![world_dir.join("als")],
+        l1b: vec![gedi.clone()],
+        l2a: vec![gedi],
+        collocate: demo_collocation(),
+        ..RunOptions::new(&ds_dir)
+    };
+    let run = run_study(&run_opts, progress)?;
+    let ds = Dataset::open(&ds_dir)?;
+    let report = crate::ops::report::run_report(&ds, None, on_report_step)?;
+    let headline = Headline::read(&report.dir)?;
+    Ok(DemoReport { world, world_dir, run, report, headline })
+}

@@ -1,0 +1,779 @@
+//! `gedisim diagnose`: reads a dataset's shots (and their per-track collocation offsets, strata)
+//! and ALS points into [`diagnose::ShotCase`]s, runs the kernels of [`crate::kernels::diagnose`], and writes
+//! `<out>/diagnosis.json`, its tables (Parquet + CSV) and figures (PNG + SVG). docs/diagnosis.md.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use arrow::array::{Array, AsArray, Float64Array, ListArray, RecordBatch, StringArray, UInt64Array};
+use arrow::datatypes::{Field, Float32Type, Float64Type, Schema, UInt64Type, UInt8Type};
+use serde_json::{json, Value};
+
+use crate::dataset::als::AlsTable;
+use crate::dataset::{self, tables, Dataset};
+use crate::kernels::diagnose::case::{nominal_noise_stddev, site_grid, Parts, RealAlgorithm, RealShot, SimShot, SimVariant, Site, Strata, FSIGMA_GRID, SHORT_SEGMENT_SHOTS};
+use crate::kernels::diagnose::gap::{GapMetrics, N_PCT};
+use crate::kernels::diagnose::rank::Trial;
+use crate::kernels::diagnose::{self, Diagnosis, ShotCase};
+use crate::error::{Error, Result};
+use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
+use crate::kernels::waveform::l2a::Noise;
+use crate::ops::report::figures::{self, LinePanels};
+use crate::kernels::scenario::effects::{Effect, ParamValue};
+use crate::kernels::sim::{self, Footprint, Profile, SimConfig, Weighting};
+use crate::kernels::study::classes;
+
+/// Vertical margin added above and below the simulated waveforms (m): room for the widest pulse
+/// the diagnosis tries (σ 3.8 m, 4σ kernels).
+const PAD_M: f64 = 16.0;
+
+/// What [`read_cases`] kept and dropped.
+#[derive(Debug, Clone, Default)]
+pub struct CaseReport {
+    pub shots_read: usize,
+    /// (reason, count)
+    pub dropped: Vec<(String, usize)>,
+}
+
+fn count_dropped(report: &mut CaseReport, reason: &str) {
+    match report.dropped.iter_mut().find(|(r, _)| r == reason) {
+        Some((_, n)) => *n += 1,
+        None => report.dropped.push((reason.to_string(), 1)),
+    }
+}
+
+/// A real shot waiting for its simulation.
+struct Pending {
+    real: RealShot,
+    footprint: Footprint,
+    /// Reported position (m, ALS CRS).
+    reported: (f64, f64),
+    /// Its collocation segment is short ([`SHORT_SEGMENT_SHOTS`]): its [`site_grid`] is centred on
+    /// the segment's re-collocated position and simulated at every width.
+    short_segment: bool,
+}
+
+/// Read every usable shot of the dataset with its simulations. `on_shot` is called per shot
+/// simulated.
+pub fn read_cases(ds: &Dataset, on_shot: &(dyn Fn() + Sync)) -> Result<(Vec<ShotCase>, CaseReport)> {
+    let mut report = CaseReport::default();
+    let offsets = crate::dataset::offsets::read_offsets(ds)?;
+    let forest = read_forest_types(ds)?;
+    let dir = ds.root().join(tables::SHOTS);
+    let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi`")))?;
+    let mut pending = Vec::new();
+    for_each_batch(files, |f, b| read_shots(f, b, &offsets, &forest, &mut pending, &mut report))?;
+    let mut segment_shots: HashMap<&str, usize> = HashMap::new();
+    offsets.values().for_each(|o| *segment_shots.entry(o.segment_id.as_str()).or_default() += 1);
+    for p in &mut pending {
+        p.short_segment = segment_shots.get(p.real.segment.as_str()).is_some_and(|&n| n < SHORT_SEGMENT_SHOTS);
+    }
+    let als = AlsTable::open(ds)?;
+    let centres = recollocate(&als, &pending, reference_dz(&offsets))?;
+    let cases = simulate_cases(&als, pending, &centres, &mut report, on_shot)?;
+    Ok((cases, report))
+}
+
+fn read_forest_types(ds: &Dataset) -> Result<HashMap<u64, String>> {
+    let mut out = HashMap::new();
+    if !ds.has_table(tables::STRATA) {
+        return Ok(out);
+    }
+    let dir = ds.root().join(tables::STRATA);
+    let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, e))?;
+    for_each_batch(files, |f, b| {
+        let sn = column(f, b, "shot_number")?.as_primitive_opt::<UInt64Type>().cloned().ok_or_else(|| Error::field(f, "shot_number", "not uint64"))?;
+        let ft = column(f, b, "forest_type")?.as_string_opt::<i32>().cloned().ok_or_else(|| Error::field(f, "forest_type", "not a string"))?;
+        for i in 0..b.num_rows() {
+            out.insert(sn.value(i), ft.value(i).to_string());
+        }
+        Ok(())
+    })?;
+    Ok(out)
+}
+
+/// Call `f` on every batch of every file of `files` (Parquet).
+fn for_each_batch(files: Vec<PathBuf>, mut f: impl FnMut(&Path, &RecordBatch) -> Result<()>) -> Result<()> {
+    for path in files {
+        let file = std::fs::File::open(&path).map_err(|e| Error::file(&path, e))?;
+        let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+            .and_then(|b| b.build())
+            .map_err(|e| Error::table(&path, e))?;
+        for b in reader {
+            f(&path, &b.map_err(|e| Error::table(&path, e))?)?;
+        }
+    }
+    Ok(())
+}
+
+fn column<'a>(path: &Path, b: &'a RecordBatch, name: &str) -> Result<&'a Arc<dyn Array>> {
+    b.column_by_name(name).ok_or_else(|| Error::field(path, name, "column missing from the table"))
+}
+
+fn f64s(path: &Path, b: &RecordBatch, name: &str) -> Result<Float64Array> {
+    column(path, b, name)?.as_primitive_opt::<Float64Type>().cloned().ok_or_else(|| Error::field(path, name, "not float64"))
+}
+
+fn u8s(path: &Path, b: &RecordBatch, name: &str) -> Result<arrow::array::UInt8Array> {
+    column(path, b, name)?.as_primitive_opt::<UInt8Type>().cloned().ok_or_else(|| Error::field(path, name, "not uint8"))
+}
+
+fn lists(path: &Path, b: &RecordBatch, name: &str) -> Result<ListArray> {
+    column(path, b, name)?.as_list_opt::<i32>().cloned().ok_or_else(|| Error::field(path, name, "not a list"))
+}
+
+fn list_f32(l: &ListArray, i: usize) -> Option<Vec<f32>> {
+    if l.is_null(i) {
+        return None;
+    }
+    let v = l.value(i);
+    let v = v.as_primitive_opt::<Float32Type>()?;
+    Some(v.values().to_vec())
+}
+
+fn opt<P: arrow::datatypes::ArrowPrimitiveType>(a: &arrow::array::PrimitiveArray<P>, i: usize) -> Option<P::Native> {
+    (!a.is_null(i)).then(|| a.value(i))
+}
+
+fn read_shots(
+    path: &Path,
+    b: &RecordBatch,
+    offsets: &HashMap<u64, crate::dataset::offsets::AppliedOffset>,
+    forest: &HashMap<u64, String>,
+    out: &mut Vec<Pending>,
+    report: &mut CaseReport,
+) -> Result<()> {
+    let s = |n: &str| -> Result<StringArray> {
+        column(path, b, n)?.as_string_opt::<i32>().cloned().ok_or_else(|| Error::field(path, n, "not a string"))
+    };
+    let (granule, beam, beam_type) = (s("granule")?, s("beam")?, s("beam_type")?);
+    let sn: UInt64Array = column(path, b, "shot_number")?.as_primitive_opt::<UInt64Type>().cloned().ok_or_else(|| Error::field(path, "shot_number", "not uint64"))?;
+    let (x, y) = (f64s(path, b, "x")?, f64s(path, b, "y")?);
+    let (bin0, lastbin) = (f64s(path, b, "elevation_bin0")?, f64s(path, b, "elevation_lastbin")?);
+    let (nmean, nsd) = (f64s(path, b, "noise_mean_corrected")?, f64s(path, b, "noise_stddev_corrected")?);
+    let (geoid, geoid_used) = (f64s(path, b, "geoid")?, f64s(path, b, "geoid_offset_used")?);
+    let rx = lists(path, b, "rx_waveform")?;
+    let degrade = u8s(path, b, "degrade_flag")?;
+    let selected = u8s(path, b, "selected_algorithm")?;
+    let leaf_off = u8s(path, b, "leaf_off_flag")?;
+    let mut alg_cols = Vec::new();
+    for a in 1..=N_ALGORITHMS {
+        alg_cols.push((
+            f64s(path, b, &format!("elev_lowestmode_a{a}"))?,
+            lists(path, b, &format!("rh_a{a}"))?,
+            f64s(path, b, &format!("sensitivity_a{a}"))?,
+            u8s(path, b, &format!("quality_flag_a{a}"))?,
+        ));
+    }
+    for i in 0..b.num_rows() {
+        report.shots_read += 1;
+        let (Some(px), Some(py)) = (opt(&x, i), opt(&y, i)) else {
+            count_dropped(report, "no position");
+            continue;
+        };
+        let Some(wave) = list_f32(&rx, i).filter(|w| w.len() > 1) else {
+            count_dropped(report, "no L1B waveform");
+            continue;
+        };
+        let (Some(e0), Some(e1), Some(mean), Some(sd)) = (opt(&bin0, i), opt(&lastbin, i), opt(&nmean, i), opt(&nsd, i)) else {
+            count_dropped(report, "no record geolocation or noise");
+            continue;
+        };
+        let Some(n_geoid) = opt(&geoid_used, i).or(opt(&geoid, i)) else {
+            count_dropped(report, "no geoid");
+            continue;
+        };
+        let Some(bt) = BeamType::from_name(beam.value(i)).or(match beam_type.value(i) {
+            "coverage" => Some(BeamType::Coverage),
+            "full_power" => Some(BeamType::FullPower),
+            _ => None,
+        }) else {
+            count_dropped(report, "unknown beam type");
+            continue;
+        };
+        let shot = sn.value(i);
+        let algorithms: [Option<RealAlgorithm>; N_ALGORITHMS] = std::array::from_fn(|a| {
+            let (elev, rh, sens, q) = &alg_cols[a];
+            if !classes::passes_quality(opt(q, i), opt(&degrade, i), opt(sens, i)) {
+                return None;
+            }
+            let ground = opt(elev, i)?;
+            let rh = list_f32(rh, i).filter(|r| r.len() == RH_LEN)?;
+            ground.is_finite().then(|| RealAlgorithm { ground: ground - n_geoid, rh })
+        });
+        if algorithms.iter().all(Option::is_none) {
+            count_dropped(report, "no algorithm passes quality (quality_flag, degrade_flag, sensitivity ≥ 0.9)");
+            continue;
+        }
+        let sel = opt(&selected, i).filter(|s| (1..=N_ALGORITHMS as u8).contains(s)).unwrap_or(1);
+        let sens_sel = opt(&alg_cols[usize::from(sel) - 1].2, i).unwrap_or(f64::NAN);
+        let energy: f64 = wave.iter().map(|&v| f64::from(v) - mean).sum();
+        let (dx, dy) = offsets.get(&shot).map_or((0.0, 0.0), |o| (o.dx, o.dy));
+        let collocation_dz = offsets.get(&shot).map(|o| o.dz).filter(|dz| dz.is_finite());
+        let segment = offsets.get(&shot).map_or_else(|| shot.to_string(), |o| o.segment_id.clone());
+        let real = RealShot {
+            shot_number: shot,
+            track: format!("{}/{}", granule.value(i), beam.value(i)),
+            beam_type: bt,
+            noise: Noise { mean, stddev: sd },
+            nominal_noise_stddev: nominal_noise_stddev(bt),
+            energy,
+            sample_count: wave.len(),
+            bin0: e0 - n_geoid,
+            lastbin: e1 - n_geoid,
+            wave: wave.iter().map(|&v| (f64::from(v) - mean) as f32).collect(),
+            selected: sel,
+            algorithms,
+            segment,
+            collocation_dz,
+            strata: Strata {
+                forest_type: forest.get(&shot).cloned().unwrap_or_else(|| classes::UNKNOWN.to_string()),
+                phenology: classes::phenology(opt(&leaf_off, i)).to_string(),
+                sensitivity_group: classes::sensitivity_group(sens_sel).unwrap_or(classes::UNKNOWN).to_string(),
+                beam_type: beam_type.value(i).to_string(),
+                ..Default::default()
+            },
+        };
+        out.push(Pending { real, footprint: Footprint { id: shot.to_string(), x: px + dx, y: py + dy }, reported: (px, py), short_segment: false });
+    }
+    Ok(())
+}
+
+/// The simulator settings of the diagnosis: the study's nominal one (15 ns pulse, σ_f 5.5 m,
+/// default profile) and, for every width of [`FSIGMA_GRID`], the same without pulse (the chain
+/// convolves its own) and without the coverage skip (the nominal run decides coverage).
+fn configs() -> (SimConfig, Vec<SimConfig>) {
+    let nominal = SimConfig::new(Profile::Default);
+    let variants = FSIGMA_GRID
+        .iter()
+        .map(|&f| SimConfig { fsigma: f as f32, pulse: sim::Pulse::dirac(), min_covered_fraction: None, ..nominal.clone() })
+        .collect();
+    (nominal, variants)
+}
+
+/// Search of the re-collocation of short segments: ±8 m every metre around the reported position.
+const RECOLLOCATE_SHIFT_M: f64 = 8.0;
+const RECOLLOCATE_STEP_M: f64 = 1.0;
+
+/// The vertical reference of the re-collocation: the median of the collocation segments'
+/// vertical offsets (GEDI − N − ALS, m), one value for all (0 without offsets).
+fn reference_dz(offsets: &HashMap<u64, crate::dataset::offsets::AppliedOffset>) -> f64 {
+    let by_segment: HashMap<&str, f64> = offsets.values().filter(|o| o.dz.is_finite()).map(|o| (o.segment_id.as_str(), o.dz)).collect();
+    let mut dz: Vec<f64> = by_segment.into_values().collect();
+    dz.sort_by(|a, b| a.total_cmp(b));
+    if dz.is_empty() { 0.0 } else { dz[dz.len() / 2] }
+}
+
+/// The centre of the [`site_grid`] of each short segment's shots: the segment's horizontal
+/// collocation redone with the vertical offset fixed at `dz`
+/// ([`crate::kernels::collocate::horizontal_offset_at`]), as an absolute position per shot.
+fn recollocate(als: &AlsTable, pending: &[Pending], dz: f64) -> Result<HashMap<u64, (f64, f64)>> {
+    use crate::kernels::collocate::{horizontal_offset_at, profile::real_profile, CollocateConfig, ShotInput, SUB_BATCH};
+    let cfg = CollocateConfig::new(RECOLLOCATE_SHIFT_M, RECOLLOCATE_STEP_M)?;
+    let half = cfg.support_half_width();
+    let mut segments: std::collections::BTreeMap<&str, Vec<&Pending>> = Default::default();
+    pending.iter().filter(|p| p.short_segment).for_each(|p| segments.entry(p.real.segment.as_str()).or_default().push(p));
+    let inputs: Vec<(&[&Pending], Vec<ShotInput>)> = segments
+        .values()
+        .map(|shots| {
+            let inputs = shots
+                .iter()
+                .filter_map(|p| {
+                    let r = &p.real;
+                    let real = real_profile(&r.wave, r.bin0, r.lastbin, cfg.model.res).ok()?;
+                    Some(ShotInput { x: p.reported.0, y: p.reported.1, real })
+                })
+                .collect();
+            (shots.as_slice(), inputs)
+        })
+        .collect();
+    // Whole segments, about SUB_BATCH shots at a time, share one read, like the collocation's.
+    let mut out = HashMap::new();
+    let mut start = 0;
+    while start < inputs.len() {
+        let (mut end, mut n) = (start, 0);
+        while end < inputs.len() && n < SUB_BATCH {
+            n += inputs[end].1.len();
+            end += 1;
+        }
+        let chunk = &inputs[start..end];
+        start = end;
+        let boxes: Vec<crate::dataset::als::BBox> =
+            chunk.iter().flat_map(|(_, i)| i).map(|s| [s.x - half, s.y - half, s.x + half, s.y + half]).collect();
+        if boxes.is_empty() {
+            continue;
+        }
+        let (cloud, _) = als.xyz_in_boxes(&boxes)?;
+        for (shots, inputs) in chunk.iter().filter(|(_, i)| !i.is_empty()) {
+            if let Some((ox, oy)) = horizontal_offset_at(inputs, &cloud, &cfg, dz) {
+                for p in shots.iter() {
+                    out.insert(p.real.shot_number, (p.reported.0 + ox, p.reported.1 + oy));
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+fn simulate_cases(
+    als: &AlsTable,
+    pending: Vec<Pending>,
+    centres: &HashMap<u64, (f64, f64)>,
+    report: &mut CaseReport,
+    on_shot: &(dyn Fn() + Sync),
+) -> Result<Vec<ShotCase>> {
+    if pending.is_empty() {
+        return Ok(Vec::new());
+    }
+    let (nominal, variants) = configs();
+    let fmax = FSIGMA_GRID[FSIGMA_GRID.len() - 1] as f32;
+    let half = sim::footprint::gauss_sep(fmax, sim::footprint::I_THRESH) as f64 + 1.0;
+    let grid = site_grid();
+    // Site 0 at the collocated position, then the grid around the short segment's re-collocated
+    // centre (every width) or around the collocated position (a long segment: nominal width).
+    let items: Vec<(Footprint, (RealShot, bool, Vec<(f64, f64)>))> = pending
+        .into_iter()
+        .map(|p| {
+            let (x0, y0) = (p.footprint.x, p.footprint.y);
+            let centre = if p.short_segment { centres.get(&p.real.shot_number).copied() } else { Some((x0, y0)) };
+            let mut sites = vec![(x0, y0)];
+            if let Some((cx, cy)) = centre {
+                sites.extend(grid.iter().map(|(dx, dy)| (cx + dx, cy + dy)));
+            }
+            (p.footprint, (p.real, p.short_segment, sites))
+        })
+        .collect();
+    let mut cases = Vec::new();
+    for block in crate::ops::simulate::blocks(items) {
+        let mut bb = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        for (x, y) in block.iter().flat_map(|(_, (_, _, sites))| sites.iter().copied()) {
+            bb = [bb[0].min(x - half), bb[1].min(y - half), bb[2].max(x + half), bb[3].max(y + half)];
+        }
+        let (points, _) = als.points_in(bb)?;
+        let (fps, reals): (Vec<Footprint>, Vec<(RealShot, bool, Vec<(f64, f64)>)>) = block.into_iter().unzip();
+        let nom = sim::simulate(&points, &fps, &nominal)?;
+        // Sites simulated at every width (site 0, a short segment's grid) and at the nominal one
+        // (a long segment's grid), each as one footprint: index[j][k] = (light, i) for shot j,
+        // site k.
+        let (mut full, mut light): (Vec<Footprint>, Vec<Footprint>) = (Vec::new(), Vec::new());
+        let mut index: Vec<Vec<(bool, usize)>> = Vec::with_capacity(fps.len());
+        for (f, (_, short, sites)) in fps.iter().zip(&reals) {
+            index.push(
+                sites
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &(x, y))| {
+                        let is_light = k > 0 && !short;
+                        let list = if is_light { &mut light } else { &mut full };
+                        list.push(Footprint { id: f.id.clone(), x, y });
+                        (is_light, list.len() - 1)
+                    })
+                    .collect(),
+            );
+        }
+        let vars = variants.iter().map(|cfg| sim::simulate(&points, &full, cfg)).collect::<Result<Vec<_>>>()?;
+        let light_vars = sim::simulate(&points, &light, &variants[NOMINAL_WIDTH])?;
+        for (j, (mut real, short, positions)) in reals.into_iter().enumerate() {
+            on_shot();
+            let Ok(n) = &nom[j] else {
+                count_dropped(report, "footprint not simulated (no ALS points or partly covered)");
+                continue;
+            };
+            let count = n.get(Weighting::Count);
+            let (Some(ground), Some(rh)) = (count.truth.als_ground, count.rh) else {
+                count_dropped(report, "simulated footprint has no ground");
+                continue;
+            };
+            let mut sites = Vec::with_capacity(index[j].len());
+            let mut dz = f64::NAN;
+            let (x0, y0) = positions[0];
+            for (k, &(is_light, i)) in index[j].iter().enumerate() {
+                let vs: Vec<&sim::SimulatedFootprint> = if is_light {
+                    light_vars[i].as_ref().ok().into_iter().collect()
+                } else {
+                    vars.iter().filter_map(|v| v[i].as_ref().ok()).collect()
+                };
+                let complete = vs.len() == if is_light { 1 } else { FSIGMA_GRID.len() };
+                // The collocated position keeps the nominal run's ground; another site needs
+                // its widths and a ground of its own, or is kept empty (never chosen) so that
+                // site k is the same offset for every shot of the segment.
+                let nominal_width = if is_light { vs.first() } else { vs.get(NOMINAL_WIDTH) };
+                let site_ground = if k == 0 { Some(ground) } else { nominal_width.and_then(|v| v.get(Weighting::Count).truth.als_ground) };
+                let offset = (positions[k].0 - x0, positions[k].1 - y0);
+                match site_ground {
+                    Some(g) if complete => {
+                        dz = vs[0].dz;
+                        sites.push(site_of(&vs, g, offset));
+                    }
+                    _ if k == 0 => break,
+                    _ => sites.push(Site { z0: f64::NAN, variants: Vec::new(), als_ground: f64::NAN, offset }),
+                }
+            }
+            if sites.is_empty() {
+                count_dropped(report, "footprint not simulated at every footprint width");
+                continue;
+            }
+            real.strata.slope_class = classes::slope_class(count.truth.slope_deg.map(f64::from)).to_string();
+            let cover = f64::from(count.truth.als_cover);
+            real.strata.cover_class = classes::cover_class((cover >= 0.0).then_some(cover)).to_string();
+            cases.push(ShotCase { real, sim: Arc::new(SimShot { dz, sites, short_segment: short, rh_nominal: rh.to_vec() }), mismatch: [false; N_ALGORITHMS] });
+        }
+    }
+    Ok(cases)
+}
+
+/// Index of σ_f 5.5 m in [`FSIGMA_GRID`] (where a site's ALS ground is taken).
+const NOMINAL_WIDTH: usize = 2;
+
+/// Put every width's parts of one position on one bin grid with [`PAD_M`] of empty bins above
+/// and below. The default profile's bins lie on one absolute lattice, so the grids differ by
+/// whole bins.
+fn site_of(vs: &[&sim::SimulatedFootprint], als_ground: f64, offset: (f64, f64)) -> Site {
+    let dz = vs[0].dz;
+    let top = vs.iter().map(|v| v.z0).fold(f64::NEG_INFINITY, f64::max) + PAD_M;
+    let bottom = vs.iter().map(|v| v.z0 - (v.n_bins() as f64 - 1.0) * dz).fold(f64::INFINITY, f64::min) - PAD_M;
+    let n = ((top - bottom) / dz).round() as usize + 1;
+    let place = |src: &[f32], z0: f64| {
+        let mut out = vec![0f32; n];
+        let off = ((top - z0) / dz).round() as usize;
+        for (k, &v) in src.iter().enumerate() {
+            if let Some(o) = out.get_mut(off + k) {
+                *o = v;
+            }
+        }
+        out
+    };
+    let variants = vs
+        .iter()
+        .map(|v| SimVariant {
+            weightings: Weighting::ALL.map(|w| {
+                let p = v.get(w);
+                Parts { ground: place(&p.ground, v.z0), canopy: place(&p.canopy, v.z0) }
+            }),
+        })
+        .collect();
+    Site { z0: top, variants, als_ground, offset }
+}
+
+/// What `diagnose` wrote.
+#[derive(Debug, Clone)]
+pub struct DiagnosisOutput {
+    pub diagnosis: Diagnosis,
+    pub json: Value,
+    pub files: Vec<PathBuf>,
+    pub cases: CaseReport,
+}
+
+/// Diagnose the dataset into `out`.
+/// `effects`: the effects tried (names of `diagnose::fit::FITTED_EFFECTS`; empty = all).
+pub fn diagnose_dataset(ds: &Dataset, out: &Path, effects: &[String], on_shot: &(dyn Fn() + Sync), on_step: &dyn Fn(&str)) -> Result<DiagnosisOutput> {
+    let names: Vec<&str> = if effects.is_empty() {
+        diagnose::fit::FITTED_EFFECTS.to_vec()
+    } else {
+        effects
+            .iter()
+            .map(|e| {
+                diagnose::fit::FITTED_EFFECTS.iter().copied().find(|n| n == e).ok_or_else(|| {
+                    Error::Usage(format!("--effects: '{e}' is not an effect the diagnosis fits (known: {})", diagnose::fit::FITTED_EFFECTS.join(", ")))
+                })
+            })
+            .collect::<Result<_>>()?
+    };
+    let (cases, report) = read_cases(ds, on_shot)?;
+    if cases.len() < 4 {
+        return Err(Error::file(
+            ds.root().join(tables::SHOTS),
+            format!("only {} usable shot(s) for the diagnosis (need ≥ 4): {}", cases.len(), dropped_text(&report)),
+        ));
+    }
+    let d = diagnose::diagnose(cases, &names, on_step);
+    std::fs::create_dir_all(out).map_err(|e| Error::file(out, e))?;
+    let json = to_json(&d, &report);
+    let mut files = write_tables(&d, out)?;
+    files.extend(write_figures(&d, out)?);
+    let path = out.join("diagnosis.json");
+    let text = serde_json::to_string_pretty(&json).map_err(|e| Error::file(&path, e))?;
+    figures::write_atomic(&path, text.as_bytes())?;
+    files.push(path);
+    Ok(DiagnosisOutput { diagnosis: d, json, files, cases: report })
+}
+
+/// "reason (n), …"
+pub fn dropped_text(r: &CaseReport) -> String {
+    if r.dropped.is_empty() {
+        return "none dropped".into();
+    }
+    r.dropped.iter().map(|(k, n)| format!("{k} ({n})")).collect::<Vec<_>>().join(", ")
+}
+
+fn param_json(v: &ParamValue) -> Value {
+    match v {
+        ParamValue::Number(x) => json!(x),
+        other => json!(other.to_string()),
+    }
+}
+
+/// The effect's parameters as a JSON object (contract names).
+pub fn params_json(e: &Effect) -> Value {
+    Value::Object(e.params().into_iter().map(|(k, v)| (k.to_string(), param_json(&v))).collect())
+}
+
+fn finite(x: f64) -> Value {
+    if x.is_finite() { json!(x) } else { Value::Null }
+}
+
+fn gap_json(m: &GapMetrics) -> Value {
+    json!({
+        "mean_abs_bias_rh1_99": finite(m.mean_abs_bias),
+        "mean_abs_bias_rh_frame": finite(m.mean_abs_bias_rh),
+        "mean_abs_bias_als_frame": finite(m.mean_abs_bias_als),
+        "systematic_gap": finite(m.systematic),
+        "msd": finite(m.msd), "sb": finite(m.sb), "sdsd": finite(m.sdsd), "lcs": finite(m.lcs),
+        "ground_bias_m": finite(m.ground_bias), "n_pairs": m.n_pairs,
+    })
+}
+
+fn trial_json(t: &Trial) -> Value {
+    let h = &t.held_out;
+    json!({
+        "name": t.effect.name(),
+        "params": params_json(&t.effect),
+        "held_out": {
+            "mean_abs_bias_rh1_99_before": finite(h.before.mean_abs_bias),
+            "mean_abs_bias_rh1_99_after": finite(h.after.mean_abs_bias),
+            "shrink": finite(h.shrink),
+            "ci95": [finite(h.ci95[0]), finite(h.ci95[1])],
+            "systematic_gap_before": finite(h.before.systematic),
+            "systematic_gap_after": finite(h.after.systematic),
+            "gain_m_ci95": [finite(h.gain_ci95[0]), finite(h.gain_ci95[1])],
+            "shrink_mean_abs_bias": finite(h.shrink_mean_abs_bias),
+            "msd_before": finite(h.before.msd), "msd_after": finite(h.after.msd),
+            "waveform_chi2_before": finite(h.profile_chi2[0]), "waveform_chi2_after": finite(h.profile_chi2[1]),
+            "waveform_shrink": h.profile_shrink().map_or(Value::Null, finite),
+            "score": finite(h.score()),
+            "before": gap_json(&h.before), "after": gap_json(&h.after),
+            "measure": if h.spread.is_some() { "excess_msd" } else { "systematic_gap" },
+            "spread": h.spread.as_ref().map_or(Value::Null, |s| json!({
+                "msd_segments_replaced": finite(s.msd[0]), "msd_shots_replaced": finite(s.msd[1]),
+                "floor_msd_segments_replaced": finite(s.floor[0]), "floor_msd_shots_replaced": finite(s.floor[1]),
+                "excess_msd_before": finite(s.excess()[0]), "excess_msd_after": finite(s.excess()[1]),
+            })),
+        },
+        "fold_params": t.fold_effects.iter().map(|e| e.as_ref().map_or(Value::Null, params_json)).collect::<Vec<_>>(),
+    })
+}
+
+fn to_json(d: &Diagnosis, r: &CaseReport) -> Value {
+    let w = &d.where_;
+    json!({
+        "baseline": {
+            "description": "study baseline: real RH of the selected algorithm as stored vs noise-free simulated RH (count, 15 ns, σf 5.5 m) from the ALS ground, per-track collocated, nominal geoid",
+            "mean_abs_bias_rh1_99": finite(w.overall.mean_abs_bias_rh),
+            "msd": finite(w.percentiles.iter().map(|p| p.sb + p.sdsd + p.lcs).sum::<f64>() / N_PCT as f64),
+            "sb": finite(w.percentiles.iter().map(|p| p.sb).sum::<f64>() / N_PCT as f64),
+            "sdsd": finite(w.percentiles.iter().map(|p| p.sdsd).sum::<f64>() / N_PCT as f64),
+            "lcs": finite(w.percentiles.iter().map(|p| p.lcs).sum::<f64>() / N_PCT as f64),
+            "mean_abs_bias_als_frame": finite(w.overall.mean_abs_bias_als),
+            "ground_bias_m": finite(w.overall.ground_bias),
+            "n_shots": d.n_shots,
+            "n_tracks": d.n_tracks,
+        },
+        "nominal_chain": gap_json(&d.nominal),
+        "effects": d.ranking.effects.iter().map(trial_json).collect::<Vec<_>>(),
+        "ladder": d.ranking.ladder.iter().map(trial_json).collect::<Vec<_>>(),
+        "unexplained": d.ranking.unexplained,
+        "where": {
+            "percentiles": w.percentiles.iter().map(|p| json!({"rh": p.k, "bias": p.bias, "bias_als_frame": p.bias_als_frame, "rmse": p.rmse, "sb": p.sb, "sdsd": p.sdsd, "lcs": p.lcs})).collect::<Vec<_>>(),
+            "strata": w.strata.iter().map(|s| json!({"kind": s.kind, "label": s.label, "n_shots": s.n_shots, "mean_abs_bias_rh1_99": finite(s.metrics.mean_abs_bias_rh), "msd": finite(s.metrics.msd), "sb": finite(s.metrics.sb), "sdsd": finite(s.metrics.sdsd), "lcs": finite(s.metrics.lcs), "ground_bias_m": finite(s.metrics.ground_bias), "share_of_squared_error": s.share_of_squared_error})).collect::<Vec<_>>(),
+            "waveform_residual": {"height_m": w.waveform.height, "real": w.waveform.real, "simulated": w.waveform.simulated, "residual": w.waveform.residual, "n_shots": w.waveform.n_shots},
+        },
+        "shots": {"read": r.shots_read, "used": d.n_shots, "re_placed_per_hypothesis": d.n_replaceable, "pairs_ground_mismatch": d.mismatched, "dropped": r.dropped.iter().map(|(k, n)| json!({"reason": k, "n": n})).collect::<Vec<_>>()},
+        "settings": {"min_shrink_lower": crate::kernels::diagnose::rank::MIN_SHRINK_LOWER, "min_gain_m": crate::kernels::diagnose::rank::MIN_GAIN_M, "bootstrap": crate::kernels::diagnose::rank::BOOTSTRAP, "folds": 2, "split": "by track (granule/beam)",
+            "placement": {"short_segment_shots": SHORT_SEGMENT_SHOTS, "site_grid_step_m": crate::kernels::diagnose::case::SITE_STEP_M, "site_grid_half_width_m": f64::from(crate::kernels::diagnose::case::SITE_HALF) * crate::kernels::diagnose::case::SITE_STEP_M, "recollocation_shift_m": RECOLLOCATE_SHIFT_M, "recollocation_step_m": RECOLLOCATE_STEP_M}},
+    })
+}
+
+fn batch(fields: Vec<(&str, Arc<dyn Array>)>) -> Result<RecordBatch> {
+    let schema = Schema::new(fields.iter().map(|(n, a)| Field::new(*n, a.data_type().clone(), true)).collect::<Vec<_>>());
+    RecordBatch::try_new(Arc::new(schema), fields.into_iter().map(|(_, a)| a).collect()).map_err(|e| Error::table("diagnosis", e))
+}
+
+fn floats(v: impl IntoIterator<Item = f64>) -> Arc<dyn Array> {
+    Arc::new(Float64Array::from_iter_values(v))
+}
+
+fn texts<S: AsRef<str>>(v: impl IntoIterator<Item = S>) -> Arc<dyn Array> {
+    Arc::new(StringArray::from_iter_values(v))
+}
+
+fn write_tables(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
+    let w = &d.where_;
+    let mut files = Vec::new();
+    let p = &w.percentiles;
+    files.extend(crate::ops::report::write_named_table(out, "where_percentiles", &batch(vec![
+        ("rh", floats(p.iter().map(|p| p.k as f64))),
+        ("bias", floats(p.iter().map(|p| p.bias))),
+        ("bias_als_frame", floats(p.iter().map(|p| p.bias_als_frame))),
+        ("rmse", floats(p.iter().map(|p| p.rmse))),
+        ("sb", floats(p.iter().map(|p| p.sb))),
+        ("sdsd", floats(p.iter().map(|p| p.sdsd))),
+        ("lcs", floats(p.iter().map(|p| p.lcs))),
+    ])?)?);
+    let s = &w.strata;
+    files.extend(crate::ops::report::write_named_table(out, "where_strata", &batch(vec![
+        ("kind", texts(s.iter().map(|s| s.kind.as_str()))),
+        ("label", texts(s.iter().map(|s| s.label.as_str()))),
+        ("n_shots", floats(s.iter().map(|s| s.n_shots as f64))),
+        ("mean_abs_bias_rh1_99", floats(s.iter().map(|s| s.metrics.mean_abs_bias_rh))),
+        ("msd", floats(s.iter().map(|s| s.metrics.msd))),
+        ("sb", floats(s.iter().map(|s| s.metrics.sb))),
+        ("sdsd", floats(s.iter().map(|s| s.metrics.sdsd))),
+        ("lcs", floats(s.iter().map(|s| s.metrics.lcs))),
+        ("ground_bias_m", floats(s.iter().map(|s| s.metrics.ground_bias))),
+        ("share_of_squared_error", floats(s.iter().map(|s| s.share_of_squared_error))),
+    ])?)?);
+    let r = &w.waveform;
+    files.extend(crate::ops::report::write_named_table(out, "waveform_residual", &batch(vec![
+        ("height_m", floats(r.height.iter().copied())),
+        ("real", floats(r.real.iter().copied())),
+        ("simulated", floats(r.simulated.iter().copied())),
+        ("residual", floats(r.residual.iter().copied())),
+    ])?)?);
+    for (name, trials) in [("effects", &d.ranking.effects), ("ladder", &d.ranking.ladder)] {
+        files.extend(crate::ops::report::write_named_table(out, name, &batch(vec![
+            ("step", floats((0..trials.len()).map(|i| i as f64 + 1.0))),
+            ("effect", texts(trials.iter().map(|t| t.effect.name()))),
+            ("params", texts(trials.iter().map(|t| params_json(&t.effect).to_string()))),
+            ("mean_abs_bias_before", floats(trials.iter().map(|t| t.held_out.before.mean_abs_bias))),
+            ("mean_abs_bias_after", floats(trials.iter().map(|t| t.held_out.after.mean_abs_bias))),
+            ("shrink", floats(trials.iter().map(|t| t.held_out.shrink))),
+            ("shrink_ci95_lo", floats(trials.iter().map(|t| t.held_out.ci95[0]))),
+            ("shrink_ci95_hi", floats(trials.iter().map(|t| t.held_out.ci95[1]))),
+            ("msd_before", floats(trials.iter().map(|t| t.held_out.before.msd))),
+            ("msd_after", floats(trials.iter().map(|t| t.held_out.after.msd))),
+            ("waveform_shrink", Arc::new(Float64Array::from(trials.iter().map(|t| t.held_out.profile_shrink()).collect::<Vec<_>>()))),
+            ("score", floats(trials.iter().map(|t| t.held_out.score()))),
+        ])?)?);
+    }
+    Ok(files)
+}
+
+fn write_figures(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    let profile = |label: &str, b: &[f64; N_PCT]| (label.to_string(), (0..N_PCT).map(|k| ((k + 1) as f64, b[k])).collect::<Vec<_>>());
+    let mut rh = vec![profile("baseline (noise-free)", &d.where_.overall.bias_rh), profile("nominal chain", &d.nominal.bias_rh)];
+    let mut als = vec![profile("baseline (noise-free)", &d.where_.overall.bias_als), profile("nominal chain", &d.nominal.bias_als)];
+    let mut names = Vec::new();
+    for t in &d.ranking.ladder {
+        names.push(t.effect.name());
+        let label = format!("+ {}", names.join(" + "));
+        rh.push(profile(&label, &t.held_out.after.bias_rh));
+        als.push(profile(&label, &t.held_out.after.bias_als));
+    }
+    if d.ranking.ladder.is_empty() {
+        if let Some(t) = d.ranking.effects.first() {
+            let label = format!("+ {} (not significant)", t.effect.name());
+            rh.push(profile(&label, &t.held_out.after.bias_rh));
+            als.push(profile(&label, &t.held_out.after.bias_als));
+        }
+    }
+    let fig = LinePanels {
+        title: "Held-out bias (real − simulated) before and after the diagnosed effects".into(),
+        x_desc: "RH percentile".into(),
+        y_desc: "bias (m)".into(),
+        panels: vec![("RH frame (own grounds)".into(), rh), ("ALS frame (heights above the ALS ground)".into(), als)],
+        zero_line: true,
+        legend_lower: false,
+        own_y: false,
+    };
+    files.extend(figures::render(&fig, out, "bias_profile_before_after")?);
+    let r = &d.where_.waveform;
+    // In % of the waveform energy, so that the residual's ticks stay readable.
+    let series = |label: &str, v: &[f64]| (label.to_string(), r.height.iter().zip(v).map(|(&h, &y)| (h, 100.0 * y)).collect::<Vec<_>>());
+    let fig = LinePanels {
+        title: format!("Mean normalised waveform by height above the ALS ground ({} shots)", r.n_shots),
+        x_desc: "height above ALS ground (m)".into(),
+        y_desc: "% of the waveform energy per 0.5 m".into(),
+        panels: vec![
+            ("real and simulated (baseline)".into(), vec![series("real", &r.real), series("simulated", &r.simulated)]),
+            ("residual real − simulated".into(), vec![series("residual", &r.residual)]),
+        ],
+        zero_line: true,
+        legend_lower: false,
+        own_y: true,
+    };
+    files.extend(figures::render(&fig, out, "waveform_residual")?);
+    Ok(files)
+}
+
+/// The diagnosis in a few lines a scientist can read.
+pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
+    let mut lines = Vec::new();
+    let w = &d.where_;
+    lines.push(format!(
+        "{} shots on {} tracks. Baseline gap: mean |bias| over RH1–RH99 {:.2} m, ground bias (GEDI − ALS) {:+.2} m.",
+        d.n_shots, d.n_tracks, w.overall.mean_abs_bias_rh, w.overall.ground_bias
+    ));
+    let (k, b) = w.overall.bias_rh.iter().enumerate().max_by(|a, b| a.1.abs().total_cmp(&b.1.abs())).map_or((0, 0.0), |(k, b)| (k + 1, *b));
+    let mut place = format!("Where: the largest bias is at RH{k} ({b:+.2} m)");
+    // Among strata of kinds with at least two labels: the one holding most of the squared error
+    // relative to its share of the shots.
+    let labels = |kind: &str| w.strata.iter().filter(|s| s.kind == kind).count();
+    let worst = w
+        .strata
+        .iter()
+        .filter(|s| labels(&s.kind) >= 2 && s.n_shots >= 5)
+        .max_by(|a, b| (a.share_of_squared_error / a.n_shots as f64).total_cmp(&(b.share_of_squared_error / b.n_shots as f64)));
+    if let Some(s) = worst {
+        place += &format!(
+            "; {} = {} holds {:.0} % of the squared error with {:.0} % of the shots",
+            s.kind,
+            s.label,
+            100.0 * s.share_of_squared_error,
+            100.0 * s.n_shots as f64 / d.n_shots.max(1) as f64
+        );
+    }
+    lines.push(place + ".");
+    if d.ranking.unexplained {
+        let best = d.ranking.effects.first();
+        lines.push(match best {
+            Some(t) => format!(
+                "Which: unexplained — the best candidate, {}, shrinks the held-out {} by {:.0} % (95 % CI {:.0} to {:.0} %), not enough to name it{}.",
+                t.effect.name(),
+                if t.held_out.spread.is_some() { "excess spread" } else { "gap" },
+                100.0 * t.held_out.shrink,
+                100.0 * t.held_out.ci95[0],
+                100.0 * t.held_out.ci95[1],
+                if t.held_out.spread.is_some() { format!(" (or its per-shot offsets are under {} m)", crate::kernels::diagnose::rank::MIN_SHOT_SIGMA_M) } else { String::new() }
+            ),
+            None => "Which: unexplained — no effect could be fitted.".into(),
+        });
+    } else {
+        for (i, t) in d.ranking.ladder.iter().enumerate() {
+            let params: Vec<String> = t
+                .effect
+                .params()
+                .iter()
+                .map(|(k, v)| match v {
+                    ParamValue::Number(x) => format!("{k} = {x:.3}"),
+                    other => format!("{k} = {other}"),
+                })
+                .collect();
+            let gap = match &t.held_out.spread {
+                Some(s) => format!("held-out MSD above the noise floor {:.2} → {:.2} m²", s.excess()[0], s.excess()[1]),
+                None => format!("held-out gap {:.2} → {:.2} m", t.held_out.before.mean_abs_bias, t.held_out.after.mean_abs_bias),
+            };
+            lines.push(format!(
+                "{} {} ({}): {gap}, shrink {:.0} % (95 % CI {:.0}–{:.0} %).",
+                if i == 0 { "Which:" } else { "  then" },
+                t.effect.name(),
+                params.join(", "),
+                100.0 * t.held_out.shrink,
+                100.0 * t.held_out.ci95[0],
+                100.0 * t.held_out.ci95[1]
+            ));
+        }
+    }
+    lines
+}

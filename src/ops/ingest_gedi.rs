@@ -1,0 +1,1188 @@
+//! GEDI L1B and L2A HDF5 granules (V1 and V2 layouts) into one Arrow table of shots.
+//!
+//! One row per shot. L1B and L2A are joined on `shot_number` within a beam; a shot present on
+//! one side only is **kept** with nulls for the other side's columns and reported (or rejected
+//! with [`GediOptions::strict_join`]). Files are read one beam at a time, so memory is bounded by
+//! the largest beam, and batches of at most [`BATCH_ROWS`] rows are handed to a sink. The
+//! columns, their units and the policies are documented in `docs/schemas.md` ("shots/").
+//!
+//! Facts relied on (gedi-products.md §1–§3): `shot_number` is uint64 (int64 in some old subsets;
+//! never float); `rx_sample_start_index` is **1-based**; L2A `geolocation/rh_aN` is integer
+//! centimetres while root `rh` is metres; V1 has no `land_cover_data/leaf_off_flag`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use arrow::array::{ArrayRef, BooleanArray, Float32Builder, ListBuilder, PrimitiveArray, RecordBatch, StringArray};
+use arrow::datatypes::{
+    ArrowPrimitiveType, DataType, Field, Float64Type, Int16Type, Int8Type, Schema, SchemaRef, UInt32Type, UInt64Type,
+    UInt8Type,
+};
+use hdf5::types::{FixedAscii, FixedUnicode, H5Type, TypeDescriptor, VarLenAscii, VarLenUnicode};
+use hdf5::{Dataset, File, Group, Location};
+use rayon::prelude::*;
+
+use crate::error::{one_line, Error, Result};
+use crate::kernels::gedi::{is_beam_group, BeamType, N_ALGORITHMS, RH_LEN};
+use crate::kernels::geo::projection::Projector;
+
+/// Maximum rows per emitted batch (a beam larger than this is split).
+pub const BATCH_ROWS: usize = 8192;
+
+/// Value of the `vertical_datum` column: every GEDI height stays WGS84-ellipsoidal.
+pub const VERTICAL_DATUM: &str = "WGS84 ellipsoid";
+
+/// Options of the GEDI ingest.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GediOptions {
+    /// Target projected CRS of the `x`, `y` columns (default 2154, Lambert-93).
+    pub epsg: u32,
+    /// Geoid offset N (m, ellipsoid − orthometric) for every shot; `None` uses each shot's L1B
+    /// `geophys_corr/geoid`.
+    pub geoid_offset: Option<f64>,
+    /// Reject (error) a shot present in only one of a paired L1B/L2A granule instead of keeping it.
+    pub strict_join: bool,
+}
+
+impl Default for GediOptions {
+    fn default() -> Self {
+        GediOptions { epsg: 2154, geoid_offset: None, strict_join: false }
+    }
+}
+
+/// One granule to read: an L1B file, an L2A file, or both.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct GranulePair {
+    /// The `granule` column: the L1B file stem, or the L2A file stem when there is no L1B file.
+    pub granule: String,
+    /// The L1B file, if any.
+    pub l1b: Option<PathBuf>,
+    /// The L2A file, if any.
+    pub l2a: Option<PathBuf>,
+}
+
+/// Shot counts of one beam of one granule, and the shots found on one side only.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct BeamReport {
+    /// The `granule` value.
+    pub granule: String,
+    /// Beam group name.
+    pub beam: String,
+    /// L1B file read (if any).
+    pub l1b_file: Option<PathBuf>,
+    /// L2A file read (if any).
+    pub l2a_file: Option<PathBuf>,
+    /// Shots in the L1B beam.
+    pub l1b_shots: usize,
+    /// Shots in the L2A beam.
+    pub l2a_shots: usize,
+    /// Shots present in both.
+    pub joined: usize,
+    /// L1B shots without an L2A partner although an L2A file was given.
+    pub l1b_only: Vec<u64>,
+    /// L2A shots without an L1B partner although an L1B file was given.
+    pub l2a_only: Vec<u64>,
+    /// L2A shots whose `lat/lon_lowestmode` are not valid coordinates (kept null).
+    pub invalid_lowestmode: Vec<u64>,
+}
+
+impl BeamReport {
+    /// Rows written for this beam.
+    pub fn rows(&self) -> usize {
+        self.joined + (self.l1b_shots - self.joined) + (self.l2a_shots - self.joined)
+    }
+
+    /// One line per anomaly, naming the file, the beam and the shot count.
+    pub fn warnings(&self) -> Vec<String> {
+        let name = |p: &Option<PathBuf>| p.as_deref().map(|p| p.display().to_string()).unwrap_or_default();
+        let mut out = Vec::new();
+        if let Some(&first) = self.l1b_only.first() {
+            out.push(format!(
+                "{}: {}: {} L1B shot(s) have no L2A partner in {} (first {first}); kept with null L2A columns",
+                name(&self.l1b_file),
+                self.beam,
+                self.l1b_only.len(),
+                name(&self.l2a_file)
+            ));
+        }
+        if let Some(&first) = self.l2a_only.first() {
+            out.push(format!(
+                "{}: {}: {} L2A shot(s) have no L1B partner in {} (first {first}); kept with null L1B columns",
+                name(&self.l2a_file),
+                self.beam,
+                self.l2a_only.len(),
+                name(&self.l1b_file)
+            ));
+        }
+        if let Some(&first) = self.invalid_lowestmode.first() {
+            out.push(format!(
+                "{}: {}/lat_lowestmode: {} shot(s) with invalid lowest-mode coordinates (first {first}); kept null",
+                name(&self.l2a_file),
+                self.beam,
+                self.invalid_lowestmode.len()
+            ));
+        }
+        out
+    }
+}
+
+/// What an ingest read: per-beam counts and file-level notes.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct IngestReport {
+    /// One entry per (granule, beam), in the order read.
+    pub beams: Vec<BeamReport>,
+    /// File-level notes, e.g. an L1B file with no L2A partner file.
+    pub notes: Vec<String>,
+}
+
+impl IngestReport {
+    /// Total rows written.
+    pub fn rows(&self) -> usize {
+        self.beams.iter().map(BeamReport::rows).sum()
+    }
+
+    /// Every warning line (file-level notes first).
+    pub fn warnings(&self) -> Vec<String> {
+        self.notes.iter().cloned().chain(self.beams.iter().flat_map(BeamReport::warnings)).collect()
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Schema
+// ---------------------------------------------------------------------------------------------
+
+fn list_f32() -> DataType {
+    DataType::List(Arc::new(Field::new_list_field(DataType::Float32, true)))
+}
+
+/// The schema of the `shots` table; `epsg` is recorded in its metadata (`gedisim:crs_epsg`).
+///
+/// Every column is documented in `docs/schemas.md`. Columns from one product are nullable,
+/// because a shot may come from the other product only.
+pub fn shots_schema(epsg: u32) -> SchemaRef {
+    use DataType::*;
+    let f = |name: &str, t: DataType, nullable: bool| Field::new(name, t, nullable);
+    let mut fields = vec![
+        f("granule", Utf8, false),
+        f("shot_number", UInt64, false),
+        f("beam", Utf8, false),
+        f("beam_type", Utf8, false),
+        f("in_l1b", Boolean, false),
+        f("in_l2a", Boolean, false),
+        f("delta_time", Float64, true),
+        f("lat_bin0", Float64, true),
+        f("lon_bin0", Float64, true),
+        f("lat_lastbin", Float64, true),
+        f("lon_lastbin", Float64, true),
+        f("lat_lowestmode", Float64, true),
+        f("lon_lowestmode", Float64, true),
+        f("x", Float64, true),
+        f("y", Float64, true),
+        f("xy_source", Utf8, true),
+        f("elevation_bin0", Float64, true),
+        f("elevation_lastbin", Float64, true),
+        f("rx_waveform", list_f32(), true),
+        f("rx_sample_count", UInt32, true),
+        f("tx_waveform", list_f32(), true),
+        f("noise_mean_corrected", Float64, true),
+        f("noise_stddev_corrected", Float64, true),
+        f("stale_return_flag", UInt8, true),
+        f("degrade", Int8, true),
+        f("geoid", Float64, true),
+        f("geoid_offset_used", Float64, true),
+        f("vertical_datum", Utf8, false),
+        f("quality_flag", UInt8, true),
+        f("degrade_flag", UInt8, true),
+        f("sensitivity", Float64, true),
+        f("selected_algorithm", UInt8, true),
+        f("elev_lowestmode", Float64, true),
+        f("rh", list_f32(), true),
+        f("energy_total", Float64, true),
+    ];
+    for n in 1..=N_ALGORITHMS {
+        fields.extend([
+            f(&format!("elev_lowestmode_a{n}"), Float64, true),
+            f(&format!("rh_a{n}"), list_f32(), true),
+            f(&format!("sensitivity_a{n}"), Float64, true),
+            f(&format!("quality_flag_a{n}"), UInt8, true),
+            f(&format!("toploc_a{n}"), Float64, true),
+            f(&format!("botloc_a{n}"), Float64, true),
+            f(&format!("zcross_a{n}"), Float64, true),
+        ]);
+    }
+    fields.extend([
+        f("leaf_off_flag", UInt8, true),
+        f("leaf_off_doy", Int16, true),
+        f("leaf_on_doy", Int16, true),
+        f("pft_class", UInt8, true),
+        f("region_class", UInt8, true),
+        f("urban_proportion", UInt8, true),
+        f("landsat_water_persistence", UInt8, true),
+    ]);
+    let metadata = [
+        ("gedisim:crs_epsg".to_string(), epsg.to_string()),
+        ("gedisim:vertical_reference".to_string(), VERTICAL_DATUM.to_string()),
+    ];
+    Arc::new(Schema::new(fields).with_metadata(metadata.into_iter().collect()))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Entry points
+// ---------------------------------------------------------------------------------------------
+
+/// Read L1B and/or L2A files (either list may be empty) into batches of the [`shots_schema`].
+///
+/// Granules are read in parallel (rayon) and the batches returned in input order. For large
+/// inputs prefer [`ingest_gedi`], which hands batches to a sink one beam at a time.
+pub fn read_gedi(l1b: &[PathBuf], l2a: &[PathBuf], opts: &GediOptions) -> Result<(Vec<RecordBatch>, IngestReport)> {
+    let (pairs, notes) = pair_granules(l1b, l2a)?;
+    let parts = pairs
+        .par_iter()
+        .map(|pair| {
+            let mut batches = Vec::new();
+            let beams = read_granule(pair, opts, &mut |b| {
+                batches.push(b);
+                Ok(())
+            })?;
+            Ok((batches, beams))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let mut report = IngestReport { beams: Vec::new(), notes };
+    let mut all = Vec::new();
+    for (batches, beams) in parts {
+        all.extend(batches);
+        report.beams.extend(beams);
+    }
+    Ok((all, report))
+}
+
+/// Stream L1B and/or L2A files into `sink`, one beam at a time (at most [`BATCH_ROWS`] rows per batch).
+pub fn ingest_gedi(
+    l1b: &[PathBuf],
+    l2a: &[PathBuf],
+    opts: &GediOptions,
+    mut sink: impl FnMut(RecordBatch) -> Result<()>,
+) -> Result<IngestReport> {
+    let (pairs, notes) = pair_granules(l1b, l2a)?;
+    let mut report = IngestReport { beams: Vec::new(), notes };
+    for pair in &pairs {
+        report.beams.extend(read_granule(pair, opts, &mut sink)?);
+    }
+    Ok(report)
+}
+
+/// The part of a GEDI file name shared by the L1B and L2A files of one granule.
+///
+/// `GEDI01_B_2019108080338_O01964_T05337_02_003_01_sub` and
+/// `GEDI02_A_2019108080338_O01964_T05337_02_001_01_sub` both give
+/// `2019108080338_O01964_T05337_02` (V2 names keep their sub-orbit field). A name that does not
+/// follow the convention is its own key.
+pub fn granule_key(path: &Path) -> String {
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let tokens: Vec<&str> = stem.split('_').collect();
+    let is_product = tokens.len() > 2 && tokens[0].starts_with("GEDI0") && tokens[1].len() == 1;
+    if is_product {
+        let track =
+            tokens.iter().position(|t| t.len() > 1 && t.starts_with('T') && t[1..].bytes().all(|b| b.is_ascii_digit()));
+        if let Some(t) = track.filter(|&t| t > 2 && t + 1 < tokens.len()) {
+            return tokens[2..=t + 1].join("_");
+        }
+    }
+    stem
+}
+
+/// Files as given; folders expanded to the `.h5` files they hold whose name starts with
+/// `product` (GEDI's naming: `GEDI01_B…` for L1B, `GEDI02_A…` for L2A).
+pub fn expand_granule_inputs(inputs: &[PathBuf], product: &str) -> Result<Vec<PathBuf>> {
+    crate::io::expand_inputs(inputs, |f| {
+        crate::io::has_extension(f, "h5") && f.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with(product))
+    })
+}
+
+/// Pair L1B and L2A files by [`granule_key`]; a file without a partner becomes a one-sided pair.
+///
+/// Returns the pairs (in the order the files were given, L1B first) and one note per file left
+/// without a partner when both lists are non-empty.
+pub fn pair_granules(l1b: &[PathBuf], l2a: &[PathBuf]) -> Result<(Vec<GranulePair>, Vec<String>)> {
+    let mut l2a_by_key: BTreeMap<String, &PathBuf> = BTreeMap::new();
+    for p in l2a {
+        if let Some(other) = l2a_by_key.insert(granule_key(p), p) {
+            return Err(Error::Usage(format!("{} and {} are the same L2A granule", other.display(), p.display())));
+        }
+    }
+    let mut seen = BTreeMap::new();
+    let mut pairs = Vec::new();
+    let mut notes = Vec::new();
+    let stem = |p: &Path| p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    for p in l1b {
+        let key = granule_key(p);
+        if let Some(other) = seen.insert(key.clone(), p) {
+            return Err(Error::Usage(format!("{} and {} are the same L1B granule", other.display(), p.display())));
+        }
+        let partner = l2a_by_key.remove(&key).cloned();
+        if partner.is_none() && !l2a.is_empty() {
+            notes.push(format!(
+                "{}: no L2A file of granule {key} was given; its shots have null L2A columns",
+                p.display()
+            ));
+        }
+        pairs.push(GranulePair { granule: stem(p), l1b: Some(p.clone()), l2a: partner });
+    }
+    for p in l2a.iter().filter(|p| l2a_by_key.contains_key(&granule_key(p))) {
+        if !l1b.is_empty() {
+            notes.push(format!(
+                "{}: no L1B file of granule {} was given; its shots have null L1B columns",
+                p.display(),
+                granule_key(p)
+            ));
+        }
+        pairs.push(GranulePair { granule: stem(p), l1b: None, l2a: Some(p.clone()) });
+    }
+    Ok((pairs, notes))
+}
+
+/// Read one granule, beam by beam, handing each batch to `sink`; returns one report per beam.
+pub fn read_granule(
+    pair: &GranulePair,
+    opts: &GediOptions,
+    sink: &mut dyn FnMut(RecordBatch) -> Result<()>,
+) -> Result<Vec<BeamReport>> {
+    let projector = Projector::new(opts.epsg)?;
+    let schema = shots_schema(opts.epsg);
+    let l1b = pair.l1b.as_deref().map(|p| open_product(p, Product::L1b)).transpose()?;
+    let l2a = pair.l2a.as_deref().map(|p| open_product(p, Product::L2a)).transpose()?;
+
+    let mut beams: Vec<String> = Vec::new();
+    for f in l1b.iter().chain(l2a.iter()) {
+        beams.extend(f.beams()?);
+    }
+    beams.sort();
+    beams.dedup();
+
+    let mut reports = Vec::new();
+    for beam in beams {
+        let beam_type = BeamType::from_name(&beam).ok_or_else(|| {
+            let path = l1b.as_ref().or(l2a.as_ref()).map(|f| f.path).unwrap_or(Path::new(""));
+            Error::field(path, &beam, "not one of the eight GEDI beams (BEAM0000..BEAM1011)")
+        })?;
+        // Read one side, then the other: only this beam is in memory.
+        let l1b_beam = l1b.as_ref().map(|f| f.beam(&beam)).transpose()?.flatten().map(|g| read_l1b(&g)).transpose()?;
+        let l2a_beam = l2a.as_ref().map(|f| f.beam(&beam)).transpose()?.flatten().map(|g| read_l2a(&g)).transpose()?;
+        let mut report = BeamReport {
+            granule: pair.granule.clone(),
+            beam: beam.clone(),
+            l1b_file: pair.l1b.clone(),
+            l2a_file: pair.l2a.clone(),
+            ..Default::default()
+        };
+        let rows = join(pair, &beam, l1b_beam.as_ref(), l2a_beam.as_ref(), opts, &projector, &mut report)?;
+        let ctx = BatchContext {
+            schema: &schema,
+            granule: &pair.granule,
+            beam: &beam,
+            beam_type,
+            l1b: l1b_beam.as_ref(),
+            l2a: l2a_beam.as_ref(),
+            geoid_offset: opts.geoid_offset,
+        };
+        for chunk in rows.chunks(BATCH_ROWS) {
+            sink(ctx.batch(chunk)?)?;
+        }
+        reports.push(report);
+    }
+    Ok(reports)
+}
+
+// ---------------------------------------------------------------------------------------------
+// HDF5 access
+// ---------------------------------------------------------------------------------------------
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Product {
+    L1b,
+    L2a,
+}
+
+impl Product {
+    fn short_name(self) -> &'static str {
+        match self {
+            Product::L1b => "GEDI_L1B",
+            Product::L2a => "GEDI_L2A",
+        }
+    }
+}
+
+/// An open granule file.
+struct Granule<'a> {
+    path: &'a Path,
+    file: File,
+}
+
+fn open_product(path: &Path, product: Product) -> Result<Granule<'_>> {
+    let file = File::open(path).map_err(|e| Error::file(path, format!("cannot open as HDF5: {e}")))?;
+    // A swapped --l1b/--l2a would otherwise fail later with a confusing "missing dataset".
+    if let Some(name) = read_str_attr(&file, "short_name") {
+        let other = if product == Product::L1b { Product::L2a } else { Product::L1b };
+        if name.trim() == other.short_name() {
+            return Err(Error::field(
+                path,
+                "short_name",
+                format!("file is {name} but was given as {}", product.short_name()),
+            ));
+        }
+    }
+    Ok(Granule { path, file })
+}
+
+/// Read a scalar string attribute of any HDF5 string flavour; `None` if absent or not a string.
+fn read_str_attr(loc: &Location, name: &str) -> Option<String> {
+    let attr = loc.attr(name).ok()?;
+    let r = attr.as_reader();
+    let s = match attr.dtype().ok()?.to_descriptor().ok()? {
+        TypeDescriptor::VarLenUnicode => r.read_raw::<VarLenUnicode>().ok()?.first()?.to_string(),
+        TypeDescriptor::VarLenAscii => r.read_raw::<VarLenAscii>().ok()?.first()?.to_string(),
+        TypeDescriptor::FixedAscii(_) => r.read_raw::<FixedAscii<256>>().ok()?.first()?.to_string(),
+        TypeDescriptor::FixedUnicode(_) => r.read_raw::<FixedUnicode<256>>().ok()?.first()?.to_string(),
+        _ => return None,
+    };
+    Some(s)
+}
+
+impl<'a> Granule<'a> {
+    fn beams(&self) -> Result<Vec<String>> {
+        let names = self.file.member_names().map_err(|e| Error::file(self.path, format!("cannot list groups: {e}")))?;
+        Ok(names.into_iter().filter(|n| is_beam_group(n)).collect())
+    }
+
+    fn beam(&self, name: &str) -> Result<Option<BeamGroup<'a>>> {
+        if !self.file.link_exists(name) {
+            return Ok(None);
+        }
+        let group = self.file.group(name).map_err(|e| Error::field(self.path, name, e))?;
+        let mut g = BeamGroup { path: self.path, beam: name.to_string(), group, n: 0 };
+        g.n = g.shot_numbers_len()?;
+        Ok(Some(g))
+    }
+}
+
+/// Numeric element types a dataset can be read into (HDF5 converts from the file's dtype).
+trait Numeric: H5Type + Copy {
+    /// Whether the target is a float (integer targets refuse float sources: no silent truncation).
+    const FLOAT: bool;
+}
+macro_rules! numeric {
+    ($($t:ty => $float:expr),*) => { $(impl Numeric for $t { const FLOAT: bool = $float; })* };
+}
+numeric!(u8 => false, i8 => false, i16 => false, u64 => false, i64 => false, f32 => true, f64 => true);
+
+/// Expected shape of a dataset in a beam group with `n` shots.
+#[derive(Clone, Copy)]
+enum Shape {
+    /// `(n,)`.
+    PerShot,
+    /// `(n, k)`.
+    Rows(usize),
+    /// Any 1-D length (flat waveform arrays).
+    Flat,
+}
+
+/// One beam group of one file, with its shot count.
+struct BeamGroup<'a> {
+    path: &'a Path,
+    beam: String,
+    group: Group,
+    n: usize,
+}
+
+impl BeamGroup<'_> {
+    fn field(&self, rel: &str) -> String {
+        format!("{}/{rel}", self.beam)
+    }
+
+    fn err(&self, rel: &str, msg: impl std::fmt::Display) -> Error {
+        Error::field(self.path, self.field(rel), one_line(&msg.to_string()))
+    }
+
+    /// The dataset at `rel` (e.g. `geolocation/elevation_bin0`), or `None` if any component is absent.
+    fn dataset(&self, rel: &str) -> Result<Option<Dataset>> {
+        let (dirs, name) = rel.rsplit_once('/').unwrap_or(("", rel));
+        let mut g = self.group.clone();
+        for part in dirs.split('/').filter(|p| !p.is_empty()) {
+            if !g.link_exists(part) {
+                return Ok(None);
+            }
+            g = g.group(part).map_err(|e| self.err(rel, e))?;
+        }
+        if !g.link_exists(name) {
+            return Ok(None);
+        }
+        g.dataset(name).map(Some).map_err(|e| self.err(rel, e))
+    }
+
+    fn require_dataset(&self, rel: &str) -> Result<Dataset> {
+        self.dataset(rel)?.ok_or_else(|| self.err(rel, "missing"))
+    }
+
+    /// Check the dataset's shape against the beam's shot count.
+    fn check_shape(&self, rel: &str, ds: &Dataset, shape: Shape) -> Result<()> {
+        let dims = ds.shape();
+        let ok = match shape {
+            Shape::PerShot => dims == [self.n],
+            Shape::Rows(k) => dims == [self.n, k],
+            Shape::Flat => dims.len() == 1,
+        };
+        if ok {
+            return Ok(());
+        }
+        let expected = match shape {
+            Shape::PerShot => format!("({},)", self.n),
+            Shape::Rows(k) => format!("({}, {k})", self.n),
+            Shape::Flat => "1-D".to_string(),
+        };
+        Err(self.err(
+            rel,
+            format!("shape {dims:?} does not match {expected} ({}/shot_number has {} shots)", self.beam, self.n),
+        ))
+    }
+
+    /// Read a numeric dataset into `Vec<T>` (row-major), converting from the file's dtype.
+    fn read_ds<T: Numeric>(&self, rel: &str, ds: &Dataset, shape: Shape) -> Result<Vec<T>> {
+        self.check_shape(rel, ds, shape)?;
+        let desc = ds.dtype().and_then(|t| t.to_descriptor()).map_err(|e| self.err(rel, e))?;
+        match desc {
+            TypeDescriptor::Float(_) if !T::FLOAT => {
+                return Err(self.err(rel, format!("expected an integer dtype, found {desc}")));
+            }
+            TypeDescriptor::Integer(_) | TypeDescriptor::Unsigned(_) | TypeDescriptor::Float(_) => {}
+            _ => return Err(self.err(rel, format!("expected a numeric dtype, found {desc}"))),
+        }
+        ds.read_raw::<T>().map_err(|e| self.err(rel, e))
+    }
+
+    /// A required dataset: missing ⇒ `<file>: BEAMxxxx/<rel>: missing`.
+    fn require<T: Numeric>(&self, rel: &str, shape: Shape) -> Result<Vec<T>> {
+        let ds = self.require_dataset(rel)?;
+        self.read_ds(rel, &ds, shape)
+    }
+
+    /// An optional dataset: `None` when absent, an error when present but malformed.
+    fn optional<T: Numeric>(&self, rel: &str, shape: Shape) -> Result<Option<Vec<T>>> {
+        self.dataset(rel)?.map(|ds| self.read_ds(rel, &ds, shape)).transpose()
+    }
+
+    fn shot_numbers_len(&self) -> Result<usize> {
+        let ds = self.require_dataset("shot_number")?;
+        match ds.shape().as_slice() {
+            [n] => Ok(*n),
+            dims => Err(self.err("shot_number", format!("shape {dims:?} is not 1-D"))),
+        }
+    }
+
+    /// `shot_number` as u64, never through a float (values exceed 2^53); int64 is accepted and cast.
+    fn shot_numbers(&self) -> Result<Vec<u64>> {
+        let rel = "shot_number";
+        let ds = self.require_dataset(rel)?;
+        self.check_shape(rel, &ds, Shape::PerShot)?;
+        let desc = ds.dtype().and_then(|t| t.to_descriptor()).map_err(|e| self.err(rel, e))?;
+        match desc {
+            TypeDescriptor::Unsigned(_) => ds.read_raw::<u64>().map_err(|e| self.err(rel, e)),
+            TypeDescriptor::Integer(_) => {
+                let v = ds.read_raw::<i64>().map_err(|e| self.err(rel, e))?;
+                v.into_iter()
+                    .map(|s| u64::try_from(s).map_err(|_| self.err(rel, format!("negative shot number {s}"))))
+                    .collect()
+            }
+            _ => {
+                Err(self
+                    .err(rel, format!("expected an integer dtype (a float cannot hold shot numbers), found {desc}")))
+            }
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Beam contents
+// ---------------------------------------------------------------------------------------------
+
+/// A flat waveform array with each shot's (0-based start, count), validated against its length.
+struct Waveforms {
+    samples: Vec<f32>,
+    spans: Vec<(usize, usize)>,
+}
+
+impl Waveforms {
+    fn get(&self, i: usize) -> &[f32] {
+        let (s, c) = self.spans[i];
+        &self.samples[s..s + c]
+    }
+}
+
+/// Read `<wave>`, `<prefix>_sample_start_index` (1-based) and `<prefix>_sample_count`; `None`
+/// when any of the three is absent (the caller decides whether that is an error).
+fn read_waveforms(g: &BeamGroup, shots: &[u64], wave: &str, prefix: &str) -> Result<Option<Waveforms>> {
+    let start_rel = format!("{prefix}_sample_start_index");
+    let count_rel = format!("{prefix}_sample_count");
+    let (w, s, c) = match (g.dataset(wave)?, g.dataset(&start_rel)?, g.dataset(&count_rel)?) {
+        (Some(w), Some(s), Some(c)) => (w, s, c),
+        _ => return Ok(None),
+    };
+    let samples = g.read_ds::<f32>(wave, &w, Shape::Flat)?;
+    let start = g.read_ds::<u64>(&start_rel, &s, Shape::PerShot)?;
+    let count = g.read_ds::<u64>(&count_rel, &c, Shape::PerShot)?;
+    let len = samples.len() as u64;
+    let mut spans = Vec::with_capacity(shots.len());
+    for ((&shot, &s), &c) in shots.iter().zip(&start).zip(&count) {
+        if s == 0 {
+            return Err(g.err(&start_rel, format!("shot {shot}: index 0, but GEDI's start index is 1-based")));
+        }
+        // 1-based: the shot's samples are [s-1, s-1+c).
+        let end = (s - 1).checked_add(c).filter(|&e| e <= len).ok_or_else(|| {
+            g.err(&start_rel, format!("shot {shot}: start {s} + {count_rel} {c} - 1 exceeds the {wave} length {len}"))
+        })?;
+        spans.push(((s - 1) as usize, (end - (s - 1)) as usize));
+    }
+    Ok(Some(Waveforms { samples, spans }))
+}
+
+/// The L1B datasets of one beam that the shots table uses.
+struct L1bBeam {
+    shot_number: Vec<u64>,
+    delta_time: Option<Vec<f64>>,
+    rx: Waveforms,
+    tx: Option<Waveforms>,
+    elevation_bin0: Vec<f64>,
+    elevation_lastbin: Vec<f64>,
+    lat_bin0: Vec<f64>,
+    lon_bin0: Vec<f64>,
+    lat_lastbin: Vec<f64>,
+    lon_lastbin: Vec<f64>,
+    noise_mean: Option<Vec<f64>>,
+    noise_stddev: Option<Vec<f64>>,
+    stale_return_flag: Option<Vec<u8>>,
+    degrade: Option<Vec<i8>>,
+    geoid: Option<Vec<f64>>,
+}
+
+fn read_l1b(g: &BeamGroup) -> Result<L1bBeam> {
+    use Shape::PerShot;
+    let shot_number = g.shot_numbers()?;
+    // Name the first missing waveform dataset (read_waveforms only says "not all present").
+    for rel in ["rxwaveform", "rx_sample_start_index", "rx_sample_count"] {
+        g.require_dataset(rel)?;
+    }
+    // The coordinates are required: NaN or out-of-range values are an error naming the field.
+    let coord = |rel: &str, limit: f64| -> Result<Vec<f64>> {
+        let v = g.require::<f64>(rel, PerShot)?;
+        if let Some((i, x)) = v.iter().enumerate().find(|(_, x)| !(x.is_finite() && x.abs() <= limit)) {
+            return Err(g.err(rel, format!("shot {}: invalid coordinate {x}", shot_number[i])));
+        }
+        Ok(v)
+    };
+    Ok(L1bBeam {
+        delta_time: g.optional("delta_time", PerShot)?,
+        rx: read_waveforms(g, &shot_number, "rxwaveform", "rx")?.ok_or_else(|| g.err("rxwaveform", "missing"))?,
+        tx: read_waveforms(g, &shot_number, "txwaveform", "tx")?,
+        elevation_bin0: g.require("geolocation/elevation_bin0", PerShot)?,
+        elevation_lastbin: g.require("geolocation/elevation_lastbin", PerShot)?,
+        lat_bin0: coord("geolocation/latitude_bin0", 90.0)?,
+        lon_bin0: coord("geolocation/longitude_bin0", 360.0)?,
+        lat_lastbin: coord("geolocation/latitude_lastbin", 90.0)?,
+        lon_lastbin: coord("geolocation/longitude_lastbin", 360.0)?,
+        noise_mean: g.optional("noise_mean_corrected", PerShot)?,
+        noise_stddev: g.optional("noise_stddev_corrected", PerShot)?,
+        stale_return_flag: g.optional("stale_return_flag", PerShot)?,
+        degrade: g.optional("geolocation/degrade", PerShot)?,
+        geoid: g.optional("geophys_corr/geoid", PerShot)?,
+        shot_number,
+    })
+}
+
+/// One algorithm's per-shot outputs (each optional).
+struct L2aAlgorithm {
+    elev_lowestmode: Option<Vec<f64>>,
+    /// RH in metres (converted from the stored centimetres), row-major N×101.
+    rh: Option<Vec<f32>>,
+    sensitivity: Option<Vec<f64>>,
+    quality_flag: Option<Vec<u8>>,
+    toploc: Option<Vec<f64>>,
+    botloc: Option<Vec<f64>>,
+    zcross: Option<Vec<f64>>,
+}
+
+/// The L2A datasets of one beam that the shots table uses.
+struct L2aBeam {
+    shot_number: Vec<u64>,
+    delta_time: Option<Vec<f64>>,
+    quality_flag: Vec<u8>,
+    degrade_flag: Vec<u8>,
+    sensitivity: Vec<f64>,
+    selected_algorithm: Vec<u8>,
+    elev_lowestmode: Vec<f64>,
+    lat_lowestmode: Option<Vec<f64>>,
+    lon_lowestmode: Option<Vec<f64>>,
+    /// Metres, row-major N×101.
+    rh: Vec<f32>,
+    energy_total: Option<Vec<f64>>,
+    algorithms: Vec<L2aAlgorithm>,
+    leaf_off_flag: Option<Vec<u8>>,
+    leaf_off_doy: Option<Vec<i16>>,
+    leaf_on_doy: Option<Vec<i16>>,
+    pft_class: Option<Vec<u8>>,
+    region_class: Option<Vec<u8>>,
+    urban_proportion: Option<Vec<u8>>,
+    landsat_water_persistence: Option<Vec<u8>>,
+}
+
+fn read_l2a(g: &BeamGroup) -> Result<L2aBeam> {
+    use Shape::{PerShot, Rows};
+    let algorithms = (1..=N_ALGORITHMS)
+        .map(|n| {
+            let geo = |name: &str| format!("geolocation/{name}_a{n}");
+            let rxp = |name: &str| format!("rx_processing_a{n}/{name}");
+            // rh_aN is integer centimetres (int32 in V1, int16 in V2); f64 holds either exactly.
+            let rh_cm = g.optional::<f64>(&geo("rh"), Rows(RH_LEN))?;
+            Ok(L2aAlgorithm {
+                elev_lowestmode: g.optional(&geo("elev_lowestmode"), PerShot)?,
+                rh: rh_cm.map(|v| v.into_iter().map(|cm| (cm / 100.0) as f32).collect()),
+                sensitivity: g.optional(&geo("sensitivity"), PerShot)?,
+                quality_flag: g.optional(&geo("quality_flag"), PerShot)?,
+                toploc: g.optional(&rxp("toploc"), PerShot)?,
+                botloc: g.optional(&rxp("botloc"), PerShot)?,
+                zcross: g.optional(&rxp("zcross"), PerShot)?,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let lc = |name: &str| format!("land_cover_data/{name}");
+    Ok(L2aBeam {
+        shot_number: g.shot_numbers()?,
+        delta_time: g.optional("delta_time", PerShot)?,
+        quality_flag: g.require("quality_flag", PerShot)?,
+        degrade_flag: g.require("degrade_flag", PerShot)?,
+        sensitivity: g.require("sensitivity", PerShot)?,
+        selected_algorithm: g.require("selected_algorithm", PerShot)?,
+        elev_lowestmode: g.require("elev_lowestmode", PerShot)?,
+        lat_lowestmode: g.optional("lat_lowestmode", PerShot)?,
+        lon_lowestmode: g.optional("lon_lowestmode", PerShot)?,
+        rh: g.require("rh", Rows(RH_LEN))?,
+        energy_total: g.optional("energy_total", PerShot)?,
+        algorithms,
+        leaf_off_flag: g.optional(&lc("leaf_off_flag"), PerShot)?,
+        leaf_off_doy: g.optional(&lc("leaf_off_doy"), PerShot)?,
+        leaf_on_doy: g.optional(&lc("leaf_on_doy"), PerShot)?,
+        pft_class: g.optional(&lc("pft_class"), PerShot)?,
+        region_class: g.optional(&lc("region_class"), PerShot)?,
+        urban_proportion: g.optional(&lc("urban_proportion"), PerShot)?,
+        landsat_water_persistence: g.optional(&lc("landsat_water_persistence"), PerShot)?,
+    })
+}
+
+impl L2aBeam {
+    /// The lowest-mode (lat, lon) of shot `i` when both are valid coordinates.
+    fn lowestmode(&self, i: usize) -> Option<(f64, f64)> {
+        let lat = self.lat_lowestmode.as_ref()?[i];
+        let lon = self.lon_lowestmode.as_ref()?[i];
+        let valid = lat.is_finite() && lon.is_finite() && lat.abs() <= 90.0 && lon.abs() <= 360.0;
+        valid.then_some((lat, lon))
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Join and batches
+// ---------------------------------------------------------------------------------------------
+
+/// Where the `x`, `y` of a row come from.
+#[derive(Clone, Copy)]
+enum XySource {
+    /// L2A `lat/lon_lowestmode` (the footprint as L2A reports it).
+    LowestMode,
+    /// Mean of L1B bin0 and lastbin (the reference simulator's convention), for rows without a
+    /// valid L2A lowest mode.
+    BinMean,
+}
+
+impl XySource {
+    fn as_str(self) -> &'static str {
+        match self {
+            XySource::LowestMode => "lowestmode",
+            XySource::BinMean => "bin_mean",
+        }
+    }
+}
+
+/// One output row: the shot's index on each side and its projected position.
+struct Row {
+    shot_number: u64,
+    l1b: Option<usize>,
+    l2a: Option<usize>,
+    xy: Option<(f64, f64, XySource)>,
+}
+
+fn duplicate_check(path: Option<&Path>, beam: &str, shots: &[u64]) -> Result<()> {
+    let mut sorted = shots.to_vec();
+    sorted.sort_unstable();
+    if let Some(w) = sorted.windows(2).find(|w| w[0] == w[1]) {
+        return Err(Error::field(
+            path.unwrap_or(Path::new("")),
+            format!("{beam}/shot_number"),
+            format!("duplicate shot {}", w[0]),
+        ));
+    }
+    Ok(())
+}
+
+/// Join the two sides on shot_number (rows sorted by shot number) and project every row.
+fn join(
+    pair: &GranulePair,
+    beam: &str,
+    l1b: Option<&L1bBeam>,
+    l2a: Option<&L2aBeam>,
+    opts: &GediOptions,
+    projector: &Projector,
+    report: &mut BeamReport,
+) -> Result<Vec<Row>> {
+    let mut by_shot: BTreeMap<u64, (Option<usize>, Option<usize>)> = BTreeMap::new();
+    if let Some(b) = l1b {
+        duplicate_check(pair.l1b.as_deref(), beam, &b.shot_number)?;
+        for (i, &s) in b.shot_number.iter().enumerate() {
+            by_shot.entry(s).or_default().0 = Some(i);
+        }
+        report.l1b_shots = b.shot_number.len();
+    }
+    if let Some(b) = l2a {
+        duplicate_check(pair.l2a.as_deref(), beam, &b.shot_number)?;
+        for (i, &s) in b.shot_number.iter().enumerate() {
+            by_shot.entry(s).or_default().1 = Some(i);
+        }
+        report.l2a_shots = b.shot_number.len();
+    }
+
+    let mut rows = Vec::with_capacity(by_shot.len());
+    for (shot_number, (i1, i2)) in by_shot {
+        match (i1, i2) {
+            (Some(_), Some(_)) => report.joined += 1,
+            // A one-sided shot is an anomaly only when the other product's file was given.
+            (Some(_), None) if pair.l2a.is_some() => report.l1b_only.push(shot_number),
+            (None, Some(_)) if pair.l1b.is_some() => report.l2a_only.push(shot_number),
+            _ => {}
+        }
+        let lowest = match (l2a, i2) {
+            (Some(b), Some(i)) => {
+                let v = b.lowestmode(i);
+                if v.is_none() {
+                    report.invalid_lowestmode.push(shot_number);
+                }
+                v
+            }
+            _ => None,
+        };
+        let (lat, lon, source, field) = match (lowest, l1b.zip(i1)) {
+            (Some((lat, lon)), _) => (lat, lon, XySource::LowestMode, "lat_lowestmode"),
+            (None, Some((b, i))) => (
+                (b.lat_bin0[i] + b.lat_lastbin[i]) / 2.0,
+                (b.lon_bin0[i] + b.lon_lastbin[i]) / 2.0,
+                XySource::BinMean,
+                "geolocation/latitude_bin0",
+            ),
+            (None, None) => {
+                rows.push(Row { shot_number, l1b: i1, l2a: i2, xy: None });
+                continue;
+            }
+        };
+        let (x, y) = projector.project(lon, lat).map_err(|e| {
+            let path = if matches!(source, XySource::LowestMode) { pair.l2a.as_deref() } else { pair.l1b.as_deref() };
+            Error::field(path.unwrap_or(Path::new("")), format!("{beam}/{field}"), format!("shot {shot_number}: {e}"))
+        })?;
+        rows.push(Row { shot_number, l1b: i1, l2a: i2, xy: Some((x, y, source)) });
+    }
+
+    if opts.strict_join {
+        if let Some(&first) = report.l1b_only.first() {
+            let path = pair.l1b.as_deref().unwrap_or(Path::new(""));
+            return Err(Error::field(
+                path,
+                format!("{beam}/shot_number"),
+                format!(
+                    "{} shot(s) have no L2A partner (first {first}) and --strict-join is set",
+                    report.l1b_only.len()
+                ),
+            ));
+        }
+        if let Some(&first) = report.l2a_only.first() {
+            let path = pair.l2a.as_deref().unwrap_or(Path::new(""));
+            return Err(Error::field(
+                path,
+                format!("{beam}/shot_number"),
+                format!(
+                    "{} shot(s) have no L1B partner (first {first}) and --strict-join is set",
+                    report.l2a_only.len()
+                ),
+            ));
+        }
+    }
+    Ok(rows)
+}
+
+/// Everything needed to turn rows of one beam into a batch.
+struct BatchContext<'a> {
+    schema: &'a SchemaRef,
+    granule: &'a str,
+    beam: &'a str,
+    beam_type: BeamType,
+    l1b: Option<&'a L1bBeam>,
+    l2a: Option<&'a L2aBeam>,
+    geoid_offset: Option<f64>,
+}
+
+/// `v[i]` when both the optional column and the row index are present.
+fn at<T: Copy>(v: &Option<Vec<T>>, i: Option<usize>) -> Option<T> {
+    Some(v.as_ref()?[i?])
+}
+
+/// Row `i` of a row-major N×101 RH array.
+fn rh_row(v: &[f32], i: usize) -> &[f32] {
+    &v[i * RH_LEN..(i + 1) * RH_LEN]
+}
+
+fn prim<T: ArrowPrimitiveType>(rows: &[Row], f: impl Fn(&Row) -> Option<T::Native>) -> ArrayRef {
+    Arc::new(rows.iter().map(f).collect::<PrimitiveArray<T>>())
+}
+
+fn f64s(rows: &[Row], f: impl Fn(&Row) -> Option<f64>) -> ArrayRef {
+    prim::<Float64Type>(rows, f)
+}
+
+fn lists<'r>(rows: &'r [Row], f: impl Fn(&'r Row) -> Option<&'r [f32]>) -> ArrayRef {
+    let mut b = ListBuilder::new(Float32Builder::new());
+    for r in rows {
+        match f(r) {
+            Some(v) => {
+                b.values().append_slice(v);
+                b.append(true);
+            }
+            None => b.append(false),
+        }
+    }
+    Arc::new(b.finish())
+}
+
+fn strings<'r>(rows: &'r [Row], f: impl Fn(&'r Row) -> Option<&'r str>) -> ArrayRef {
+    Arc::new(rows.iter().map(f).collect::<StringArray>())
+}
+
+impl BatchContext<'_> {
+    fn batch(&self, rows: &[Row]) -> Result<RecordBatch> {
+        let (l1, l2) = (self.l1b, self.l2a);
+        // Accessors returning None when the row lacks that side.
+        let a1 = |r: &Row| l1.zip(r.l1b);
+        let a2 = |r: &Row| l2.zip(r.l2a);
+
+        let mut cols: Vec<(String, ArrayRef)> = vec![
+            ("granule".into(), strings(rows, |_| Some(self.granule))),
+            ("shot_number".into(), prim::<UInt64Type>(rows, |r| Some(r.shot_number))),
+            ("beam".into(), strings(rows, |_| Some(self.beam))),
+            ("beam_type".into(), strings(rows, |_| Some(self.beam_type.as_str()))),
+            ("in_l1b".into(), Arc::new(rows.iter().map(|r| Some(r.l1b.is_some())).collect::<BooleanArray>())),
+            ("in_l2a".into(), Arc::new(rows.iter().map(|r| Some(r.l2a.is_some())).collect::<BooleanArray>())),
+            (
+                "delta_time".into(),
+                f64s(rows, |r| {
+                    a1(r)
+                        .and_then(|(b, i)| at(&b.delta_time, Some(i)))
+                        .or_else(|| a2(r).and_then(|(b, i)| at(&b.delta_time, Some(i))))
+                }),
+            ),
+            ("lat_bin0".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.lat_bin0[i]))),
+            ("lon_bin0".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.lon_bin0[i]))),
+            ("lat_lastbin".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.lat_lastbin[i]))),
+            ("lon_lastbin".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.lon_lastbin[i]))),
+            ("lat_lowestmode".into(), f64s(rows, |r| a2(r).and_then(|(b, i)| b.lowestmode(i)).map(|p| p.0))),
+            ("lon_lowestmode".into(), f64s(rows, |r| a2(r).and_then(|(b, i)| b.lowestmode(i)).map(|p| p.1))),
+            ("x".into(), f64s(rows, |r| r.xy.map(|p| p.0))),
+            ("y".into(), f64s(rows, |r| r.xy.map(|p| p.1))),
+            ("xy_source".into(), strings(rows, |r| r.xy.map(|p| p.2.as_str()))),
+            ("elevation_bin0".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.elevation_bin0[i]))),
+            ("elevation_lastbin".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.elevation_lastbin[i]))),
+            ("rx_waveform".into(), lists(rows, |r| a1(r).map(|(b, i)| b.rx.get(i)))),
+            ("rx_sample_count".into(), prim::<UInt32Type>(rows, |r| a1(r).map(|(b, i)| b.rx.spans[i].1 as u32))),
+            ("tx_waveform".into(), lists(rows, |r| a1(r).and_then(|(b, i)| Some(b.tx.as_ref()?.get(i))))),
+            ("noise_mean_corrected".into(), f64s(rows, |r| a1(r).and_then(|(b, i)| at(&b.noise_mean, Some(i))))),
+            ("noise_stddev_corrected".into(), f64s(rows, |r| a1(r).and_then(|(b, i)| at(&b.noise_stddev, Some(i))))),
+            (
+                "stale_return_flag".into(),
+                prim::<UInt8Type>(rows, |r| a1(r).and_then(|(b, i)| at(&b.stale_return_flag, Some(i)))),
+            ),
+            ("degrade".into(), prim::<Int8Type>(rows, |r| a1(r).and_then(|(b, i)| at(&b.degrade, Some(i))))),
+            ("geoid".into(), f64s(rows, |r| a1(r).and_then(|(b, i)| at(&b.geoid, Some(i))))),
+            (
+                "geoid_offset_used".into(),
+                f64s(rows, |r| self.geoid_offset.or_else(|| a1(r).and_then(|(b, i)| at(&b.geoid, Some(i))))),
+            ),
+            ("vertical_datum".into(), strings(rows, |_| Some(VERTICAL_DATUM))),
+            ("quality_flag".into(), prim::<UInt8Type>(rows, |r| a2(r).map(|(b, i)| b.quality_flag[i]))),
+            ("degrade_flag".into(), prim::<UInt8Type>(rows, |r| a2(r).map(|(b, i)| b.degrade_flag[i]))),
+            ("sensitivity".into(), f64s(rows, |r| a2(r).map(|(b, i)| b.sensitivity[i]))),
+            ("selected_algorithm".into(), prim::<UInt8Type>(rows, |r| a2(r).map(|(b, i)| b.selected_algorithm[i]))),
+            ("elev_lowestmode".into(), f64s(rows, |r| a2(r).map(|(b, i)| b.elev_lowestmode[i]))),
+            ("rh".into(), lists(rows, |r| a2(r).map(|(b, i)| rh_row(&b.rh, i)))),
+            ("energy_total".into(), f64s(rows, |r| a2(r).and_then(|(b, i)| at(&b.energy_total, Some(i))))),
+        ];
+        for a in 0..N_ALGORITHMS {
+            let n = a + 1;
+            let alg = |r: &Row| a2(r).map(|(b, i)| (&b.algorithms[a], i));
+            cols.extend([
+                (
+                    format!("elev_lowestmode_a{n}"),
+                    f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.elev_lowestmode, Some(i)))),
+                ),
+                (format!("rh_a{n}"), lists(rows, |r| alg(r).and_then(|(g, i)| Some(rh_row(g.rh.as_ref()?, i))))),
+                (format!("sensitivity_a{n}"), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.sensitivity, Some(i))))),
+                (
+                    format!("quality_flag_a{n}"),
+                    prim::<UInt8Type>(rows, |r| alg(r).and_then(|(g, i)| at(&g.quality_flag, Some(i)))),
+                ),
+                (format!("toploc_a{n}"), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.toploc, Some(i))))),
+                (format!("botloc_a{n}"), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.botloc, Some(i))))),
+                (format!("zcross_a{n}"), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.zcross, Some(i))))),
+            ]);
+        }
+        let u8_lc = |f: fn(&L2aBeam) -> &Option<Vec<u8>>| {
+            prim::<UInt8Type>(rows, move |r| a2(r).and_then(|(b, i)| at(f(b), Some(i))))
+        };
+        let i16_lc = |f: fn(&L2aBeam) -> &Option<Vec<i16>>| {
+            prim::<Int16Type>(rows, move |r| a2(r).and_then(|(b, i)| at(f(b), Some(i))))
+        };
+        cols.extend([
+            ("leaf_off_flag".into(), u8_lc(|b| &b.leaf_off_flag)),
+            ("leaf_off_doy".into(), i16_lc(|b| &b.leaf_off_doy)),
+            ("leaf_on_doy".into(), i16_lc(|b| &b.leaf_on_doy)),
+            ("pft_class".into(), u8_lc(|b| &b.pft_class)),
+            ("region_class".into(), u8_lc(|b| &b.region_class)),
+            ("urban_proportion".into(), u8_lc(|b| &b.urban_proportion)),
+            ("landsat_water_persistence".into(), u8_lc(|b| &b.landsat_water_persistence)),
+        ]);
+
+        // Order the columns by the schema, so the schema stays the single definition of order.
+        let mut by_name: std::collections::HashMap<String, ArrayRef> = cols.into_iter().collect();
+        let arrays = self
+            .schema
+            .fields()
+            .iter()
+            .map(|f| by_name.remove(f.name()).ok_or_else(|| Error::Usage(format!("internal: no column {}", f.name()))))
+            .collect::<Result<Vec<_>>>()?;
+        RecordBatch::try_new(self.schema.clone(), arrays).map_err(|e| Error::table(self.granule, e))
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Into a dataset
+// ---------------------------------------------------------------------------------------------
+
+/// What happened to one granule in [`ingest_into_dataset`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum GranuleOutcome {
+    /// Shots written (replacing an earlier version of the granule, if any).
+    Ingested { granule: String, shots: usize },
+    /// The same files (by content hash) were ingested before.
+    AlreadyIngested { granule: String },
+}
+
+/// Schema of the `granules/` table: one row per ingested granule and the content hashes that key it.
+pub fn granules_schema() -> SchemaRef {
+    Arc::new(arrow::datatypes::Schema::new(vec![
+        Field::new("granule", DataType::Utf8, false),
+        Field::new("granule_key", DataType::Utf8, false),
+        Field::new("l1b_path", DataType::Utf8, true),
+        Field::new("l1b_hash", DataType::Utf8, true),
+        Field::new("l2a_path", DataType::Utf8, true),
+        Field::new("l2a_hash", DataType::Utf8, true),
+        Field::new("n_shots", DataType::UInt64, false),
+    ]))
+}
+
+/// Ingest L1B/L2A files into `<dataset>/shots/` (one file per granule, `<granule_key>.parquet`)
+/// and `<dataset>/granules/`. A granule whose files have the same content hashes as at its last
+/// ingest is skipped; one whose files changed (e.g. its L2A arrived later) is rewritten.
+/// Granules are processed in parallel; `on_granule` is called after each.
+pub fn ingest_into_dataset(
+    dataset: &crate::dataset::Dataset,
+    l1b: &[PathBuf],
+    l2a: &[PathBuf],
+    opts: &GediOptions,
+    on_granule: &(dyn Fn() + Sync),
+) -> Result<(Vec<GranuleOutcome>, IngestReport)> {
+    use crate::dataset::{self, tables, AtomicParquet};
+    use arrow::array::{StringArray, UInt64Array};
+
+    let (pairs, notes) = pair_granules(l1b, l2a)?;
+    let shots_dir = dataset.table_dir(tables::SHOTS)?;
+    let granules_dir = dataset.table_dir(tables::GRANULES)?;
+    let results = pairs
+        .par_iter()
+        .map(|pair| -> Result<(GranuleOutcome, Vec<BeamReport>)> {
+            let key = granule_key(pair.l1b.as_deref().or(pair.l2a.as_deref()).expect("a pair has a file"));
+            let hash = |p: &Option<PathBuf>| p.as_deref().map(dataset::content_hash).transpose();
+            let (h1, h2) = (hash(&pair.l1b)?, hash(&pair.l2a)?);
+            let record = granules_dir.join(format!("{key}.parquet"));
+            if previous_hashes(&record)? == Some((h1.clone(), h2.clone())) {
+                on_granule();
+                return Ok((GranuleOutcome::AlreadyIngested { granule: pair.granule.clone() }, Vec::new()));
+            }
+            let schema = shots_schema(opts.epsg);
+            let mut metadata = std::collections::HashMap::new();
+            metadata.insert("gedisim:crs_epsg".to_string(), opts.epsg.to_string());
+            metadata.insert("gedisim:vertical_reference".to_string(), VERTICAL_DATUM.to_string());
+            let props = dataset::writer_properties(&metadata, 1 << 16);
+            let mut writer = AtomicParquet::create(&shots_dir.join(format!("{key}.parquet")), schema, props)?;
+            let beams = read_granule(pair, opts, &mut |b| writer.write(&b))?;
+            writer.finish()?;
+            let shots: usize = beams.iter().map(BeamReport::rows).sum();
+            let path = |p: &Option<PathBuf>| p.as_ref().map(|p| p.display().to_string());
+            let cols: Vec<arrow::array::ArrayRef> = vec![
+                Arc::new(StringArray::from(vec![pair.granule.clone()])),
+                Arc::new(StringArray::from(vec![key.clone()])),
+                Arc::new(StringArray::from(vec![path(&pair.l1b)])),
+                Arc::new(StringArray::from(vec![h1])),
+                Arc::new(StringArray::from(vec![path(&pair.l2a)])),
+                Arc::new(StringArray::from(vec![h2])),
+                Arc::new(UInt64Array::from(vec![shots as u64])),
+            ];
+            let batch = RecordBatch::try_new(granules_schema(), cols).map_err(|e| Error::table(&record, e))?;
+            dataset::write_parquet(&record, granules_schema(), &[batch], &metadata)?;
+            on_granule();
+            Ok((GranuleOutcome::Ingested { granule: pair.granule.clone(), shots }, beams))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let mut report = IngestReport { beams: Vec::new(), notes };
+    let mut outcomes = Vec::new();
+    for (o, beams) in results {
+        outcomes.push(o);
+        report.beams.extend(beams);
+    }
+    Ok((outcomes, report))
+}
+
+/// The (L1B, L2A) content hashes recorded by an earlier ingest of a granule (its
+/// `granules/<key>.parquet` record), if any.
+pub fn previous_hashes(record: &Path) -> Result<Option<(Option<String>, Option<String>)>> {
+    use arrow::array::{Array, AsArray};
+    if !record.exists() {
+        return Ok(None);
+    }
+    let file = std::fs::File::open(record).map_err(|e| Error::file(record, e))?;
+    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+        .and_then(|b| b.build())
+        .map_err(|e| Error::table(record, e))?;
+    for batch in reader {
+        let batch = batch.map_err(|e| Error::table(record, e))?;
+        if batch.num_rows() == 0 {
+            continue;
+        }
+        let get = |c: &str| {
+            let a = batch.column_by_name(c)?.as_string_opt::<i32>()?;
+            (!a.is_null(0)).then(|| a.value(0).to_string())
+        };
+        return Ok(Some((get("l1b_hash"), get("l2a_hash"))));
+    }
+    Ok(None)
+}

@@ -1,0 +1,13 @@
+//! Operations, one per command: files in, files out. The only place that sequences steps
+//! (read with `io`/`dataset`, compute with `kernels`, write with `dataset`).
+
+pub mod collocate;
+pub mod demo;
+pub mod diagnose;
+pub mod ingest_als;
+pub mod ingest_gedi;
+pub mod ingest_strata;
+pub mod report;
+pub mod run;
+pub mod scenario;
+pub mod simulate;

@@ -1,0 +1,455 @@
+//! Adapter of `gedisim scenario`: reads the ALS tiles, runs the scenario kernels
+//! ([`crate::kernels::scenario`]) and the simulator, and writes the world: `<out>/als/` (copies of the
+//! tiles), `<out>/gedi/` (V2-layout L1B + L2A granules) and `<out>/truth.json`. Every file is
+//! written under a temporary name and renamed when complete; truth.json is written last.
+
+use std::path::{Path, PathBuf};
+
+use chrono::{DateTime, Datelike, Duration, TimeZone, Timelike, Utc};
+use serde_json::{json, Value};
+
+use crate::error::{Error, Result};
+use crate::io::granule::{v2_file_name, write_l1b_v2, write_l2a_v2, Beam, GranuleMeta, L1bShot, L2aShot, LandCover};
+use crate::kernels::gedi::{beam_number, BeamType, BEAM_NAMES};
+use crate::kernels::geo::projection::Projector;
+use crate::io::las::TileReader;
+use crate::kernels::waveform::l2a::{L2aProcessor, Noise};
+use crate::kernels::scenario::effects::{EffectSet, Physics, NOMINAL_FSIGMA_M};
+use crate::kernels::scenario::plan::{plan, Extent, PlanSettings};
+use crate::kernels::scenario::real::{self, ENERGY_LOG_SPREAD, NOISE_MEAN_SPREAD, NOISE_STDDEV_LOG_SPREAD};
+use crate::kernels::scenario::rng::Stream;
+use crate::kernels::scenario::shot::{make_shot, ShotSpec};
+use crate::kernels::sim::{self, Footprint};
+
+/// Default nominal geoid height N (m): EGM2008/RAF20 N over metropolitan France spans about
+/// 44–55 m; 49 m is typical of the Massif Central and Alpine foothills.
+pub const DEFAULT_GEOID_M: f64 = 49.0;
+/// Ground speed of the ISS footprint (m/s), for the time between shots.
+const GROUND_SPEED_M_S: f64 = 7000.0;
+/// GEDI epoch (`delta_time` = 0).
+const GEDI_EPOCH_UNIX_S: i64 = 1_514_764_800; // 2018-01-01T00:00:00Z
+/// A GEDI orbit (s) and one orbit's reference time (orbit 1964 started ≈ 2019-04-18 08:03 UTC).
+const ORBIT_S: f64 = 5554.0;
+const ORBIT_1964_DELTA_TIME: f64 = 40_809_818.0;
+
+/// Options of one world.
+#[derive(Debug, Clone)]
+pub struct ScenarioOptions {
+    /// The `--effect` text as given (recorded).
+    pub effect_spec: String,
+    pub effects: EffectSet,
+    pub magnitude: Option<f64>,
+    pub params: Vec<(String, String)>,
+    pub seed: u64,
+    /// LAS/LAZ files.
+    pub tiles: Vec<PathBuf>,
+    pub out: PathBuf,
+    /// Granules (passes) per tile.
+    pub passes_per_tile: usize,
+    /// Nominal geoid height N (m).
+    pub geoid_m: f64,
+    /// RMS per axis of the per-track offsets (m).
+    pub track_offset_sigma_m: f64,
+    /// CRS of tiles without one.
+    pub default_epsg: u32,
+    /// Replace an existing world in `out`.
+    pub force: bool,
+}
+
+/// What was written.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScenarioReport {
+    pub tiles: usize,
+    pub granules: usize,
+    pub tracks: usize,
+    pub shots: usize,
+    pub dropped: usize,
+    pub truth: PathBuf,
+}
+
+/// One tile as the world uses it.
+struct Tile {
+    path: PathBuf,
+    points: sim::AlsPoints,
+    extent: Extent,
+    epsg: u32,
+    acquired: Option<DateTime<Utc>>,
+}
+
+/// Month rule of tests/data/als/PROVENANCE.md: May–October leaf-on, November–April leaf-off.
+fn is_leaf_off(date: Option<DateTime<Utc>>) -> bool {
+    date.map(|d| !(5..=10).contains(&d.month())).unwrap_or(false)
+}
+
+fn read_tile(path: &Path, default_epsg: u32) -> Result<Tile> {
+    let reader = TileReader::open(path)?;
+    let h = reader.header().clone();
+    let points = crate::ops::simulate::drop_ingest_classes(&reader.read_all()?);
+    if points.is_empty() {
+        return Err(Error::file(path, "no point left after dropping classes 7, 18, 64-67"));
+    }
+    let mut gps: Vec<f64> = points.gps_time.iter().copied().filter(|t| t.is_finite()).collect();
+    gps.sort_by(f64::total_cmp);
+    let acquired = gps
+        .get(gps.len() / 2)
+        .and_then(|&t| crate::ops::ingest_als::gps_to_utc_micros(t))
+        .and_then(|us| Utc.timestamp_micros(us).single());
+    let [xmin, ymin, _, xmax, ymax, _] = h.bounds;
+    if !(xmax > xmin && ymax > ymin) {
+        return Err(Error::field(path, "header bounds", format!("empty extent {xmin}..{xmax} x {ymin}..{ymax}")));
+    }
+    Ok(Tile { path: path.to_path_buf(), points, extent: Extent { xmin, ymin, xmax, ymax }, epsg: h.epsg.unwrap_or(default_epsg), acquired })
+}
+
+/// `YYYYDDDHHMMSS` of a time.
+fn gedi_start(t: DateTime<Utc>) -> String {
+    format!("{:04}{:03}{:02}{:02}{:02}", t.year(), t.ordinal(), t.hour(), t.minute(), t.second())
+}
+
+fn delta_time(t: DateTime<Utc>) -> f64 {
+    (t.timestamp() - GEDI_EPOCH_UNIX_S) as f64 + f64::from(t.timestamp_subsec_micros()) * 1e-6
+}
+
+/// Build the world and write it under `opts.out`.
+pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
+    if opts.tiles.is_empty() {
+        return Err(Error::Usage("--als: no LAS/LAZ file".into()));
+    }
+    if opts.passes_per_tile == 0 || opts.passes_per_tile > 64 {
+        return Err(Error::Usage(format!("--passes: {} is not in 1..64", opts.passes_per_tile)));
+    }
+    if !opts.geoid_m.is_finite() || opts.geoid_m.abs() > 200.0 {
+        return Err(Error::Usage(format!("--geoid: {} m is not a geoid height (|N| ≤ 200 m)", opts.geoid_m)));
+    }
+    if !(opts.track_offset_sigma_m.is_finite() && (0.0..=50.0).contains(&opts.track_offset_sigma_m)) {
+        return Err(Error::Usage(format!("--offset-sigma: {} m is not in 0..50", opts.track_offset_sigma_m)));
+    }
+    let gedi_dir = opts.out.join("gedi");
+    let als_dir = opts.out.join("als");
+    let truth_path = opts.out.join("truth.json");
+    let existing = truth_path.exists() || std::fs::read_dir(&gedi_dir).map(|mut d| d.next().is_some()).unwrap_or(false);
+    if existing && !opts.force {
+        return Err(Error::file(&opts.out, "already holds a world (truth.json or gedi/); use --force to replace it"));
+    }
+
+    let tiles = opts.tiles.iter().map(|p| read_tile(p, opts.default_epsg)).collect::<Result<Vec<_>>>()?;
+    let physics = opts.effects.physics(&Physics::nominal());
+    // Keep 2σ_f of ALS around every true and reported footprint centre, plus a metre.
+    let margin = 2.0 * f64::from(physics.sim.fsigma).max(NOMINAL_FSIGMA_M) + 1.0;
+    let settings = PlanSettings {
+        passes_per_tile: opts.passes_per_tile,
+        track_offset_sigma_m: opts.track_offset_sigma_m,
+        margin_m: margin,
+        extra_offset: opts.effects.extra_offset(),
+    };
+    let extents: Vec<Extent> = tiles.iter().map(|t| t.extent).collect();
+    let layout = plan(&extents, &settings, opts.seed);
+
+    // Granule identities.
+    struct Granule {
+        tile: usize,
+        pass: usize,
+        start: DateTime<Utc>,
+        orbit: u32,
+        sub_orbit: u8,
+        track: u32,
+        l1b: String,
+        l2a: String,
+    }
+    let fallback = Utc.with_ymd_and_hms(2022, 7, 1, 10, 0, 0).single().expect("valid date");
+    let mut granules = Vec::new();
+    for (t, tile) in tiles.iter().enumerate() {
+        for pass in 0..opts.passes_per_tile {
+            let mut g = Stream::new(opts.seed, &["granule", &t.to_string(), &pass.to_string()]);
+            let day = tile.acquired.unwrap_or(fallback).date_naive().and_hms_opt(0, 0, 0).expect("midnight").and_utc();
+            let start = day + Duration::days(7 * pass as i64) + Duration::seconds(3600 * 6 + (g.uniform() * 43_200.0) as i64);
+            let orbit = (1964.0 + ((delta_time(start) - ORBIT_1964_DELTA_TIME) / ORBIT_S).floor()).max(1.0) as u32;
+            let sub_orbit = 1 + (g.next_u64() % 4) as u8;
+            let track = 1 + (g.next_u64() % 4470) as u32;
+            let s = gedi_start(start);
+            granules.push(Granule {
+                tile: t,
+                pass,
+                start,
+                orbit,
+                sub_orbit,
+                track,
+                l1b: v2_file_name("01_B", &s, orbit, sub_orbit, track),
+                l2a: v2_file_name("02_A", &s, orbit, sub_orbit, track),
+            });
+        }
+    }
+
+    // Simulate every tile's shots at their true positions with the true physics.
+    let mut sims = vec![None; layout.shots.len()];
+    for (t, tile) in tiles.iter().enumerate() {
+        let idx: Vec<usize> = (0..layout.shots.len()).filter(|&i| layout.tracks[layout.shots[i].track].tile == t).collect();
+        let fps: Vec<Footprint> = idx
+            .iter()
+            .map(|&i| {
+                let s = &layout.shots[i];
+                Footprint { id: i.to_string(), x: s.x + s.dx, y: s.y + s.dy }
+            })
+            .collect();
+        let out = sim::simulate(&tile.points, &fps, &physics.sim).map_err(|e| Error::file(&tile.path, e))?;
+        for (i, r) in idx.into_iter().zip(out) {
+            sims[i] = Some(r);
+        }
+    }
+
+    // Make every shot.
+    let projectors: Vec<Projector> = tiles.iter().map(|t| Projector::new(t.epsg)).collect::<Result<_>>()?;
+    let mut l1b: Vec<Vec<Vec<L1bShot>>> = granules.iter().map(|_| vec![Vec::new(); BEAM_NAMES.len()]).collect();
+    let mut l2a: Vec<Vec<Vec<L2aShot>>> = granules.iter().map(|_| vec![Vec::new(); BEAM_NAMES.len()]).collect();
+    let mut shots_json = Vec::new();
+    let mut dropped_json = Vec::new();
+    let mut track_counts = vec![0usize; layout.tracks.len()];
+    let mut processor = L2aProcessor::new();
+    let factor = opts.effects.noise_sigma_factor();
+    for (i, ps) in layout.shots.iter().enumerate() {
+        let track = &layout.tracks[ps.track];
+        let tile = &tiles[track.tile];
+        let gr = &granules[track.granule];
+        let beam_idx = BEAM_NAMES.iter().position(|b| *b == track.beam).unwrap_or(0);
+        let beam_type = BeamType::from_name(track.beam).unwrap_or(BeamType::Coverage);
+        let rec = real::record(beam_type);
+        let mut r = Stream::new(opts.seed, &["shot", &track.id, &ps.along_index.to_string()]);
+        let (lon, lat) = projectors[track.tile]
+            .unproject(ps.x, ps.y)
+            .map_err(|e| Error::field(&tile.path, "extent", e))?;
+        let leaf_off = is_leaf_off(Some(gr.start).filter(|_| tile.acquired.is_some()));
+        let along_s = ps.along_m / GROUND_SPEED_M_S;
+        let dt = delta_time(gr.start) + along_s;
+        let shot_number = u64::from(gr.orbit) * 10_000_000_000_000
+            + u64::from(beam_number(track.beam).unwrap_or(0)) * 100_000_000_000
+            + (ps.track as u64 % 1000) * 100_000
+            + u64::from(ps.along_index)
+            + 1;
+        let spec = ShotSpec {
+            shot_number,
+            delta_time: dt,
+            beam_type,
+            lat,
+            lon,
+            geoid_m: opts.geoid_m,
+            noise: Noise {
+                mean: rec.noise_mean + NOISE_MEAN_SPREAD * r.normal(),
+                stddev: rec.noise_stddev * factor * (NOISE_STDDEV_LOG_SPREAD * r.normal()).exp(),
+            },
+            energy: rec.energy * (ENERGY_LOG_SPREAD * r.normal()).exp(),
+            above_signal_m: rec.above_signal_m + r.normal(),
+            below_ground_m: rec.below_ground_m + r.normal(),
+            noise_seed: r.next_u64(),
+            dem_error_m: 1.5 * r.normal(),
+            land_cover: LandCover {
+                leaf_off_flag: u8::from(leaf_off),
+                leaf_off_doy: 305,
+                leaf_on_doy: 105,
+                leaf_on_cycle: 1,
+                ..Default::default()
+            },
+        };
+        let outcome = match &sims[i] {
+            Some(Ok(fp)) => make_shot(fp, &physics, &opts.effects, &spec, &mut processor).map_err(|e| e.to_string()),
+            Some(Err(reason)) => Err(format!("simulation skipped: {reason:?}")),
+            None => Err("not simulated".to_string()),
+        };
+        match outcome {
+            Ok((a, b, truth)) => {
+                track_counts[ps.track] += 1;
+                shots_json.push(json!({
+                    "shot_number": shot_number,
+                    "track": track.id,
+                    "x": ps.x, "y": ps.y,
+                    "true_x": ps.x + ps.dx, "true_y": ps.y + ps.dy,
+                    "dx": ps.dx, "dy": ps.dy,
+                    "als_ground_m": truth.als_ground_m,
+                    "true_top_m": truth.true_top_m,
+                    "gedi_ground_expected_m": truth.gedi_ground_expected_m,
+                    "noise_stddev": truth.noise_stddev,
+                    "selected_algorithm": b.selected_algorithm,
+                    "quality_flag": b.quality_flag,
+                }));
+                l1b[track.granule][beam_idx].push(a);
+                l2a[track.granule][beam_idx].push(b);
+            }
+            Err(reason) => dropped_json.push(json!({ "track": track.id, "x": ps.x, "y": ps.y, "reason": reason })),
+        }
+    }
+
+    if shots_json.is_empty() {
+        return Err(Error::Usage(format!(
+            "--als: no shot fits {} m inside the tiles ({} planned, {} dropped); give larger tiles or more --passes",
+            margin,
+            layout.shots.len(),
+            dropped_json.len()
+        )));
+    }
+
+    // Write: granules and tiles under temporary names, then truth.json.
+    let tmp = opts.out.join(format!(".scenario-tmp-{}", std::process::id()));
+    let mk = |d: &Path| std::fs::create_dir_all(d).map_err(|e| Error::file(d, format!("cannot create folder: {e}")));
+    if opts.force {
+        for d in [&gedi_dir, &als_dir] {
+            if d.exists() {
+                std::fs::remove_dir_all(d).map_err(|e| Error::file(d, format!("cannot remove the previous world: {e}")))?;
+            }
+        }
+    }
+    mk(&tmp)?;
+    mk(&gedi_dir)?;
+    mk(&als_dir)?;
+    let result = write_outputs(opts, &tmp, &gedi_dir, &als_dir, &tiles, &granules.iter().map(|g| (g.l1b.clone(), g.l2a.clone())).collect::<Vec<_>>(), &l1b, &l2a);
+    let _ = std::fs::remove_dir_all(&tmp);
+    result?;
+
+    let granules_json: Vec<Value> = granules
+        .iter()
+        .enumerate()
+        .map(|(i, g)| {
+            let heading = layout.tracks.iter().find(|t| t.granule == i).map(|t| t.heading_deg);
+            json!({ "l1b": format!("gedi/{}", g.l1b), "l2a": format!("gedi/{}", g.l2a), "tile": g.tile, "pass": g.pass,
+                    "start_utc": g.start.to_rfc3339(), "orbit": g.orbit, "sub_orbit": g.sub_orbit, "track": g.track, "heading_deg": heading })
+        })
+        .collect();
+    let tracks_json: Vec<Value> = layout
+        .tracks
+        .iter()
+        .zip(&track_counts)
+        .map(|(t, &n)| {
+            json!({ "id": t.id, "tile": t.tile, "granule": t.granule, "beam": t.beam,
+                    "beam_type": BeamType::from_name(t.beam).map(|b| b.as_str()),
+                    "heading_deg": t.heading_deg, "dx": t.dx, "dy": t.dy, "n_shots": n })
+        })
+        .collect();
+    let tiles_json: Vec<Value> = tiles
+        .iter()
+        .map(|t| {
+            json!({ "file": format!("als/{}", t.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()),
+                    "source": t.path.display().to_string(), "epsg": t.epsg,
+                    "extent": [t.extent.xmin, t.extent.ymin, t.extent.xmax, t.extent.ymax],
+                    "points_used": t.points.len(),
+                    "acquired_utc": t.acquired.map(|d| d.to_rfc3339()), "leaf_off": is_leaf_off(t.acquired) })
+        })
+        .collect();
+    let effects_json: Vec<Value> = opts
+        .effects
+        .effects
+        .iter()
+        .map(|e| {
+            let params: serde_json::Map<String, Value> = e
+                .params()
+                .into_iter()
+                .map(|(k, v)| (k.to_string(), match v {
+                    crate::kernels::scenario::effects::ParamValue::Number(x) => json!(x),
+                    crate::kernels::scenario::effects::ParamValue::Text(s) => json!(s),
+                }))
+                .collect();
+            json!({ "name": e.name(), "params": params })
+        })
+        .collect();
+    let truth = json!({
+        "format": "gedisim-scenario-truth/1",
+        "effect": opts.effects.name(),
+        "effect_spec": opts.effect_spec,
+        "effects": effects_json,
+        "magnitude": opts.magnitude,
+        "params_given": opts.params.iter().map(|(k, v)| json!([k, v])).collect::<Vec<_>>(),
+        "seed": opts.seed,
+        "physics": {
+            "weighting": physics.weighting.name(),
+            "rho_ground_over_veg": physics.rho_ground_over_veg,
+            "pulse_sigma_m": physics.sim.pulse.sigma,
+            "fsigma_m": physics.sim.fsigma,
+            "profile": "default",
+        },
+        "geoid": {
+            "n_m": opts.geoid_m,
+            "dataset": "geophys_corr/geoid",
+            "relation": "GEDI elevation = ALS height (IGN69) + N + datum_dz_m",
+        },
+        "datum_dz_m": opts.effects.vertical_offset_m(),
+        "noise": {
+            "noise_sigma_factor": factor,
+            "median_noise_stddev_corrected": { "coverage": real::COVERAGE.noise_stddev, "full_power": real::FULL_POWER.noise_stddev },
+            "shape": "GEDI_V1 (per-sample 0.52 sigma, Gaussian correlation 1.63 samples)",
+        },
+        "geolocation": {
+            "convention": "true position = reported (x, y) + (dx, dy), as collocate reports offsets",
+            "track_offset_sigma_m": opts.track_offset_sigma_m,
+            "clip_sigmas": 2.5,
+        },
+        "ground_detection_offset_m": (1..=6u8).map(|a| opts.effects.ground_offset_m(a)).collect::<Vec<_>>(),
+        "margin_m": margin,
+        "n_shots": shots_json.len(),
+        "n_dropped": dropped_json.len(),
+        "tiles": tiles_json,
+        "granules": granules_json,
+        "tracks": tracks_json,
+        "shots": shots_json,
+        "dropped": dropped_json,
+    });
+    let text = serde_json::to_string_pretty(&truth).map_err(|e| Error::file(&truth_path, e))?;
+    write_atomic(&truth_path, text.as_bytes())?;
+    Ok(ScenarioReport {
+        tiles: tiles.len(),
+        granules: granules.len(),
+        tracks: layout.tracks.len(),
+        shots: shots_json.len(),
+        dropped: dropped_json.len(),
+        truth: truth_path,
+    })
+}
+
+#[allow(clippy::too_many_arguments)]
+fn write_outputs(
+    _opts: &ScenarioOptions,
+    tmp: &Path,
+    gedi_dir: &Path,
+    als_dir: &Path,
+    tiles: &[Tile],
+    names: &[(String, String)],
+    l1b: &[Vec<Vec<L1bShot>>],
+    l2a: &[Vec<Vec<L2aShot>>],
+) -> Result<()> {
+    let meta = GranuleMeta::default();
+    for (g, (n1, n2)) in names.iter().enumerate() {
+        let beams1: Vec<Beam<L1bShot>> = BEAM_NAMES
+            .iter()
+            .zip(&l1b[g])
+            .filter(|(_, s)| !s.is_empty())
+            .map(|(b, s)| Beam::new(*b, s.clone()))
+            .collect();
+        let beams2: Vec<Beam<L2aShot>> = BEAM_NAMES
+            .iter()
+            .zip(&l2a[g])
+            .filter(|(_, s)| !s.is_empty())
+            .map(|(b, s)| Beam::new(*b, s.clone()))
+            .collect();
+        if beams1.is_empty() {
+            continue; // a granule without a shot over the tile is not distributed
+        }
+        write_l1b_v2(&tmp.join(n1), &beams1, &meta)?;
+        write_l2a_v2(&tmp.join(n2), &beams2, &meta)?;
+        for n in [n1, n2] {
+            let (from, to) = (tmp.join(n), gedi_dir.join(n));
+            std::fs::rename(&from, &to).map_err(|e| Error::file(&to, format!("cannot move into place: {e}")))?;
+        }
+    }
+    for t in tiles {
+        let name = t.path.file_name().ok_or_else(|| Error::file(&t.path, "not a file name"))?;
+        let dest = als_dir.join(name);
+        let staged = tmp.join(name);
+        std::fs::copy(&t.path, &staged).map_err(|e| Error::file(&t.path, format!("cannot copy to {}: {e}", staged.display())))?;
+        std::fs::rename(&staged, &dest).map_err(|e| Error::file(&dest, format!("cannot move into place: {e}")))?;
+    }
+    Ok(())
+}
+
+/// Write `bytes` to `path` through a temporary file in the same folder.
+fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let tmp = path.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
+    std::fs::write(&tmp, bytes).map_err(|e| Error::file(&tmp, format!("cannot write: {e}")))?;
+    std::fs::rename(&tmp, path).map_err(|e| Error::file(path, format!("cannot move into place: {e}")))
+}
