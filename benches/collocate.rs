@@ -7,7 +7,7 @@
 //!
 //! Run with `cargo bench --bench collocate` (release) or `cargo bench --profile dev --bench
 //! collocate`. The scene and its ingested `als/` table are made once into `target/bench-data/`.
-//! Reference (CONTRACTS.md, simulator-reference.md §6.4): collocateWaves on a planted 40-shot
+//! Reference (docs/contracts.md, docs/simulator-reference.md §6.4): collocateWaves on a planted 40-shot
 //! track of the same scene, same grid: 105.7 s wall, 1.27 GB max RSS.
 
 #[path = "../tests/common/planted.rs"]
@@ -23,7 +23,7 @@ use gedisim::dataset::Dataset;
 use common::{field, run, scene_25m};
 use planted::{write_planted_l1b, Plant, PlantedBeam};
 
-/// Scene extent (simulator-reference.md §6.3).
+/// Scene extent (docs/simulator-reference.md §6.3).
 const SCENE: [f64; 4] = [368478.10, 6807406.82, 369478.09, 6808406.81];
 
 const REFERENCE_S: f64 = 105.7;
@@ -63,7 +63,7 @@ fn main() {
     let rss_mb = field(&out, " MB,");
     println!("collocate benchmark: 24,719,400 ALS points, 40 shots, ±10 m at 1 m (441 offsets), vertical solve included (2 cores)");
     println!("  gedisim collocate : {wall:.2} s wall (process), {}", out.trim());
-    println!("  reference         : {REFERENCE_S} s, {REFERENCE_GB} GB (collocateWaves, simulator-reference.md §6.4)");
+    println!("  reference         : {REFERENCE_S} s, {REFERENCE_GB} GB (collocateWaves, docs/simulator-reference.md §6.4)");
     let cpu = field(&out, " s, peak");
     println!(
         "  speed-up {:.0}× (wall), {:.0}× (CPU time against the reference's single-threaded user time 100.0 s); memory {:.1}× smaller",

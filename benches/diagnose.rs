@@ -9,6 +9,7 @@
 //! (default `1,2`), `GEDISIM_BENCH_SEEDS` (default `1,2`), `GEDISIM_BENCH_CONTROLS` (control seeds,
 //! default `1,2,3,4`), `GEDISIM_BENCH_DIR` (worlds kept there; default a temporary folder).
 
+use gedisim::kernels::scenario::truth::Truth;
 use std::path::Path;
 use std::process::Command;
 use std::time::Instant;
@@ -74,10 +75,10 @@ fn world(dir: &Path, effect: &str, magnitude: &str, seed: &str) -> Option<Row> {
     }
     let seconds = start.elapsed().as_secs_f64();
     let d: Value = serde_json::from_str(&std::fs::read_to_string(o.join("diagnosis.json")).ok()?).ok()?;
-    let t: Value = serde_json::from_str(&std::fs::read_to_string(ws.join("truth.json")).ok()?).ok()?;
+    let t: Truth = serde_json::from_str(&std::fs::read_to_string(ws.join("truth.json")).ok()?).ok()?;
     let first = &d["effects"][0];
     let (p, _) = main_param(effect);
-    let truth = t["effects"][0]["params"][p].as_f64().unwrap_or(f64::NAN);
+    let truth = t.effects.first().and_then(|e| e.number(p)).unwrap_or(f64::NAN);
     let fitted = if first["name"] == effect { first["params"][p].as_f64().unwrap_or(f64::NAN) } else { f64::NAN };
     Some(Row {
         effect: effect.to_string(),

@@ -2,7 +2,7 @@
 //! benchmark, 2000 footprints on a 50 × 40 lattice inside [min+20, max−20] m, all three
 //! weightings, ground split, default pulse, `default` profile — the job the reference gediRat
 //! needs 50.1 s and 2.16 GB for on this machine kind (4.1 s and 1.19 GB with 2 footprints;
-//! ../shared/docs/CONTRACTS.md).
+//! docs/contracts.md).
 //!
 //! Two paths are timed, each as separate processes, with 2 and with 2000 footprints:
 //! - direct mode from the LAZ (`simulate --als scene.laz`: the whole file decoded into memory);

@@ -19,7 +19,7 @@ use gedisim::ops::ingest_als::{ingest_tiles, AlsOptions, TileOutcome};
 fn ingest(dir: &Path, files: &[&Path], opts: &AlsOptions) -> gedisim::Result<Vec<TileOutcome>> {
     let ds = Dataset::create(dir).unwrap();
     let files: Vec<_> = files.iter().map(|p| p.to_path_buf()).collect();
-    ingest_tiles(&ds, &files, opts, &|_| {})
+    ingest_tiles(&ds, &files, opts, &gedisim::ops::progress::NoProgress)
 }
 
 /// All rows of the Parquet files of one table.

@@ -75,7 +75,8 @@ fn l2a_cli_rows_agree_with_nasa() {
 /// `no_result: <reason>` status and null values, never a failed run or a panic.
 #[test]
 fn l2a_cli_reports_bad_waveforms_as_no_result_rows() {
-    use gedisim::io::granule::{v2_file_name, write_l1b_v2, Beam, GranuleMeta, L1bShot};
+    use gedisim::io::granule::{v2_file_name, write_l1b_v2, Beam, GranuleMeta};
+    use gedisim::kernels::gedi::L1bShot;
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join(v2_file_name("01_B", "2023100120000", 1, 1, 1));
     let signal: Vec<f32> = (0..600).map(|i| 220.0 + 400.0 * (-0.5 * ((i as f32 - 300.0) / 6.0).powi(2)).exp()).collect();

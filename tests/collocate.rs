@@ -101,7 +101,7 @@ fn base_dataset() -> &'static Path {
         let base = tmp.join("collocate-base");
         let _ = std::fs::remove_dir_all(&base);
         let ds = Dataset::create(&base).unwrap();
-        gedisim::ops::ingest_als::ingest_tiles(&ds, &[scene], &Default::default(), &|_| {}).unwrap();
+        gedisim::ops::ingest_als::ingest_tiles(&ds, &[scene], &Default::default(), &gedisim::ops::progress::NoProgress).unwrap();
         base
     })
 }
@@ -233,14 +233,14 @@ fn beam_level_recovers_the_planted_offset_and_simulate_applies_it() {
 }
 
 #[test]
-fn track_level_solves_a_datum_gap_of_tens_of_metres() {
+fn granule_level_solves_a_datum_gap_of_tens_of_metres() {
     // With --geoid-offset 0 the whole 47.5 m datum gap is left to the vertical solve.
     let tmp = planted_dataset(Some("0"));
-    let rows = collocate(tmp.path(), "track");
+    let rows = collocate(tmp.path(), "track"); // the alias of `granule`, as docs/contracts.md names it
     print_rows(&rows, PLANT.datum);
     assert_eq!(rows.len(), 1, "both beams share one along-track segment");
     let r = &rows[0];
-    assert_eq!((r.beam.as_str(), r.level.as_str(), r.n_shots), ("ALL", "track", 48));
+    assert_eq!((r.beam.as_str(), r.level.as_str(), r.n_shots), ("ALL", "granule", 48));
     assert_eq!(r.v[3], 0.0);
     assert_recovered(r, PLANT.datum);
     assert!(r.v[4] < 0.2, "at zero offset the waveforms are 47.5 m apart: r_before {}", r.v[4]);
@@ -290,7 +290,7 @@ fn shot_level_gives_every_shot_an_offset_from_its_neighbours() {
 fn one_tile_dataset() -> tempfile::TempDir {
     let tmp = tempfile::tempdir().unwrap();
     let ds = Dataset::create(tmp.path()).unwrap();
-    gedisim::ops::ingest_als::ingest_tiles(&ds, &[data("als/lidarforfuel_2_bas_lig.laz")], &Default::default(), &|_| {}).unwrap();
+    gedisim::ops::ingest_als::ingest_tiles(&ds, &[data("als/lidarforfuel_2_bas_lig.laz")], &Default::default(), &gedisim::ops::progress::NoProgress).unwrap();
     tmp
 }
 

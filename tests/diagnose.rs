@@ -62,7 +62,7 @@ fn check_contract(d: &Value) {
     let resolved = |e: &Value| e["name"] != "geolocation" || e["fold_params"].as_array().unwrap().iter().all(|p| num(&p["shot_sigma_m"]) >= 1.0);
     let explains = |e: &Value| resolved(e) && num(&e["held_out"]["ci95"][0]) >= 0.10 && num(&e["held_out"]["gain_m_ci95"][0]) >= 0.02;
     let keys: Vec<(bool, f64)> = effects.iter().map(|e| (explains(e), num(&e["held_out"]["score"]))).collect();
-    assert!(keys.windows(2).all(|w| w[0].0 > w[1].0 || (w[0].0 == w[1].0 && w[0].1 >= w[1].1)), "best first: {keys:?}");
+    assert!(keys.windows(2).all(|w| w[0].0 & !w[1].0 || (w[0].0 == w[1].0 && w[0].1 >= w[1].1)), "best first: {keys:?}");
     assert_eq!(d["unexplained"], !keys[0].0);
     for e in effects {
         let h = &e["held_out"];

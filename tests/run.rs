@@ -15,7 +15,8 @@ use common::{data, files_with_suffix, gedisim};
 use gedisim::kernels::collocate::segments::Level;
 use gedisim::ops::collocate::CollocateOptions;
 use gedisim::dataset::Dataset;
-use gedisim::ops::run::{run_study, NoProgress, RunOptions, RunReport};
+use gedisim::ops::progress::NoProgress;
+use gedisim::ops::run::{run_study, RunOptions, RunReport};
 use gedisim::kernels::study::select::{Filter, StudyRules};
 
 /// A small flat leaf-off tile keeps the worlds fast.
@@ -181,7 +182,7 @@ fn run_keeps_exactly_what_passes_the_filters_and_the_report_contracts_hold() {
 
     // The report on the run's output: the two table contracts and the MSD identity.
     let ds = Dataset::open(&ds_dir).unwrap();
-    let summary = gedisim::ops::report::run_report(&ds, None, &|_| {}).unwrap();
+    let summary = gedisim::ops::report::run_report(&ds, None, &gedisim::ops::progress::NoProgress).unwrap();
     let gd = read_parquet(&summary.dir.join("ground_detection.parquet"));
     assert_eq!(
         columns(&gd),

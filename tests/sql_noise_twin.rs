@@ -268,7 +268,7 @@ fn simulated_l2a_query_processes_twins_of_simulations() {
     let tmp = tempfile::tempdir().unwrap();
     let ds = Dataset::create(tmp.path()).unwrap();
     let tile = common::data("als/lidarforfuel_2_bas_lig.laz");
-    gedisim::ops::ingest_als::ingest_tiles(&ds, &[tile], &Default::default(), &|_| {}).unwrap();
+    gedisim::ops::ingest_als::ingest_tiles(&ds, &[tile], &Default::default(), &gedisim::ops::progress::NoProgress).unwrap();
     let real = common::nasa::load_real_shots();
     let n = 12;
     let pos = |k: usize| {

@@ -17,7 +17,7 @@ use gedisim::kernels::sim::{self, Footprint, Profile, SimConfig, Weighting};
 fn dataset() -> (tempfile::TempDir, Dataset, Vec<Footprint>) {
     let tmp = tempfile::tempdir().unwrap();
     let ds = Dataset::create(tmp.path()).unwrap();
-    ingest_tiles(&ds, &[data("als/lidarforfuel_2_bas_lig.laz")], &AlsOptions::default(), &|_| {}).unwrap();
+    ingest_tiles(&ds, &[data("als/lidarforfuel_2_bas_lig.laz")], &AlsOptions::default(), &gedisim::ops::progress::NoProgress).unwrap();
     let mut fps = Vec::new();
     for i in 0..4 {
         for j in 0..3 {

@@ -85,12 +85,13 @@ fn in_group(r: &Row, group: &str) -> bool {
 fn report_tables_contracts_and_msd_identity() {
     let dir = tempfile::tempdir().unwrap();
     let ds = full_dataset(&dir.path().join("ds"));
-    let steps = std::cell::RefCell::new(Vec::new());
-    let summary = run_report(&ds, None, &|s| steps.borrow_mut().push(s.to_string())).unwrap();
+    let progress = common::Recorder::default();
+    let summary = run_report(&ds, None, &progress).unwrap();
+    let steps = progress.events.lock().unwrap();
     let out = ds.root().join("report");
     assert_eq!(summary.dir, out);
     assert!(summary.skipped.is_empty(), "{:?}", summary.skipped);
-    assert!(steps.borrow().iter().any(|s| s == "query msd"), "progress names each query");
+    assert!(steps.iter().any(|s| s == "query msd"), "progress names each query");
     let rows = results_rows(&ds);
     assert_eq!(rows.len(), N_SHOTS * 3 * 7);
 
@@ -388,7 +389,7 @@ fn results_alone_skips_what_needs_other_tables() {
     }
     study::write_results(&ds, &rows);
     let out = dir.path().join("elsewhere");
-    let summary = run_report(&ds, Some(&out), &|_| {}).unwrap();
+    let summary = run_report(&ds, Some(&out), &gedisim::ops::progress::NoProgress).unwrap();
     let skipped: HashMap<String, Vec<String>> = summary.skipped.iter().cloned().collect();
     assert_eq!(skipped["collocation"], ["offsets"]);
     assert_eq!(skipped["waveform_examples"], ["shots", "sim"]);

@@ -11,6 +11,7 @@ use arrow::datatypes::{DataType, Field, Schema, UInt16Type, UInt64Type};
 use gedisim::dataset::{write_parquet, Dataset};
 use gedisim::kernels::geo::projection::Projector;
 use gedisim::ops::ingest_strata::{ingest_strata, PixelSample};
+use gedisim::ops::progress::NoProgress;
 use tiff::encoder::{colortype, TiffEncoder};
 use tiff::tags::Tag;
 
@@ -143,13 +144,10 @@ fn grid_code_raster_gives_forest_types_and_unknown_outside() {
     let tif = dir.path().join("clc.tif");
     // grid codes: 23 → 311 broadleaf, 24 → 312 coniferous, 25 → 313 mixed, 12 → 211 other, 48 = no data.
     write_grid_tiff(&tif, &[23, 24, 25, 12, 48, 0, 0], 12, Some(&GEOKEYS_3035));
-    let calls = std::cell::Cell::new(0u64);
-    let report = ingest_strata(&ds, &tif, &|n, total| {
-        assert_eq!(total, 7);
-        calls.set(calls.get() + n)
-    })
-    .unwrap();
-    assert_eq!(calls.get(), 7, "progress covers every shot");
+    let progress = common::Recorder::default();
+    let report = ingest_strata(&ds, &tif, &progress).unwrap();
+    assert!(progress.events.lock().unwrap().contains(&"total 7".to_string()), "the total is every shot");
+    assert_eq!(progress.advanced.load(std::sync::atomic::Ordering::Relaxed), 7, "progress covers every shot");
     assert_eq!((report.rows, report.outside, report.no_position), (7, 1, 1));
     let got = read_strata(&ds);
     let types: Vec<&str> = got.iter().map(|r| r.1.as_str()).collect();
@@ -159,7 +157,7 @@ fn grid_code_raster_gives_forest_types_and_unknown_outside() {
     assert!(got.iter().all(|r| r.2 == "clc:clc.tif"));
 
     // Re-running replaces the table (atomically) rather than appending.
-    ingest_strata(&ds, &tif, &|_, _| {}).unwrap();
+    ingest_strata(&ds, &tif, &NoProgress).unwrap();
     assert_eq!(read_strata(&ds).len(), 7);
 }
 
@@ -180,7 +178,7 @@ fn sixteen_bit_raster_holds_clc_codes() {
     img.encoder().write_tag(Tag::ModelTiepointTag, &[0.0f64, 0.0, 0.0, x0, y0, 0.0][..]).unwrap();
     img.encoder().write_tag(Tag::GeoKeyDirectoryTag, &GEOKEYS_3035[..]).unwrap();
     img.write_data(&data).unwrap();
-    ingest_strata(&ds, &tif, &|_, _| {}).unwrap();
+    ingest_strata(&ds, &tif, &NoProgress).unwrap();
     let types: Vec<String> = read_strata(&ds).into_iter().map(|r| r.1).collect();
     assert_eq!(types, ["mixed", "coniferous", "broadleaf", "other", "other", "unknown", "unknown"]);
 }
@@ -192,18 +190,18 @@ fn wrong_or_missing_crs_is_a_one_line_error_naming_file_and_field() {
     let lambert = [1u16, 1, 0, 3, 1024, 0, 1, 1, 1025, 0, 1, 1, 3072, 0, 1, 2154];
     let tif = dir.path().join("lambert93.tif");
     write_grid_tiff(&tif, &[23; 7], 12, Some(&lambert));
-    let e = ingest_strata(&ds, &tif, &|_, _| {}).unwrap_err().to_string();
+    let e = ingest_strata(&ds, &tif, &NoProgress).unwrap_err().to_string();
     assert!(e.contains("lambert93.tif") && e.contains("ProjectedCSTypeGeoKey") && e.contains("EPSG:2154"), "{e}");
     assert!(!e.contains('\n'));
 
     let plain = dir.path().join("plain.tif");
     write_grid_tiff(&plain, &[23; 7], 12, None);
-    let e = ingest_strata(&ds, &plain, &|_, _| {}).unwrap_err().to_string();
+    let e = ingest_strata(&ds, &plain, &NoProgress).unwrap_err().to_string();
     assert!(e.contains("plain.tif") && e.contains("GeoKeyDirectory"), "{e}");
 
     let junk = dir.path().join("junk.tif");
     std::fs::write(&junk, b"not a tiff").unwrap();
-    let e = ingest_strata(&ds, &junk, &|_, _| {}).unwrap_err().to_string();
+    let e = ingest_strata(&ds, &junk, &NoProgress).unwrap_err().to_string();
     assert!(e.contains("junk.tif"), "{e}");
 
     // Nothing was written by the failed runs.
@@ -259,13 +257,13 @@ fn csv_strata_and_its_errors() {
     for (text, needles) in cases {
         let bad = dir.path().join("bad.csv");
         std::fs::write(&bad, text).unwrap();
-        let e = ingest_strata(&ds, &bad, &|_, _| {}).unwrap_err().to_string();
+        let e = ingest_strata(&ds, &bad, &NoProgress).unwrap_err().to_string();
         assert!(e.contains("bad.csv"), "{e}");
         for n in needles {
             assert!(e.contains(n), "{text:?}: {e}");
         }
     }
-    let e = ingest_strata(&ds, &dir.path().join("x.shp"), &|_, _| {}).unwrap_err().to_string();
+    let e = ingest_strata(&ds, &dir.path().join("x.shp"), &NoProgress).unwrap_err().to_string();
     assert!(e.contains("x.shp") && e.contains("GeoTIFF"), "{e}");
 }
 
@@ -366,7 +364,7 @@ fn tiled_raster_including_edge_tiles() {
     let ds = dataset_with_shots(&dir.path().join("ds"));
     let tif = dir.path().join("tiled.tif");
     write_tiled_tiff(&tif, &data, (x0, y0));
-    ingest_strata(&ds, &tif, &|_, _| {}).unwrap();
+    ingest_strata(&ds, &tif, &NoProgress).unwrap();
     let got = read_strata(&ds);
     let name = |v: u8| match v {
         23 => "broadleaf",

@@ -8,18 +8,19 @@ use clap::Args;
 use gedisim::dataset::Dataset;
 use gedisim::Result;
 
-use super::reporters::{cpu_seconds, peak_rss_mb, progress};
+use super::reporters::{cpu_seconds, peak_rss_mb, Bars};
 
 #[derive(Args)]
 pub struct CollocateArgs {
     /// Dataset directory with ingested shots (with L1B waveforms) and ALS.
     #[arg(long)]
     pub dataset: PathBuf,
-    /// beam: each beam cut into segments; track: all beams of a granule share an offset per
-    /// along-track segment; shot: one offset per shot from it and its neighbours.
+    /// beam: each beam (its ground track) cut into segments; granule (alias: track): all beams of
+    /// a granule share an offset per along-track segment; shot: one offset per shot from it and
+    /// its neighbours.
     #[arg(long, value_enum, default_value = "beam")]
     pub level: LevelArg,
-    /// Longest segment: shots (beam level) or along-track shot steps (track level).
+    /// Longest segment: shots (beam level) or along-track shot steps (granule level).
     #[arg(long, default_value_t = 40)]
     pub segment: usize,
     /// Largest horizontal shift searched (m).
@@ -39,21 +40,18 @@ pub struct CollocateArgs {
 #[derive(Clone, Copy, clap::ValueEnum)]
 pub enum LevelArg {
     Beam,
-    Track,
+    #[value(alias = "track")]
+    Granule,
     Shot,
 }
 
 pub fn collocate(a: CollocateArgs) -> Result<()> {
-    use gedisim::ops::collocate::{CollocateOptions, Collocation};
+    use gedisim::ops::collocate::CollocateOptions;
     let start = Instant::now();
     let level = collocate_level(a.level);
     let ds = Dataset::open(&a.dataset)?;
     let opts = CollocateOptions { level, segment: a.segment, max_shift: a.max_shift, step: a.step, min_segment: a.min_segment };
-    let plan = Collocation::plan(&ds, &opts)?;
-    let bar = progress(plan.shots_to_process() as u64, "shots");
-    let result = plan.run(&|| bar.inc(1));
-    bar.finish_and_clear();
-    let report = result?;
+    let report = gedisim::ops::collocate::collocate(&ds, &opts, &Bars::new())?;
     for s in &report.short_runs {
         eprintln!("too short, not collocated: {s}");
     }
@@ -79,7 +77,7 @@ pub fn collocate_level(l: LevelArg) -> gedisim::kernels::collocate::segments::Le
     use gedisim::kernels::collocate::segments::Level;
     match l {
         LevelArg::Beam => Level::Beam,
-        LevelArg::Track => Level::Track,
+        LevelArg::Granule => Level::Granule,
         LevelArg::Shot => Level::Shot,
     }
 }

@@ -4,12 +4,10 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Args;
-use indicatif::ProgressBar;
 
-use gedisim::dataset::Dataset;
 use gedisim::Result;
 
-use super::reporters::{progress, Bars};
+use super::reporters::Bars;
 use super::run::print_run;
 
 #[derive(Args)]
@@ -34,21 +32,7 @@ pub struct DemoArgs {
 pub fn demo(a: DemoArgs) -> Result<()> {
     let start = Instant::now();
     let opts = gedisim::ops::demo::DemoOptions { out: a.out.clone(), effect: a.effect, seed: a.seed, passes: a.passes, force: a.force };
-    let bars = Bars::new();
-    let spinner = std::sync::Mutex::new(None::<ProgressBar>);
-    let d = gedisim::ops::demo::run_demo(&opts, &bars, &|step| {
-        let mut s = spinner.lock().expect("spinner lock");
-        let b = s.get_or_insert_with(|| {
-            let b = ProgressBar::new_spinner();
-            b.enable_steady_tick(std::time::Duration::from_millis(200));
-            b
-        });
-        b.set_message(format!("report: {step}"));
-    });
-    if let Some(b) = spinner.lock().expect("spinner lock").take() {
-        b.finish_and_clear();
-    }
-    let d = d?;
+    let d = gedisim::ops::demo::run_demo(&opts, &Bars::new())?;
     match &d.world {
         Some(w) => eprintln!("world: {} tiles, {} granules, {} shots, effect {} → {}", w.tiles, w.granules, w.shots, opts.effect, d.world_dir.display()),
         None => eprintln!("world: reusing {} (effect {}, seed {})", d.world_dir.display(), opts.effect, opts.seed),
@@ -63,25 +47,12 @@ pub fn demo(a: DemoArgs) -> Result<()> {
     print!("{}", d.headline.msd_table());
     println!();
     println!("report: {}", d.report.html.display());
-    // The diagnosis of the world, told nothing about the withheld effect.
-    let ds = Dataset::open(&d.run.dataset)?;
-    let dir = a.out.join("diagnosis");
-    let bar = progress(0, "shots");
-    let fitting = ProgressBar::new_spinner();
-    let diagnosis = gedisim::ops::diagnose::diagnose_dataset(&ds, &dir, &[], &|| bar.inc(1), &|step| {
-        bar.finish_and_clear();
-        fitting.set_message(format!("diagnosis: fitting and scoring {step}"));
-        fitting.tick();
-    });
-    bar.finish_and_clear();
-    fitting.finish_and_clear();
-    let diagnosis = diagnosis?;
     println!();
     println!("Diagnosis (the withheld effect is not told; truth: {}):", d.world_dir.join("truth.json").display());
-    for line in gedisim::ops::diagnose::summary_lines(&diagnosis.diagnosis) {
+    for line in gedisim::ops::diagnose::summary_lines(&d.diagnosis.diagnosis) {
         println!("  {line}");
     }
-    println!("diagnosis: {}", dir.join("diagnosis.json").display());
+    println!("diagnosis: {}", a.out.join("diagnosis").join("diagnosis.json").display());
     eprintln!("demo finished in {:.0} s", start.elapsed().as_secs_f64());
     Ok(())
 }

@@ -4,8 +4,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use gedisim::dataset::Dataset;
-use gedisim::{Error, Result};
+use gedisim::Result;
 
 
 #[derive(Args)]
@@ -22,9 +21,7 @@ pub struct ExportGeoArgs {
 }
 
 pub fn export_geoparquet(a: ExportGeoArgs) -> Result<()> {
-    let ds = Dataset::open(&a.dataset)?;
-    let rt = tokio::runtime::Runtime::new().map_err(|e| Error::Usage(e.to_string()))?;
-    let rows = rt.block_on(gedisim::ops::report::geoparquet::export(&ds, &a.table, &a.out, gedisim::ops::report::geoparquet::GeoCrs::Wgs84))?;
+    let rows = gedisim::ops::export::export_geoparquet(&a.dataset, &a.table, &a.out)?;
     eprintln!("{rows} rows → {}", a.out.display());
     Ok(())
 }

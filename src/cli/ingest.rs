@@ -9,7 +9,7 @@ use gedisim::dataset::Dataset;
 use gedisim::ops::ingest_als::{self as als, AlsOptions, TileOutcome};
 use gedisim::{Error, Result};
 
-use super::reporters::{peak_rss_mb, progress};
+use super::reporters::{peak_rss_mb, Bars};
 
 #[derive(Args)]
 pub struct IngestAlsArgs {
@@ -64,25 +64,14 @@ pub struct IngestStrataArgs {
 
 pub fn ingest_als(a: IngestAlsArgs) -> Result<()> {
     let start = Instant::now();
-    let files = als::expand_inputs(&a.inputs)?;
-    if files.is_empty() {
-        return Err(Error::Usage("no LAS/LAZ file found in the inputs".into()));
-    }
-    let mut total = 0u64;
-    for f in &files {
-        total += gedisim::io::las::TileReader::open(f)?.header().number_of_points;
-    }
     let ds = Dataset::create(&a.out)?;
-    let bar = progress(total, "points");
     let opts = AlsOptions { keep_all_classes: a.keep_all_classes, epsg: a.epsg };
-    let outcomes = als::ingest_tiles(&ds, &files, &opts, &|n| bar.inc(n));
-    bar.finish_and_clear();
-    let outcomes = outcomes?;
-    let mut written = 0;
+    let outcomes = als::ingest(&ds, &a.inputs, &opts, &Bars::new())?;
+    let (mut read, mut written) = (0, 0);
     for o in &outcomes {
         match o {
             TileOutcome::Ingested { tile, points, dropped } => {
-                written += points;
+                (read, written) = (read + points + dropped, written + points);
                 eprintln!("{tile}: {points} points ({dropped} dropped by class)");
             }
             TileOutcome::AlreadyIngested { tile } => eprintln!("{tile}: already ingested (same content), skipped"),
@@ -91,9 +80,9 @@ pub fn ingest_als(a: IngestAlsArgs) -> Result<()> {
     if a.stats {
         let s = start.elapsed().as_secs_f64();
         println!(
-            "ingest: {} files, {total} points read, {written} written, {s:.2} s, {:.0} points/s, peak RSS {:.1} MB",
-            files.len(),
-            total as f64 / s,
+            "ingest: {} files, {read} points read, {written} written, {s:.2} s, {:.0} points/s, peak RSS {:.1} MB",
+            outcomes.len(),
+            read as f64 / s,
             peak_rss_mb()
         );
     }
@@ -101,23 +90,12 @@ pub fn ingest_als(a: IngestAlsArgs) -> Result<()> {
 }
 
 pub fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
-    use gedisim::ops::ingest_gedi::{self as gedi, GediOptions, GranuleOutcome};
+    use gedisim::ops::ingest_gedi::GranuleOutcome;
     if a.l1b.is_empty() && a.l2a.is_empty() {
         return Err(Error::Usage("give --l1b and/or --l2a files".into()));
     }
-    let l1b = gedi::expand_granule_inputs(&a.l1b, "GEDI01_B")?;
-    let l2a = gedi::expand_granule_inputs(&a.l2a, "GEDI02_A")?;
     let ds = Dataset::create(&a.out)?;
-    let epsg = match a.epsg {
-        Some(e) => e,
-        None => als::dataset_epsg(&ds)?.unwrap_or(2154),
-    };
-    let opts = GediOptions { epsg, geoid_offset: a.geoid_offset, strict_join: a.strict_join };
-    let n = gedi::pair_granules(&l1b, &l2a)?.0.len() as u64;
-    let bar = progress(n, "granules");
-    let result = gedi::ingest_into_dataset(&ds, &l1b, &l2a, &opts, &|| bar.inc(1));
-    bar.finish_and_clear();
-    let (outcomes, report) = result?;
+    let (outcomes, report) = gedisim::ops::ingest_gedi::ingest(&ds, &a.l1b, &a.l2a, a.epsg, a.geoid_offset, a.strict_join, &Bars::new())?;
     for w in report.warnings() {
         eprintln!("warning: {w}");
     }
@@ -132,13 +110,7 @@ pub fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
 
 pub fn ingest_strata(a: IngestStrataArgs) -> Result<()> {
     let ds = Dataset::open(&a.dataset)?;
-    let bar = progress(0, "shots");
-    let report = gedisim::ops::ingest_strata::ingest_strata(&ds, &a.landcover, &|n, total| {
-        bar.set_length(total);
-        bar.inc(n);
-    });
-    bar.finish_and_clear();
-    let report = report?;
+    let report = gedisim::ops::ingest_strata::ingest_strata(&ds, &a.landcover, &Bars::new())?;
     let mut counts: Vec<_> = report.counts.iter().collect();
     counts.sort();
     let counts: Vec<String> = counts.iter().map(|(k, v)| format!("{k} {v}")).collect();

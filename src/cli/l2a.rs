@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use gedisim::{Error, Result};
+use gedisim::Result;
 
 
 #[derive(Args)]
@@ -21,23 +21,7 @@ pub struct L2aArgs {
 }
 
 pub fn l2a(a: L2aArgs) -> Result<()> {
-    use gedisim::kernels::waveform::l2a::AlgorithmSettings;
-    let settings = a
-        .algorithms
-        .iter()
-        .map(|&n| AlgorithmSettings::gedi(n).ok_or_else(|| Error::Usage(format!("--algorithms: {n} is not a GEDI algorithm (1..6)"))))
-        .collect::<Result<Vec<_>>>()?;
-    let opts = gedisim::ops::ingest_gedi::GediOptions::default();
-    let schema = gedisim::dataset::l2a::l2a_schema();
-    let props = gedisim::dataset::writer_properties(&Default::default(), 1 << 16);
-    let mut writer = gedisim::dataset::AtomicParquet::create(&a.out, schema, props)?;
-    let mut rows = 0;
-    let report = gedisim::ops::ingest_gedi::ingest_gedi(std::slice::from_ref(&a.l1b), &[], &opts, |shots| {
-        let batch = gedisim::dataset::l2a::l2a_batch(&shots, &settings, &a.l1b)?;
-        rows += batch.num_rows();
-        writer.write(&batch)
-    })?;
-    writer.finish()?;
-    eprintln!("{} shots × {} algorithms → {rows} rows in {}", report.rows(), settings.len(), a.out.display());
+    let r = gedisim::ops::l2a::l2a(&a.l1b, &a.algorithms, &a.out)?;
+    eprintln!("{} shots × {} algorithms → {} rows in {}", r.shots, a.algorithms.len(), r.rows, a.out.display());
     Ok(())
 }

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use indicatif::ProgressBar;
+use super::reporters::Bars;
 
 use gedisim::dataset::Dataset;
 use gedisim::Result;
@@ -21,10 +21,7 @@ pub struct ReportArgs {
 
 pub fn report(a: ReportArgs) -> Result<()> {
     let ds = Dataset::open(&a.dataset)?;
-    let bar = ProgressBar::new_spinner();
-    let s = gedisim::ops::report::run_report(&ds, a.out.as_deref(), &|step| bar.set_message(step.to_string()));
-    bar.finish_and_clear();
-    let s = s?;
+    let s = gedisim::ops::report::run_report(&ds, a.out.as_deref(), &Bars::new())?;
     for (name, rows) in &s.tables {
         eprintln!("{name}: {rows} rows");
     }

@@ -1,28 +1,29 @@
-//! Progress bars (indicatif) and process statistics for `--stats`.
+//! Progress bars (indicatif): the command line's one implementation of the operations'
+//! [`Progress`] trait; and process statistics for `--stats`.
 
+use std::sync::Mutex;
+use std::time::Duration;
 
 use indicatif::{ProgressBar, ProgressStyle};
 
+use gedisim::ops::progress::{Progress, Step};
 
-
-/// Progress of `run` and `demo`: one indicatif bar per step.
-pub struct Bars(std::sync::Mutex<Option<ProgressBar>>);
+/// One indicatif bar per step: a bar with its total and unit, or a spinner for steps without
+/// counts, whose message follows the step's notes.
+pub struct Bars(Mutex<Option<(Step, ProgressBar)>>);
 
 impl Bars {
     pub fn new() -> Self {
-        Bars(std::sync::Mutex::new(None))
+        Bars(Mutex::new(None))
     }
 }
 
-
-
-
-impl gedisim::ops::run::Progress for Bars {
-    fn start(&self, step: gedisim::ops::run::Step, total: u64) {
+impl Progress for Bars {
+    fn start(&self, step: Step, total: u64) {
         let bar = if step.unit().is_empty() {
             let b = ProgressBar::new_spinner();
             b.set_message(step.label());
-            b.enable_steady_tick(std::time::Duration::from_millis(200));
+            b.enable_steady_tick(Duration::from_millis(200));
             b
         } else {
             let b = ProgressBar::new(total);
@@ -37,38 +38,34 @@ impl gedisim::ops::run::Progress for Bars {
             b.set_prefix(step.label());
             b
         };
-        if let Some(old) = self.0.lock().expect("progress lock").replace(bar) {
+        if let Some((_, old)) = self.0.lock().expect("progress lock").replace((step, bar)) {
             old.finish_and_clear();
         }
     }
 
     fn set_total(&self, total: u64) {
-        if let Some(b) = self.0.lock().expect("progress lock").as_ref() {
+        if let Some((_, b)) = self.0.lock().expect("progress lock").as_ref() {
             b.set_length(total);
         }
     }
 
     fn advance(&self, n: u64) {
-        if let Some(b) = self.0.lock().expect("progress lock").as_ref() {
+        if let Some((_, b)) = self.0.lock().expect("progress lock").as_ref() {
             b.inc(n);
         }
     }
 
+    fn note(&self, text: &str) {
+        if let Some((step, b)) = self.0.lock().expect("progress lock").as_ref() {
+            b.set_message(format!("{}: {text}", step.label()));
+        }
+    }
+
     fn finish(&self) {
-        if let Some(b) = self.0.lock().expect("progress lock").take() {
+        if let Some((_, b)) = self.0.lock().expect("progress lock").take() {
             b.finish_and_clear();
         }
     }
-}
-
-pub fn progress(total: u64, unit: &str) -> ProgressBar {
-    let bar = ProgressBar::new(total);
-    bar.set_style(
-        ProgressStyle::with_template(&format!("{{elapsed_precise}} [{{bar:40}}] {{human_pos}}/{{human_len}} {unit} ({{per_sec}}, eta {{eta}})"))
-            .expect("valid template")
-            .progress_chars("=> "),
-    );
-    bar
 }
 
 /// User + system CPU time of this process, all threads (s); 0 where /proc is unavailable.

@@ -5,10 +5,9 @@ use std::time::Instant;
 
 use clap::Args;
 
-use gedisim::dataset::Dataset;
 use gedisim::{Error, Result};
 
-use super::reporters::{peak_rss_mb, progress};
+use super::reporters::{peak_rss_mb, Bars};
 
 #[derive(Args)]
 pub struct SimulateArgs {
@@ -61,67 +60,42 @@ pub enum ProfileArg {
 }
 
 pub fn simulate(a: SimulateArgs) -> Result<()> {
-    use gedisim::kernels::sim::{self, Profile, PulseTiming, SimConfig};
-    let profile = match a.profile {
-        ProfileArg::Gedirat => Profile::Gedirat,
-        ProfileArg::Default => Profile::Default,
-    };
-    let mut cfg = SimConfig::new(profile);
-    cfg.fsigma = a.fsigma;
-    cfg.normalise_density = !a.no_norm;
-    if a.pulse_before {
-        cfg.pulse_timing = PulseTiming::BeforeBinning;
-    }
-    cfg.pulse = match (a.pulse.as_str(), a.psigma) {
-        ("gaussian", Some(s)) => sim::Pulse::gaussian(s, cfg.res as f32)?,
-        ("gaussian", None) => cfg.pulse,
-        (file, _) => {
-            let path = PathBuf::from(file);
-            let text = std::fs::read_to_string(&path).map_err(|e| Error::file(&path, format!("cannot read pulse file: {e}")))?;
-            let pairs = sim::pulse::parse_pulse_text(&text).map_err(|e| Error::field(&path, "pulse", e))?;
-            sim::Pulse::tabulated(&pairs).map_err(|e| Error::field(&path, "pulse", e))?
+    use gedisim::kernels::sim::Profile;
+    use gedisim::ops::simulate::{PulseChoice, SimulateOptions, Source};
+    let source = match (a.dataset, a.als) {
+        (Some(dataset), _) => Source::Dataset { dataset, footprints: a.footprints, out: a.out },
+        (None, Some(als)) => {
+            let (Some(footprints), Some(out)) = (a.footprints, a.out) else {
+                return Err(Error::Usage("give --als, --footprints and --out (direct mode) or --dataset".into()));
+            };
+            Source::Direct { als, footprints, out, keep_all_classes: a.keep_all_classes }
         }
+        (None, None) => return Err(Error::Usage("give --als, --footprints and --out (direct mode) or --dataset".into())),
+    };
+    let opts = SimulateOptions {
+        source,
+        profile: match a.profile {
+            ProfileArg::Gedirat => Profile::Gedirat,
+            ProfileArg::Default => Profile::Default,
+        },
+        fsigma: a.fsigma,
+        normalise_density: !a.no_norm,
+        pulse_before: a.pulse_before,
+        pulse: match a.pulse.as_str() {
+            "gaussian" => PulseChoice::Gaussian(a.psigma),
+            file => PulseChoice::File(PathBuf::from(file)),
+        },
     };
     let start = Instant::now();
-    let (ok, skipped, out) = if let Some(dir) = a.dataset {
-        let ds = Dataset::open(&dir)?;
-        let (footprints, dest) = match &a.footprints {
-            Some(csv) => {
-                let stem = csv.file_stem().and_then(|s| s.to_str()).unwrap_or("footprints");
-                let dest = match &a.out {
-                    Some(out) => out.clone(),
-                    None => ds.table_file(gedisim::dataset::tables::SIM, stem)?,
-                };
-                (gedisim::io::footprints::read_footprints_csv(csv)?.into_iter().map(|f| (f, None)).collect(), dest)
-            }
-            None if a.out.is_some() => return Err(Error::Usage("--out in dataset mode needs --footprints".into())),
-            None => (gedisim::ops::simulate::shot_footprints(&ds)?, ds.table_file(gedisim::dataset::tables::SIM, "shots")?),
-        };
-        let bar = progress(footprints.len() as u64, "footprints");
-        let r = gedisim::ops::simulate::simulate_on_dataset(&ds, footprints, &cfg, profile, &dest, &|k| bar.inc(k as u64));
-        bar.finish_and_clear();
-        let (ok, skipped) = r?;
-        (ok, skipped, dest)
-    } else {
-        let (Some(als_path), Some(fp_path), Some(out)) = (a.als, a.footprints, a.out) else {
-            return Err(Error::Usage("give --als, --footprints and --out (direct mode) or --dataset".into()));
-        };
-        let footprints = gedisim::io::footprints::read_footprints_csv(&fp_path)?;
-        let mut points = gedisim::io::las::read_points(&als_path)?;
-        if profile == Profile::Default && !a.keep_all_classes {
-            points = gedisim::ops::simulate::drop_ingest_classes(&points);
-        }
-        let (ok, skipped) = gedisim::ops::simulate::simulate_direct(&points, &footprints, &cfg, profile, &out)?;
-        (ok, skipped, out)
-    };
-    eprintln!("{ok} footprints simulated, {skipped} skipped (see the status column) → {}", out.display());
+    let r = gedisim::ops::simulate::simulate(&opts, &Bars::new())?;
+    eprintln!("{} footprints simulated, {} skipped (see the status column) → {}", r.simulated, r.skipped, r.out.display());
     if a.stats {
         let s = start.elapsed().as_secs_f64();
+        let n = r.simulated + r.skipped;
         println!(
-            "simulate: {} footprints × {} weightings, {s:.3} s, {:.1} footprints/s, peak RSS {:.1} MB",
-            ok + skipped,
+            "simulate: {n} footprints × {} weightings, {s:.3} s, {:.1} footprints/s, peak RSS {:.1} MB",
             gedisim::kernels::sim::N_WEIGHTINGS,
-            (ok + skipped) as f64 / s,
+            n as f64 / s,
             peak_rss_mb()
         );
     }

@@ -4,7 +4,6 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use gedisim::dataset::Dataset;
 use gedisim::{Error, Result};
 
 
@@ -29,19 +28,8 @@ pub fn sql(a: SqlArgs) -> Result<()> {
         (None, Some(f)) => std::fs::read_to_string(&f).map_err(|e| Error::file(&f, e))?,
         _ => return Err(Error::Usage("give either a SQL statement or -f <file>".into())),
     };
-    let ds = Dataset::open(&a.dataset)?;
-    let rt = tokio::runtime::Runtime::new().map_err(|e| Error::Usage(e.to_string()))?;
-    rt.block_on(async move {
-        let ctx = gedisim::sql::session(&ds).await?;
-        let df = ctx.sql(&query).await.map_err(|e| Error::Usage(format!("SQL: {e}")))?;
-        let batches = df.collect().await.map_err(|e| Error::Usage(format!("SQL: {e}")))?;
-        match a.out {
-            None => {
-                let table = arrow::util::pretty::pretty_format_batches(&batches).map_err(|e| Error::Usage(e.to_string()))?;
-                println!("{table}");
-            }
-            Some(out) => gedisim::dataset::write_result(&out, &batches)?,
-        }
-        Ok(())
-    })
+    if let Some(table) = gedisim::ops::sql::sql(&a.dataset, &query, a.out.as_deref())? {
+        println!("{table}");
+    }
+    Ok(())
 }

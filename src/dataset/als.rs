@@ -1,11 +1,15 @@
-//! Reading ALS points back from the dataset's `als/` table around footprints, touching only the
-//! row groups whose x/y statistics intersect a footprint's box (the table is clustered by cell).
+//! The `als/` and `tiles/` tables: their layout (points clustered by [`CELL_SIZE_M`] cell), schemas
+//! and batches, and the reading of ALS points back around footprints, touching only the row groups
+//! whose x/y statistics intersect a footprint's box.
 
 use std::collections::HashMap;
 use std::fs::File;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
-use arrow::array::{Array, AsArray};
+use arrow::array::{Array, ArrayRef, AsArray, Float32Array, Float64Array, StringArray, UInt16Array, UInt64Array, UInt8Array};
+use arrow::datatypes::{DataType, Field, Schema, SchemaRef, TimeUnit};
+use arrow::record_batch::RecordBatch;
 use arrow::datatypes::{Float32Type, Float64Type, UInt16Type, UInt8Type};
 use parquet::arrow::arrow_reader::{ArrowReaderMetadata, ArrowReaderOptions, ParquetRecordBatchReaderBuilder};
 use parquet::arrow::ProjectionMask;
@@ -20,6 +24,120 @@ use crate::kernels::sim::AlsPoints;
 
 /// Axis-aligned box [xmin, ymin, xmax, ymax].
 pub type BBox = [f64; 4];
+
+/// Side of the square spatial cells that cluster the `als/` table, metres.
+pub const CELL_SIZE_M: f64 = 50.0;
+
+/// Most rows in one row group of `als/`.
+pub const MAX_ROW_GROUP_ROWS: usize = 1 << 17;
+
+/// Classes dropped unless `keep_all_classes`: noise (7, 18) and IGN artefacts/virtual points (64–67).
+pub const DROPPED_CLASSES: [u8; 6] = [7, 18, 64, 65, 66, 67];
+
+/// Parquet key-value metadata keys.
+pub mod meta {
+    pub const EPSG: &str = "gedisim:crs_epsg";
+    pub const CRS_WKT: &str = "gedisim:crs_wkt";
+    pub const CELL_SIZE: &str = "gedisim:cell_size_m";
+    pub const VERTICAL: &str = "gedisim:vertical_reference";
+}
+
+/// The global cell key of a position: row-major over (floor(y/CELL), floor(x/CELL)), so that
+/// sorting by key clusters points spatially.
+pub fn cell_key(x: f64, y: f64) -> u64 {
+    let ix = (x / CELL_SIZE_M).floor() as i64 + (1 << 31);
+    let iy = (y / CELL_SIZE_M).floor() as i64 + (1 << 31);
+    ((iy as u64 & 0xffff_ffff) << 32) | (ix as u64 & 0xffff_ffff)
+}
+
+/// Schema of the `als/` table.
+pub fn als_schema() -> SchemaRef {
+    Arc::new(Schema::new(vec![
+        Field::new("x", DataType::Float64, false),
+        Field::new("y", DataType::Float64, false),
+        Field::new("z", DataType::Float64, false),
+        Field::new("intensity", DataType::UInt16, false),
+        Field::new("return_number", DataType::UInt8, false),
+        Field::new("number_of_returns", DataType::UInt8, false),
+        Field::new("classification", DataType::UInt8, false),
+        Field::new("scan_angle_deg", DataType::Float32, false),
+        Field::new("gps_time", DataType::Float64, true),
+        Field::new("point_source_id", DataType::UInt16, false),
+        Field::new("tile", DataType::Utf8, false),
+        Field::new("cell", DataType::UInt64, false),
+    ]))
+}
+
+/// Schema of the `tiles/` table.
+pub fn tiles_schema() -> SchemaRef {
+    let ts = DataType::Timestamp(TimeUnit::Microsecond, Some("UTC".into()));
+    Arc::new(Schema::new(vec![
+        Field::new("tile", DataType::Utf8, false),
+        Field::new("path", DataType::Utf8, false),
+        Field::new("content_hash", DataType::Utf8, false),
+        Field::new("las_version", DataType::Utf8, false),
+        Field::new("point_format", DataType::UInt8, false),
+        Field::new("compressed", DataType::Boolean, false),
+        Field::new("n_points_header", DataType::UInt64, false),
+        Field::new("n_points", DataType::UInt64, false),
+        Field::new("n_dropped", DataType::UInt64, false),
+        Field::new("xmin", DataType::Float64, true),
+        Field::new("ymin", DataType::Float64, true),
+        Field::new("zmin", DataType::Float64, true),
+        Field::new("xmax", DataType::Float64, true),
+        Field::new("ymax", DataType::Float64, true),
+        Field::new("zmax", DataType::Float64, true),
+        Field::new("epsg", DataType::UInt32, false),
+        Field::new("crs_wkt", DataType::Utf8, true),
+        Field::new("extra_bytes", DataType::Utf8, false),
+        Field::new("intensity_min", DataType::UInt16, true),
+        Field::new("intensity_max", DataType::UInt16, true),
+        Field::new("intensity_mean", DataType::Float64, true),
+        Field::new("intensity_p01", DataType::UInt16, true),
+        Field::new("intensity_p50", DataType::UInt16, true),
+        Field::new("intensity_p99", DataType::UInt16, true),
+        Field::new("gps_time_min", DataType::Float64, true),
+        Field::new("gps_time_max", DataType::Float64, true),
+        Field::new("acquisition_start", ts.clone(), true),
+        Field::new("acquisition_end", ts, true),
+    ]))
+}
+
+/// The EPSG recorded by previously ingested tiles, if any.
+pub fn dataset_epsg(dataset: &Dataset) -> Result<Option<u32>> {
+    let tiles_dir = dataset.root().join(tables::TILES);
+    if !tiles_dir.is_dir() {
+        return Ok(None);
+    }
+    let files = dataset::table_files(&tiles_dir).map_err(|e| Error::file(&tiles_dir, e))?;
+    let Some(first) = files.first() else { return Ok(None) };
+    let file = File::open(first).map_err(|e| Error::file(first, e))?;
+    let reader = parquet::file::serialized_reader::SerializedFileReader::new(file).map_err(|e| Error::table(first, e))?;
+    use parquet::file::reader::FileReader;
+    let kv = reader.metadata().file_metadata().key_value_metadata().cloned().unwrap_or_default();
+    Ok(kv.iter().find(|k| k.key == meta::EPSG).and_then(|k| k.value.as_deref()?.parse().ok()))
+}
+
+/// The points of one cell as an `als/` batch (the columns are moved, not copied).
+pub fn als_batch(p: AlsPoints, tile: &str, cell: u64) -> Result<RecordBatch> {
+    let n = p.len();
+    let gps_time = Float64Array::from_iter(p.gps_time.iter().map(|&t| t.is_finite().then_some(t)));
+    let cols: Vec<ArrayRef> = vec![
+        Arc::new(Float64Array::from(p.x)),
+        Arc::new(Float64Array::from(p.y)),
+        Arc::new(Float64Array::from(p.z)),
+        Arc::new(UInt16Array::from(p.intensity)),
+        Arc::new(UInt8Array::from(p.return_number)),
+        Arc::new(UInt8Array::from(p.number_of_returns)),
+        Arc::new(UInt8Array::from(p.classification)),
+        Arc::new(Float32Array::from(p.scan_angle_deg)),
+        Arc::new(gps_time),
+        Arc::new(UInt16Array::from(p.point_source_id)),
+        Arc::new(StringArray::from(vec![tile; n])),
+        Arc::new(UInt64Array::from(vec![cell; n])),
+    ];
+    RecordBatch::try_new(als_schema(), cols).map_err(|e| Error::table(tile, e))
+}
 
 /// One Parquet file of `als/` with the x/y extent of each row group.
 struct AlsFile {
@@ -37,7 +155,7 @@ pub struct AlsTable {
 }
 
 /// Cell of the coverage index (m): the ingest's cell size.
-const COVER_CELL: f64 = crate::ops::ingest_als::CELL_SIZE_M;
+const COVER_CELL: f64 = CELL_SIZE_M;
 
 /// Gap (m) between the extents of neighbouring row groups still counted as covered: row-group
 /// extents are those of their points, so neighbouring cells leave gaps of the point spacing.

@@ -1,4 +1,4 @@
-//! The `l2a` table: one row per shot × algorithm (the `gedisim l2a` contract, CONTRACTS.md), from
+//! The `l2a` table: one row per shot × algorithm (the `gedisim l2a` contract, docs/contracts.md), from
 //! the L1B waveforms of the `shots` schema through the L2A kernel, and the columns of one L2A
 //! outcome that the CLI table and the `gedi_l2a` SQL struct share.
 

@@ -8,9 +8,11 @@
 //! [`offsets`], [`results`] (schemas of the derived tables and kernel outputs as Arrow).
 
 pub mod als;
+pub mod blocks;
 pub mod l2a;
 pub mod offsets;
 pub mod results;
+pub mod shots;
 pub mod sim;
 
 use std::collections::HashMap;
@@ -158,14 +160,6 @@ impl AtomicParquet {
         }
     }
 
-    /// Close the current row group (the next batch starts a new one).
-    pub fn flush_row_group(&mut self) -> Result<()> {
-        match self.writer.as_mut().expect("writer is present until finish") {
-            Writer::Buffered(w) => w.flush().map_err(|e| Error::table(&self.dest, e)),
-            Writer::RowGroups(..) => Ok(()),
-        }
-    }
-
     /// Write `batch` as one row group, encoding and compressing its columns in parallel.
     pub fn write_row_group(&mut self, batch: &RecordBatch) -> Result<()> {
         let table_err = |e: parquet::errors::ParquetError| Error::table(&self.dest, e);
@@ -227,6 +221,14 @@ pub fn write_parquet(dest: &Path, schema: SchemaRef, batches: &[RecordBatch], me
     w.finish()
 }
 
+/// Write `bytes` to `path` through a temporary name in the same folder, renamed when complete (the
+/// one atomic write of every non-Parquet output: CSV, JSON, figures, HTML).
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let tmp = tmp_path(path);
+    std::fs::write(&tmp, bytes).map_err(|e| Error::file(&tmp, format!("cannot write: {e}")))?;
+    std::fs::rename(&tmp, path).map_err(|e| Error::file(path, format!("cannot rename into place: {e}")))
+}
+
 fn tmp_path(dest: &Path) -> PathBuf {
     let mut name = dest.file_name().map(|n| n.to_os_string()).unwrap_or_default();
     name.push(format!(".{}.tmp", std::process::id()));
@@ -246,11 +248,6 @@ pub fn content_hash(path: &Path) -> Result<String> {
         hasher.update(&buf[..n]);
     }
     Ok(hex::encode(hasher.finalize()))
-}
-
-/// Shorthand for an Arc'd schema.
-pub fn schema_ref(s: arrow::datatypes::Schema) -> SchemaRef {
-    Arc::new(s)
 }
 
 /// Write query results to `out`: Parquet when it ends in `.parquet`, CSV otherwise (atomically).

@@ -1,4 +1,4 @@
-//! The `offsets` table: one row per collocated segment (CONTRACTS.md, "Collocate"), and the
+//! The `offsets` table: one row per collocated segment (docs/contracts.md, "Collocate"), and the
 //! per-shot lookup that `simulate` applies.
 
 use std::collections::HashMap;

@@ -13,7 +13,8 @@ use arrow::record_batch::RecordBatch;
 use super::list_f32;
 use crate::error::{Error, Result};
 use crate::kernels::gedi::RH_LEN;
-use crate::kernels::study::align::{align_rh, VerticalReference};
+use crate::kernels::study::align::align_rh;
+use crate::kernels::study::select::{ResultInput, StudyAlgorithm};
 use crate::kernels::study::classes;
 
 /// Schema of the results table (docs/schemas.md, `results/`).
@@ -43,60 +44,6 @@ pub fn results_schema() -> SchemaRef {
         f("rh_aligned", list_f32(), false),
         f("r_collocation", DataType::Float64, true),
     ]))
-}
-
-/// Which L2A algorithm a row's GEDI ground and RH come from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum StudyAlgorithm {
-    /// The shot's `selected_algorithm` (root `rh`, `elev_lowestmode`, `sensitivity`).
-    Default,
-    /// Algorithm aN, N = 1…6 (`rh_aN`, `elev_lowestmode_aN`, `sensitivity_aN`).
-    A(u8),
-}
-
-impl StudyAlgorithm {
-    /// `default` or `a1` … `a6`.
-    pub fn label(&self) -> String {
-        match self {
-            StudyAlgorithm::Default => "default".to_string(),
-            StudyAlgorithm::A(n) => format!("a{n}"),
-        }
-    }
-}
-
-/// What `run` knows about one shot × weighting × algorithm; [`results_batch`] derives the rest.
-#[derive(Debug, Clone)]
-pub struct ResultInput {
-    pub shot_number: u64,
-    pub granule: String,
-    pub beam: String,
-    /// `coverage` | `full_power` (the shots table's `beam_type`).
-    pub beam_type: String,
-    /// From `strata/`; `None` → `unknown`.
-    pub forest_type: Option<String>,
-    /// L2A `leaf_off_flag` (V2); `None` for V1 → phenology `unknown`.
-    pub leaf_off_flag: Option<u8>,
-    pub selected_algorithm: Option<u8>,
-    /// Sensitivity of this algorithm (root `sensitivity` for `default`); must be ≥ 0.90.
-    pub sensitivity: f64,
-    /// ALS truth of this weighting (`sim.slope_deg`, `sim.als_cover`).
-    pub slope_deg: Option<f64>,
-    pub als_cover: Option<f64>,
-    /// `count` | `frac` | `int`.
-    pub weighting: String,
-    pub algorithm: StudyAlgorithm,
-    /// ALS ground of this weighting (`sim.als_ground`), m, ALS datum.
-    pub als_ground: f64,
-    /// GEDI ground of this algorithm, m, WGS84 ellipsoid (`elev_lowestmode[_aN]`).
-    pub elev_lowestmode: f64,
-    /// How to bring `elev_lowestmode` into the ALS datum.
-    pub vertical_reference: VerticalReference,
-    /// Simulated RH0…RH100 (`sim.rh`), m above `als_ground`.
-    pub rh_sim: Vec<f32>,
-    /// Real RH0…RH100 of this algorithm as stored (m above GEDI's ground).
-    pub rh_gedi: Vec<f32>,
-    /// Collocation correlation at the optimum (`offsets.r_after`), when collocated.
-    pub r_collocation: Option<f64>,
 }
 
 /// Key-value metadata of a results file.
@@ -181,6 +128,7 @@ pub fn results_batch(rows: &[ResultInput]) -> Result<RecordBatch> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::kernels::study::align::VerticalReference;
     use arrow::array::{Array, AsArray};
     use arrow::datatypes::Float32Type;
 

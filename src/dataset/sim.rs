@@ -1,4 +1,4 @@
-//! The `sim` table: one row per footprint × weighting (the `simulate` contract, CONTRACTS.md),
+//! The `sim` table: one row per footprint × weighting (the `simulate` contract, docs/contracts.md),
 //! with the collocation offset applied to the shot, if any.
 
 use std::collections::HashMap;

@@ -4,6 +4,7 @@
 pub mod footprints;
 pub mod granule;
 pub mod las;
+pub mod pulse;
 
 use std::path::{Path, PathBuf};
 

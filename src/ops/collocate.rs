@@ -22,6 +22,7 @@ use crate::kernels::collocate::profile::{real_profile, ProfileError};
 use crate::kernels::collocate::segments::{plan, Level, SegmentPlan, Slot, MIN_SEGMENT};
 use crate::kernels::collocate::{collocate_unit, CollocateConfig, PointCloud, ShotInput};
 use crate::dataset::{self, tables, Dataset};
+use crate::ops::progress::{Progress, Step};
 use crate::error::{Error, Result};
 use crate::dataset::offsets::{offsets_batch, offsets_schema, OffsetRow};
 
@@ -30,13 +31,13 @@ use crate::dataset::offsets::{offsets_batch, offsets_schema, OffsetRow};
 pub struct CollocateOptions {
     /// Level at which offsets are solved.
     pub level: Level,
-    /// Longest segment (shots at the beam level, along-track steps at the track level).
+    /// Longest segment (shots at the beam level, along-track steps at the granule level).
     pub segment: usize,
     /// Largest horizontal shift searched (m).
     pub max_shift: f64,
     /// Horizontal grid step (m).
     pub step: f64,
-    /// Fewest shots (beam) or steps (track) of a segment ([`MIN_SEGMENT`] by default); a
+    /// Fewest shots (beam) or steps (granule) of a segment ([`MIN_SEGMENT`] by default); a
     /// shorter run is reported and not solved. 1 solves every run, however short.
     pub min_segment: usize,
 }
@@ -93,7 +94,7 @@ struct GranulePlan {
 
 /// Plans solved together (their shots read at once).
 struct Unit {
-    /// Beam of the unit's segments (`ALL` at the track level).
+    /// Beam of the unit's segments (`ALL` at the granule level).
     beam: String,
     plans: Vec<SegmentPlan>,
 }
@@ -163,13 +164,16 @@ impl<'a> Collocation<'a> {
         self.granules.iter().flat_map(|g| &g.units).map(|u| support_of(&u.plans).len()).sum()
     }
 
-    /// Solves every unit (pass B) and writes the offsets table (replacing it); `on_shot` is
-    /// called per shot.
-    pub fn run(self, on_shot: &(dyn Fn() + Sync)) -> Result<CollocateReport> {
+    /// Solves every unit (pass B) as one [`Step::Collocate`] and writes the offsets table
+    /// (replacing it).
+    pub fn run(self, progress: &dyn Progress) -> Result<CollocateReport> {
         let level = self.opts.level;
         let (max_shift, step) = (self.opts.max_shift, self.opts.step);
         let ds = self.ds;
-        let (rows, mut report) = self.solve(on_shot)?;
+        progress.start(Step::Collocate, self.shots_to_process() as u64);
+        let solved = self.solve(progress);
+        progress.finish();
+        let (rows, mut report) = solved?;
         let dest = ds.table_file(tables::OFFSETS, "offsets")?;
         let mut metadata = std::collections::HashMap::new();
         metadata.insert("gedisim:collocate_level".to_string(), level.name().to_string());
@@ -181,8 +185,9 @@ impl<'a> Collocation<'a> {
     }
 
     /// Solves every unit (pass B) without writing: the rows and the report (whose `table` is
-    /// where [`run`](Self::run) would write them).
-    pub fn solve(mut self, on_shot: &(dyn Fn() + Sync)) -> Result<(Vec<OffsetRow>, CollocateReport)> {
+    /// where [`run`](Self::run) would write them); `progress` advances by one per shot.
+    pub fn solve(mut self, progress: &dyn Progress) -> Result<(Vec<OffsetRow>, CollocateReport)> {
+        let on_shot = &|| progress.advance(1);
         let mut rows = Vec::new();
         let mut skipped = std::mem::take(&mut self.report.skipped);
         let mut read = (0u64, 0u64);
@@ -288,9 +293,9 @@ impl<'a> Collocation<'a> {
     }
 }
 
-/// Collocate every shot of the dataset (plan, then run); `on_shot` is called per shot processed.
-pub fn collocate_dataset(ds: &Dataset, opts: &CollocateOptions, on_shot: &(dyn Fn() + Sync)) -> Result<CollocateReport> {
-    Collocation::plan(ds, opts)?.run(on_shot)
+/// `gedisim collocate`: every granule of the dataset planned, solved and written to `offsets/`.
+pub fn collocate(ds: &Dataset, opts: &CollocateOptions, progress: &dyn Progress) -> Result<CollocateReport> {
+    Collocation::plan(ds, opts)?.run(progress)
 }
 
 /// Sorted union of the plans' supports.
@@ -317,7 +322,7 @@ fn plan_units(granule: &str, shots: &[ShotRecord], opts: &CollocateOptions, shor
             .iter()
             .map(|(b, idx)| (b.to_string(), idx.clone(), idx.iter().enumerate().map(|(k, &i)| slot(i, k as i64)).collect()))
             .collect(),
-        Level::Track => {
+        Level::Granule => {
             let steps = along_track_steps(shots, &beams);
             let mut order: Vec<usize> = (0..shots.len()).collect();
             order.sort_by_key(|&i| (steps[i], shots[i].shot_number));

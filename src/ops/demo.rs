@@ -12,7 +12,9 @@ use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::ops::report::headline::Headline;
 use crate::ops::report::ReportSummary;
-use crate::ops::run::{run_study, Progress, RunOptions, RunReport, Step};
+use crate::ops::progress::{Progress, Step};
+use crate::ops::run::{run_study, RunOptions, RunReport};
+use crate::kernels::scenario::truth::Truth;
 use crate::kernels::scenario::EffectSet;
 use crate::ops::scenario::{make_scenario, ScenarioOptions, ScenarioReport, DEFAULT_GEOID_M};
 
@@ -50,6 +52,8 @@ pub struct DemoReport {
     pub run: RunReport,
     pub report: ReportSummary,
     pub headline: Headline,
+    /// The diagnosis of the world, in `<out>/diagnosis/`.
+    pub diagnosis: crate::ops::diagnose::DiagnosisOutput,
 }
 
 /// The world's folder and the dataset's.
@@ -64,20 +68,18 @@ pub fn demo_collocation() -> CollocateOptions {
     CollocateOptions { level: Level::Beam, min_segment: 1, ..CollocateOptions::default() }
 }
 
-/// scenario → run → report on the bundled tiles. `on_report_step` follows the report's steps.
-pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress, on_report_step: &dyn Fn(&str)) -> Result<DemoReport> {
+/// scenario → run → report → diagnose on the bundled tiles.
+pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoReport> {
     let effects = EffectSet::parse(&opts.effect, None, &[]).map_err(|e| Error::Usage(e.to_string()))?;
     let (world_dir, ds_dir) = layout(&opts.out);
     let truth = world_dir.join("truth.json");
     let mut reuse = false;
     if truth.exists() {
-        let t: serde_json::Value = std::fs::read_to_string(&truth)
+        let t: Truth = std::fs::read_to_string(&truth)
             .ok()
             .and_then(|s| serde_json::from_str(&s).ok())
             .ok_or_else(|| Error::file(&truth, "not a scenario truth file"))?;
-        let same = t["effect_spec"].as_str() == Some(opts.effect.as_str())
-            && t["seed"].as_u64() == Some(opts.seed)
-            && t["granules"].as_array().map(|g| g.len()) == t["tiles"].as_array().map(|t| t.len() * opts.passes);
+        let same = t.effect_spec == opts.effect && t.seed == opts.seed && t.granules.len() == t.tiles.len() * opts.passes;
         if same {
             reuse = true;
         } else if opts.force {
@@ -89,11 +91,7 @@ pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress, on_report_step: &dy
         } else {
             return Err(Error::file(
                 &opts.out,
-                format!(
-                    "holds a demo of effect {}, seed {}; use --force to replace it, or another --out",
-                    t["effect_spec"].as_str().unwrap_or("?"),
-                    t["seed"]
-                ),
+                format!("holds a demo of effect {}, seed {}; use --force to replace it, or another --out", t.effect_spec, t.seed),
             ));
         }
     }
@@ -129,7 +127,9 @@ pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress, on_report_step: &dy
     };
     let run = run_study(&run_opts, progress)?;
     let ds = Dataset::open(&ds_dir)?;
-    let report = crate::ops::report::run_report(&ds, None, on_report_step)?;
+    let report = crate::ops::report::run_report(&ds, None, progress)?;
     let headline = Headline::read(&report.dir)?;
-    Ok(DemoReport { world, world_dir, run, report, headline })
+    // The diagnosis of the world, told nothing about the withheld effect.
+    let diagnosis = crate::ops::diagnose::diagnose_dataset(&ds, &opts.out.join("diagnosis"), &[], progress)?;
+    Ok(DemoReport { world, world_dir, run, report, headline, diagnosis })
 }

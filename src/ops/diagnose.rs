@@ -1,4 +1,4 @@
-//! `gedisim diagnose`: reads a dataset's shots (and their per-track collocation offsets, strata)
+//! `gedisim diagnose`: reads a dataset's shots (and their per-beam collocation offsets, strata)
 //! and ALS points into [`diagnose::ShotCase`]s, runs the kernels of [`crate::kernels::diagnose`], and writes
 //! `<out>/diagnosis.json`, its tables (Parquet + CSV) and figures (PNG + SVG). docs/diagnosis.md.
 
@@ -12,21 +12,24 @@ use serde_json::{json, Value};
 
 use crate::dataset::als::AlsTable;
 use crate::dataset::{self, tables, Dataset};
-use crate::kernels::diagnose::case::{nominal_noise_stddev, site_grid, Parts, RealAlgorithm, RealShot, SimShot, SimVariant, Site, Strata, FSIGMA_GRID, SHORT_SEGMENT_SHOTS};
+use crate::kernels::diagnose::case::{
+    configs, nominal_noise_stddev, site_grid, site_of, RealAlgorithm, RealShot, SimShot, Site, Strata, FSIGMA_GRID, NOMINAL_WIDTH, RECOLLOCATE_SHIFT_M, RECOLLOCATE_STEP_M,
+    SHORT_SEGMENT_SHOTS,
+};
 use crate::kernels::diagnose::gap::{GapMetrics, N_PCT};
 use crate::kernels::diagnose::rank::Trial;
 use crate::kernels::diagnose::{self, Diagnosis, ShotCase};
 use crate::error::{Error, Result};
+use crate::kernels::collocate::segments::Level;
+use crate::ops::collocate::{CollocateOptions, CollocateReport};
+use crate::ops::progress::{Progress, Step};
+use crate::ops::run::{RunOptions, RunReport};
 use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
 use crate::kernels::waveform::l2a::Noise;
 use crate::ops::report::figures::{self, LinePanels};
 use crate::kernels::scenario::effects::{Effect, ParamValue};
-use crate::kernels::sim::{self, Footprint, Profile, SimConfig, Weighting};
+use crate::kernels::sim::{self, Footprint, Weighting};
 use crate::kernels::study::classes;
-
-/// Vertical margin added above and below the simulated waveforms (m): room for the widest pulse
-/// the diagnosis tries (σ 3.8 m, 4σ kernels).
-const PAD_M: f64 = 16.0;
 
 /// What [`read_cases`] kept and dropped.
 #[derive(Debug, Clone, Default)]
@@ -54,9 +57,9 @@ struct Pending {
     short_segment: bool,
 }
 
-/// Read every usable shot of the dataset with its simulations. `on_shot` is called per shot
-/// simulated.
-pub fn read_cases(ds: &Dataset, on_shot: &(dyn Fn() + Sync)) -> Result<(Vec<ShotCase>, CaseReport)> {
+/// Read every usable shot of the dataset with its simulations, simulated as one
+/// [`Step::DiagnoseSimulate`].
+pub fn read_cases(ds: &Dataset, progress: &dyn Progress) -> Result<(Vec<ShotCase>, CaseReport)> {
     let mut report = CaseReport::default();
     let offsets = crate::dataset::offsets::read_offsets(ds)?;
     let forest = read_forest_types(ds)?;
@@ -71,8 +74,10 @@ pub fn read_cases(ds: &Dataset, on_shot: &(dyn Fn() + Sync)) -> Result<(Vec<Shot
     }
     let als = AlsTable::open(ds)?;
     let centres = recollocate(&als, &pending, reference_dz(&offsets))?;
-    let cases = simulate_cases(&als, pending, &centres, &mut report, on_shot)?;
-    Ok((cases, report))
+    progress.start(Step::DiagnoseSimulate, pending.len() as u64);
+    let cases = simulate_cases(&als, pending, &centres, &mut report, &|| progress.advance(1));
+    progress.finish();
+    Ok((cases?, report))
 }
 
 fn read_forest_types(ds: &Dataset) -> Result<HashMap<u64, String>> {
@@ -200,7 +205,7 @@ fn read_shots(
             }
             let ground = opt(elev, i)?;
             let rh = list_f32(rh, i).filter(|r| r.len() == RH_LEN)?;
-            ground.is_finite().then(|| RealAlgorithm { ground: ground - n_geoid, rh })
+            ground.is_finite().then_some(RealAlgorithm { ground: ground - n_geoid, rh })
         });
         if algorithms.iter().all(Option::is_none) {
             count_dropped(report, "no algorithm passes quality (quality_flag, degrade_flag, sensitivity ≥ 0.9)");
@@ -239,22 +244,6 @@ fn read_shots(
     }
     Ok(())
 }
-
-/// The simulator settings of the diagnosis: the study's nominal one (15 ns pulse, σ_f 5.5 m,
-/// default profile) and, for every width of [`FSIGMA_GRID`], the same without pulse (the chain
-/// convolves its own) and without the coverage skip (the nominal run decides coverage).
-fn configs() -> (SimConfig, Vec<SimConfig>) {
-    let nominal = SimConfig::new(Profile::Default);
-    let variants = FSIGMA_GRID
-        .iter()
-        .map(|&f| SimConfig { fsigma: f as f32, pulse: sim::Pulse::dirac(), min_covered_fraction: None, ..nominal.clone() })
-        .collect();
-    (nominal, variants)
-}
-
-/// Search of the re-collocation of short segments: ±8 m every metre around the reported position.
-const RECOLLOCATE_SHIFT_M: f64 = 8.0;
-const RECOLLOCATE_STEP_M: f64 = 1.0;
 
 /// The vertical reference of the re-collocation: the median of the collocation segments'
 /// vertical offsets (GEDI − N − ALS, m), one value for all (0 without offsets).
@@ -316,6 +305,9 @@ fn recollocate(als: &AlsTable, pending: &[Pending], dz: f64) -> Result<HashMap<u
     Ok(out)
 }
 
+/// A shot to simulate: its real facts, whether its segment is short, and its sites.
+type ToSimulate = (RealShot, bool, Vec<(f64, f64)>);
+
 fn simulate_cases(
     als: &AlsTable,
     pending: Vec<Pending>,
@@ -332,7 +324,7 @@ fn simulate_cases(
     let grid = site_grid();
     // Site 0 at the collocated position, then the grid around the short segment's re-collocated
     // centre (every width) or around the collocated position (a long segment: nominal width).
-    let items: Vec<(Footprint, (RealShot, bool, Vec<(f64, f64)>))> = pending
+    let items: Vec<(Footprint, ToSimulate)> = pending
         .into_iter()
         .map(|p| {
             let (x0, y0) = (p.footprint.x, p.footprint.y);
@@ -345,13 +337,13 @@ fn simulate_cases(
         })
         .collect();
     let mut cases = Vec::new();
-    for block in crate::ops::simulate::blocks(items) {
+    for block in crate::dataset::blocks::blocks(items) {
         let mut bb = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
         for (x, y) in block.iter().flat_map(|(_, (_, _, sites))| sites.iter().copied()) {
             bb = [bb[0].min(x - half), bb[1].min(y - half), bb[2].max(x + half), bb[3].max(y + half)];
         }
         let (points, _) = als.points_in(bb)?;
-        let (fps, reals): (Vec<Footprint>, Vec<(RealShot, bool, Vec<(f64, f64)>)>) = block.into_iter().unzip();
+        let (fps, reals): (Vec<Footprint>, Vec<ToSimulate>) = block.into_iter().unzip();
         let nom = sim::simulate(&points, &fps, &nominal)?;
         // Sites simulated at every width (site 0, a short segment's grid) and at the nominal one
         // (a long segment's grid), each as one footprint: index[j][k] = (light, i) for shot j,
@@ -423,39 +415,6 @@ fn simulate_cases(
     Ok(cases)
 }
 
-/// Index of σ_f 5.5 m in [`FSIGMA_GRID`] (where a site's ALS ground is taken).
-const NOMINAL_WIDTH: usize = 2;
-
-/// Put every width's parts of one position on one bin grid with [`PAD_M`] of empty bins above
-/// and below. The default profile's bins lie on one absolute lattice, so the grids differ by
-/// whole bins.
-fn site_of(vs: &[&sim::SimulatedFootprint], als_ground: f64, offset: (f64, f64)) -> Site {
-    let dz = vs[0].dz;
-    let top = vs.iter().map(|v| v.z0).fold(f64::NEG_INFINITY, f64::max) + PAD_M;
-    let bottom = vs.iter().map(|v| v.z0 - (v.n_bins() as f64 - 1.0) * dz).fold(f64::INFINITY, f64::min) - PAD_M;
-    let n = ((top - bottom) / dz).round() as usize + 1;
-    let place = |src: &[f32], z0: f64| {
-        let mut out = vec![0f32; n];
-        let off = ((top - z0) / dz).round() as usize;
-        for (k, &v) in src.iter().enumerate() {
-            if let Some(o) = out.get_mut(off + k) {
-                *o = v;
-            }
-        }
-        out
-    };
-    let variants = vs
-        .iter()
-        .map(|v| SimVariant {
-            weightings: Weighting::ALL.map(|w| {
-                let p = v.get(w);
-                Parts { ground: place(&p.ground, v.z0), canopy: place(&p.canopy, v.z0) }
-            }),
-        })
-        .collect();
-    Site { z0: top, variants, als_ground, offset }
-}
-
 /// What `diagnose` wrote.
 #[derive(Debug, Clone)]
 pub struct DiagnosisOutput {
@@ -465,9 +424,52 @@ pub struct DiagnosisOutput {
     pub cases: CaseReport,
 }
 
-/// Diagnose the dataset into `out`.
+/// Collocation of a dataset the diagnosis makes: per beam (the baseline's horizontal collocation),
+/// every run solved however short.
+pub const DIAGNOSIS_COLLOCATION: CollocateOptions = CollocateOptions { level: Level::Beam, segment: 40, max_shift: 10.0, step: 1.0, min_segment: 1 };
+
+/// What `gedisim diagnose` reads.
+#[derive(Debug, Clone)]
+pub enum DiagnoseInput {
+    /// A dataset after `gedisim run` (or at least both ingests; collocated first if it has no
+    /// offsets).
+    Dataset(PathBuf),
+    /// The first half of `gedisim run` into `<out>/dataset` (its `out` and `collocate` are set
+    /// here): tiles, granules and land cover ingested, collocated per beam.
+    Chain(RunOptions),
+}
+
+/// What `gedisim diagnose` did.
+#[derive(Debug, Clone)]
+pub struct DiagnoseReport {
+    /// The ingest and collocation of [`DiagnoseInput::Chain`].
+    pub chain: Option<RunReport>,
+    /// The collocation of a dataset that had no offsets.
+    pub collocated: Option<CollocateReport>,
+    pub output: DiagnosisOutput,
+}
+
+/// `gedisim diagnose`: the dataset (made or collocated first when needed) diagnosed into `out`;
+/// `effects` as in [`diagnose_dataset`].
+pub fn diagnose(input: DiagnoseInput, out: &Path, effects: &[String], progress: &dyn Progress) -> Result<DiagnoseReport> {
+    let (root, chain) = match input {
+        DiagnoseInput::Dataset(root) => (root, None),
+        DiagnoseInput::Chain(opts) => {
+            let opts = RunOptions { out: out.join("dataset"), collocate: DIAGNOSIS_COLLOCATION, ..opts };
+            let report = crate::ops::run::ingest_and_collocate(&opts, progress)?;
+            (opts.out, Some(report))
+        }
+    };
+    let ds = Dataset::open(&root)?;
+    let collocated = if ds.has_table(tables::OFFSETS) { None } else { Some(crate::ops::collocate::collocate(&ds, &DIAGNOSIS_COLLOCATION, progress)?) };
+    let output = diagnose_dataset(&ds, out, effects, progress)?;
+    Ok(DiagnoseReport { chain, collocated, output })
+}
+
+/// Diagnose the dataset into `out`: its cases read and simulated, then each effect fitted and
+/// scored as one [`Step::DiagnoseFit`] (each effect a note).
 /// `effects`: the effects tried (names of `diagnose::fit::FITTED_EFFECTS`; empty = all).
-pub fn diagnose_dataset(ds: &Dataset, out: &Path, effects: &[String], on_shot: &(dyn Fn() + Sync), on_step: &dyn Fn(&str)) -> Result<DiagnosisOutput> {
+pub fn diagnose_dataset(ds: &Dataset, out: &Path, effects: &[String], progress: &dyn Progress) -> Result<DiagnosisOutput> {
     let names: Vec<&str> = if effects.is_empty() {
         diagnose::fit::FITTED_EFFECTS.to_vec()
     } else {
@@ -480,21 +482,23 @@ pub fn diagnose_dataset(ds: &Dataset, out: &Path, effects: &[String], on_shot: &
             })
             .collect::<Result<_>>()?
     };
-    let (cases, report) = read_cases(ds, on_shot)?;
+    let (cases, report) = read_cases(ds, progress)?;
     if cases.len() < 4 {
         return Err(Error::file(
             ds.root().join(tables::SHOTS),
             format!("only {} usable shot(s) for the diagnosis (need ≥ 4): {}", cases.len(), dropped_text(&report)),
         ));
     }
-    let d = diagnose::diagnose(cases, &names, on_step);
+    progress.start(Step::DiagnoseFit, 0);
+    let d = diagnose::diagnose(cases, &names, &|step| progress.note(step));
+    progress.finish();
     std::fs::create_dir_all(out).map_err(|e| Error::file(out, e))?;
     let json = to_json(&d, &report);
     let mut files = write_tables(&d, out)?;
     files.extend(write_figures(&d, out)?);
     let path = out.join("diagnosis.json");
     let text = serde_json::to_string_pretty(&json).map_err(|e| Error::file(&path, e))?;
-    figures::write_atomic(&path, text.as_bytes())?;
+    crate::dataset::write_atomic(&path, text.as_bytes())?;
     files.push(path);
     Ok(DiagnosisOutput { diagnosis: d, json, files, cases: report })
 }

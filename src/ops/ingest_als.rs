@@ -14,34 +14,18 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use arrow::array::{
-    ArrayRef, BooleanArray, Float32Array, Float64Array, StringArray, TimestampMicrosecondArray, UInt16Array,
+    ArrayRef, BooleanArray, Float64Array, StringArray, TimestampMicrosecondArray, UInt16Array,
     UInt32Array, UInt64Array, UInt8Array,
 };
-use arrow::datatypes::{DataType, Field, Schema, SchemaRef, TimeUnit};
 use arrow::record_batch::RecordBatch;
 use rayon::prelude::*;
 
 use crate::dataset::{self, tables, AtomicParquet, Dataset};
 use crate::error::{Error, Result};
 use crate::io::las::{TileHeader, TileReader, CHUNK_POINTS};
+use crate::dataset::als::{als_batch, als_schema, cell_key, dataset_epsg, meta, tiles_schema, CELL_SIZE_M, DROPPED_CLASSES, MAX_ROW_GROUP_ROWS};
 use crate::kernels::sim::AlsPoints;
-
-/// Side of the square spatial cells that cluster the `als/` table, metres.
-pub const CELL_SIZE_M: f64 = 50.0;
-
-/// Most rows in one row group of `als/`.
-pub const MAX_ROW_GROUP_ROWS: usize = 1 << 17;
-
-/// Classes dropped unless `keep_all_classes`: noise (7, 18) and IGN artefacts/virtual points (64–67).
-pub const DROPPED_CLASSES: [u8; 6] = [7, 18, 64, 65, 66, 67];
-
-/// Parquet key-value metadata keys.
-pub mod meta {
-    pub const EPSG: &str = "gedisim:crs_epsg";
-    pub const CRS_WKT: &str = "gedisim:crs_wkt";
-    pub const CELL_SIZE: &str = "gedisim:cell_size_m";
-    pub const VERTICAL: &str = "gedisim:vertical_reference";
-}
+use crate::ops::progress::{Progress, Step};
 
 /// Options of `ingest als`.
 #[derive(Debug, Clone, Default)]
@@ -61,79 +45,35 @@ pub enum TileOutcome {
     AlreadyIngested { tile: String },
 }
 
-/// The global cell key of a position: row-major over (floor(y/CELL), floor(x/CELL)), so that
-/// sorting by key clusters points spatially.
-pub fn cell_key(x: f64, y: f64) -> u64 {
-    let ix = (x / CELL_SIZE_M).floor() as i64 + (1 << 31);
-    let iy = (y / CELL_SIZE_M).floor() as i64 + (1 << 31);
-    ((iy as u64 & 0xffff_ffff) << 32) | (ix as u64 & 0xffff_ffff)
-}
-
 /// Expand folders into the LAS/LAZ files they contain (sorted); files are kept as given.
 pub fn expand_inputs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
     crate::io::expand_inputs(inputs, |f| crate::io::has_extension(f, "las") || crate::io::has_extension(f, "laz"))
 }
 
-/// Schema of the `als/` table.
-pub fn als_schema() -> SchemaRef {
-    Arc::new(Schema::new(vec![
-        Field::new("x", DataType::Float64, false),
-        Field::new("y", DataType::Float64, false),
-        Field::new("z", DataType::Float64, false),
-        Field::new("intensity", DataType::UInt16, false),
-        Field::new("return_number", DataType::UInt8, false),
-        Field::new("number_of_returns", DataType::UInt8, false),
-        Field::new("classification", DataType::UInt8, false),
-        Field::new("scan_angle_deg", DataType::Float32, false),
-        Field::new("gps_time", DataType::Float64, true),
-        Field::new("point_source_id", DataType::UInt16, false),
-        Field::new("tile", DataType::Utf8, false),
-        Field::new("cell", DataType::UInt64, false),
-    ]))
+/// `gedisim ingest als`: the LAS/LAZ files of `inputs` (folders expanded) into `dataset`, as one
+/// [`Step::IngestAls`] counted in points.
+pub fn ingest(dataset: &Dataset, inputs: &[PathBuf], opts: &AlsOptions, progress: &dyn Progress) -> Result<Vec<TileOutcome>> {
+    let files = expand_inputs(inputs)?;
+    if files.is_empty() {
+        return Err(Error::Usage("no LAS/LAZ file found in the inputs".into()));
+    }
+    let mut total = 0;
+    for f in &files {
+        total += TileReader::open(f)?.header().number_of_points;
+    }
+    progress.start(Step::IngestAls, total);
+    let outcomes = ingest_tiles(dataset, &files, opts, progress);
+    progress.finish();
+    outcomes
 }
 
-/// Schema of the `tiles/` table.
-pub fn tiles_schema() -> SchemaRef {
-    let ts = DataType::Timestamp(TimeUnit::Microsecond, Some("UTC".into()));
-    Arc::new(Schema::new(vec![
-        Field::new("tile", DataType::Utf8, false),
-        Field::new("path", DataType::Utf8, false),
-        Field::new("content_hash", DataType::Utf8, false),
-        Field::new("las_version", DataType::Utf8, false),
-        Field::new("point_format", DataType::UInt8, false),
-        Field::new("compressed", DataType::Boolean, false),
-        Field::new("n_points_header", DataType::UInt64, false),
-        Field::new("n_points", DataType::UInt64, false),
-        Field::new("n_dropped", DataType::UInt64, false),
-        Field::new("xmin", DataType::Float64, true),
-        Field::new("ymin", DataType::Float64, true),
-        Field::new("zmin", DataType::Float64, true),
-        Field::new("xmax", DataType::Float64, true),
-        Field::new("ymax", DataType::Float64, true),
-        Field::new("zmax", DataType::Float64, true),
-        Field::new("epsg", DataType::UInt32, false),
-        Field::new("crs_wkt", DataType::Utf8, true),
-        Field::new("extra_bytes", DataType::Utf8, false),
-        Field::new("intensity_min", DataType::UInt16, true),
-        Field::new("intensity_max", DataType::UInt16, true),
-        Field::new("intensity_mean", DataType::Float64, true),
-        Field::new("intensity_p01", DataType::UInt16, true),
-        Field::new("intensity_p50", DataType::UInt16, true),
-        Field::new("intensity_p99", DataType::UInt16, true),
-        Field::new("gps_time_min", DataType::Float64, true),
-        Field::new("gps_time_max", DataType::Float64, true),
-        Field::new("acquisition_start", ts.clone(), true),
-        Field::new("acquisition_end", ts, true),
-    ]))
-}
-
-/// Ingest `files` into `dataset`, several files in parallel. `on_points` is called with the
+/// Ingest `files` into `dataset`, several files in parallel. `progress` advances by the
 /// number of points decoded, for progress display.
 pub fn ingest_tiles(
     dataset: &Dataset,
     files: &[PathBuf],
     opts: &AlsOptions,
-    on_points: &(dyn Fn(u64) + Sync),
+    progress: &dyn Progress,
 ) -> Result<Vec<TileOutcome>> {
     let als_dir = dataset.table_dir(tables::ALS)?;
     let tiles_dir = dataset.table_dir(tables::TILES)?;
@@ -143,23 +83,8 @@ pub fn ingest_tiles(
     let parallel_decode = files.len() == 1;
     files
         .par_iter()
-        .map(|f| ingest_tile(f, &als_dir, &tiles_dir, opts, existing_epsg, parallel_decode, on_points))
+        .map(|f| ingest_tile(f, &als_dir, &tiles_dir, opts, existing_epsg, parallel_decode, progress))
         .collect()
-}
-
-/// The EPSG recorded by previously ingested tiles, if any.
-pub fn dataset_epsg(dataset: &Dataset) -> Result<Option<u32>> {
-    let tiles_dir = dataset.root().join(tables::TILES);
-    if !tiles_dir.is_dir() {
-        return Ok(None);
-    }
-    let files = dataset::table_files(&tiles_dir).map_err(|e| Error::file(&tiles_dir, e))?;
-    let Some(first) = files.first() else { return Ok(None) };
-    let file = File::open(first).map_err(|e| Error::file(first, e))?;
-    let reader = parquet::file::serialized_reader::SerializedFileReader::new(file).map_err(|e| Error::table(first, e))?;
-    use parquet::file::reader::FileReader;
-    let kv = reader.metadata().file_metadata().key_value_metadata().cloned().unwrap_or_default();
-    Ok(kv.iter().find(|k| k.key == meta::EPSG).and_then(|k| k.value.as_deref()?.parse().ok()))
 }
 
 fn resolve_epsg(h: &TileHeader, opts: &AlsOptions, existing: Option<u32>) -> Result<u32> {
@@ -259,7 +184,7 @@ fn ingest_tile(
     opts: &AlsOptions,
     existing_epsg: Option<u32>,
     parallel_decode: bool,
-    on_points: &(dyn Fn(u64) + Sync),
+    progress: &dyn Progress,
 ) -> Result<TileOutcome> {
     let hash = dataset::content_hash(path)?;
     let key = &hash[..16];
@@ -280,7 +205,7 @@ fn ingest_tile(
         let mut stats = TileStats::new();
         let mut runs: Vec<Run> = Vec::new();
         while let Some(chunk) = reader.next_chunk(CHUNK_POINTS)? {
-            on_points(chunk.len() as u64);
+            progress.advance(chunk.len() as u64);
             let mut keep: Vec<(u64, u32)> = Vec::with_capacity(chunk.len());
             for i in 0..chunk.len() {
                 if !opts.keep_all_classes && DROPPED_CLASSES.contains(&chunk.classification[i]) {
@@ -356,27 +281,6 @@ fn als_writer_properties(props: parquet::file::properties::WriterProperties) -> 
         builder = builder.set_column_dictionary_enabled(ColumnPath::from(col), false);
     }
     builder.build()
-}
-
-/// The points of one cell as an `als/` batch (the columns are moved, not copied).
-fn als_batch(p: AlsPoints, tile: &str, cell: u64) -> Result<RecordBatch> {
-    let n = p.len();
-    let gps_time = Float64Array::from_iter(p.gps_time.iter().map(|&t| t.is_finite().then_some(t)));
-    let cols: Vec<ArrayRef> = vec![
-        Arc::new(Float64Array::from(p.x)),
-        Arc::new(Float64Array::from(p.y)),
-        Arc::new(Float64Array::from(p.z)),
-        Arc::new(UInt16Array::from(p.intensity)),
-        Arc::new(UInt8Array::from(p.return_number)),
-        Arc::new(UInt8Array::from(p.number_of_returns)),
-        Arc::new(UInt8Array::from(p.classification)),
-        Arc::new(Float32Array::from(p.scan_angle_deg)),
-        Arc::new(gps_time),
-        Arc::new(UInt16Array::from(p.point_source_id)),
-        Arc::new(StringArray::from(vec![tile; n])),
-        Arc::new(UInt64Array::from(vec![cell; n])),
-    ];
-    RecordBatch::try_new(als_schema(), cols).map_err(|e| Error::table(tile, e))
 }
 
 fn tiles_batch(h: &TileHeader, tile: &str, hash: &str, epsg: u32, s: &TileStats) -> Result<RecordBatch> {

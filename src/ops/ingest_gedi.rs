@@ -6,7 +6,7 @@
 //! the largest beam, and batches of at most [`BATCH_ROWS`] rows are handed to a sink. The
 //! columns, their units and the policies are documented in `docs/schemas.md` ("shots/").
 //!
-//! Facts relied on (gedi-products.md §1–§3): `shot_number` is uint64 (int64 in some old subsets;
+//! Facts relied on (docs/gedi-products.md §1–§3): `shot_number` is uint64 (int64 in some old subsets;
 //! never float); `rx_sample_start_index` is **1-based**; L2A `geolocation/rh_aN` is integer
 //! centimetres while root `rh` is metres; V1 has no `land_cover_data/leaf_off_flag`.
 
@@ -23,6 +23,7 @@ use hdf5::types::{FixedAscii, FixedUnicode, H5Type, TypeDescriptor, VarLenAscii,
 use hdf5::{Dataset, File, Group, Location};
 use rayon::prelude::*;
 
+use crate::ops::progress::{Progress, Step};
 use crate::error::{one_line, Error, Result};
 use crate::kernels::gedi::{is_beam_group, BeamType, N_ALGORITHMS, RH_LEN};
 use crate::kernels::geo::projection::Projector;
@@ -1100,16 +1101,44 @@ pub fn granules_schema() -> SchemaRef {
     ]))
 }
 
+/// `gedisim ingest gedi`: the granules of `l1b` and `l2a` (files, or folders expanded) into
+/// `dataset`, projected to `epsg` (`None`: the dataset's ALS CRS, else 2154), as one
+/// [`Step::IngestGedi`] counted in granules.
+pub fn ingest(
+    dataset: &crate::dataset::Dataset,
+    l1b: &[PathBuf],
+    l2a: &[PathBuf],
+    epsg: Option<u32>,
+    geoid_offset: Option<f64>,
+    strict_join: bool,
+    progress: &dyn Progress,
+) -> Result<(Vec<GranuleOutcome>, IngestReport)> {
+    let l1b = expand_granule_inputs(l1b, "GEDI01_B")?;
+    let l2a = expand_granule_inputs(l2a, "GEDI02_A")?;
+    if l1b.is_empty() && l2a.is_empty() {
+        return Err(Error::Usage("--l1b/--l2a: no GEDI01_B or GEDI02_A .h5 file found in the inputs".into()));
+    }
+    let epsg = match epsg {
+        Some(e) => e,
+        None => crate::dataset::als::dataset_epsg(dataset)?.unwrap_or(2154),
+    };
+    let opts = GediOptions { epsg, geoid_offset, strict_join };
+    progress.start(Step::IngestGedi, pair_granules(&l1b, &l2a)?.0.len() as u64);
+    let r = ingest_into_dataset(dataset, &l1b, &l2a, &opts, progress);
+    progress.finish();
+    r
+}
+
 /// Ingest L1B/L2A files into `<dataset>/shots/` (one file per granule, `<granule_key>.parquet`)
 /// and `<dataset>/granules/`. A granule whose files have the same content hashes as at its last
 /// ingest is skipped; one whose files changed (e.g. its L2A arrived later) is rewritten.
-/// Granules are processed in parallel; `on_granule` is called after each.
+/// Granules are processed in parallel; `progress` advances by one after each.
 pub fn ingest_into_dataset(
     dataset: &crate::dataset::Dataset,
     l1b: &[PathBuf],
     l2a: &[PathBuf],
     opts: &GediOptions,
-    on_granule: &(dyn Fn() + Sync),
+    progress: &dyn Progress,
 ) -> Result<(Vec<GranuleOutcome>, IngestReport)> {
     use crate::dataset::{self, tables, AtomicParquet};
     use arrow::array::{StringArray, UInt64Array};
@@ -1125,7 +1154,7 @@ pub fn ingest_into_dataset(
             let (h1, h2) = (hash(&pair.l1b)?, hash(&pair.l2a)?);
             let record = granules_dir.join(format!("{key}.parquet"));
             if previous_hashes(&record)? == Some((h1.clone(), h2.clone())) {
-                on_granule();
+                progress.advance(1);
                 return Ok((GranuleOutcome::AlreadyIngested { granule: pair.granule.clone() }, Vec::new()));
             }
             let schema = shots_schema(opts.epsg);
@@ -1149,7 +1178,7 @@ pub fn ingest_into_dataset(
             ];
             let batch = RecordBatch::try_new(granules_schema(), cols).map_err(|e| Error::table(&record, e))?;
             dataset::write_parquet(&record, granules_schema(), &[batch], &metadata)?;
-            on_granule();
+            progress.advance(1);
             Ok((GranuleOutcome::Ingested { granule: pair.granule.clone(), shots }, beams))
         })
         .collect::<Result<Vec<_>>>()?;

@@ -21,6 +21,7 @@ use tiff::decoder::{Decoder, DecodingResult};
 use tiff::tags::Tag;
 
 use crate::dataset::{self, tables, Dataset};
+use crate::ops::progress::{Progress, Step};
 use crate::error::{Error, Result};
 use crate::kernels::geo::projection::Projector;
 use crate::kernels::study::classes::{self, UNKNOWN};
@@ -65,9 +66,18 @@ pub struct StrataReport {
 }
 
 /// Read `landcover` (`.tif`/`.tiff` GeoTIFF or `.csv`) and write `<dataset>/strata/strata.parquet`,
-/// replacing a previous one. `on_shots(done, total)` reports progress (raster input): `done`
-/// more shots of `total`.
-pub fn ingest_strata(ds: &Dataset, landcover: &Path, on_shots: &dyn Fn(u64, u64)) -> Result<StrataReport> {
+/// replacing a previous one, as one [`Step::Strata`] counted in shots (raster input).
+pub fn ingest_strata(ds: &Dataset, landcover: &Path, progress: &dyn Progress) -> Result<StrataReport> {
+    progress.start(Step::Strata, 0);
+    let report = strata_of(ds, landcover, &|n, total| {
+        progress.set_total(total);
+        progress.advance(n);
+    });
+    progress.finish();
+    report
+}
+
+fn strata_of(ds: &Dataset, landcover: &Path, on_shots: &dyn Fn(u64, u64)) -> Result<StrataReport> {
     let ext = landcover.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
     let mut report = StrataReport::default();
     let (strata, source) = match ext.as_str() {

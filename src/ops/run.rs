@@ -33,7 +33,8 @@ use crate::ops::collocate::{CollocateOptions, CollocateReport, Collocation};
 use crate::dataset::{self, tables, Dataset};
 use crate::error::{Error, Result};
 use crate::ops::ingest_als::{self as als, AlsOptions, TileOutcome};
-use crate::ops::ingest_gedi::{self as gedi, GediOptions, GranuleOutcome};
+use crate::ops::ingest_gedi::{self as gedi, GranuleOutcome};
+use crate::ops::progress::{Progress, Step};
 use crate::ops::ingest_strata::StrataReport;
 use crate::kernels::sim::{Footprint, Profile, SimConfig};
 use crate::kernels::study::select::{
@@ -90,66 +91,6 @@ impl RunOptions {
             rules: StudyRules::default(),
         }
     }
-}
-
-/// The long steps, for progress display.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Step {
-    /// `gedisim demo` building its world (`scenario`).
-    Scenario,
-    IngestAls,
-    IngestGedi,
-    Strata,
-    Collocate,
-    Simulate,
-    Results,
-}
-
-impl Step {
-    /// What the step does, for people.
-    pub fn label(self) -> &'static str {
-        match self {
-            Step::Scenario => "building the world (scenario)",
-            Step::IngestAls => "ingest ALS",
-            Step::IngestGedi => "ingest GEDI",
-            Step::Strata => "strata",
-            Step::Collocate => "collocate",
-            Step::Simulate => "simulate",
-            Step::Results => "results",
-        }
-    }
-
-    /// Unit of the step's counts.
-    pub fn unit(self) -> &'static str {
-        match self {
-            Step::Scenario => "",
-            Step::IngestAls => "points",
-            Step::IngestGedi => "granules",
-            Step::Strata | Step::Collocate | Step::Simulate => "shots",
-            Step::Results => "granules",
-        }
-    }
-}
-
-/// Progress of a run: one step at a time.
-pub trait Progress: Sync {
-    /// `step` starts with `total` units (0: unknown).
-    fn start(&self, step: Step, total: u64);
-    /// The current step's total became known.
-    fn set_total(&self, _total: u64) {}
-    /// `n` more units of the current step are done.
-    fn advance(&self, n: u64);
-    /// The current step ended.
-    fn finish(&self);
-}
-
-/// No progress display.
-pub struct NoProgress;
-
-impl Progress for NoProgress {
-    fn start(&self, _: Step, _: u64) {}
-    fn advance(&self, _: u64) {}
-    fn finish(&self) {}
 }
 
 /// What happened to one granule.
@@ -261,13 +202,7 @@ fn ingest_and_collocate_granules(opts: &RunOptions, progress: &dyn Progress) -> 
     ingest_als(&ds, opts, progress, &mut report)?;
     ingest_gedi(&ds, opts, progress, &mut report)?;
     if let Some(landcover) = &opts.landcover {
-        progress.start(Step::Strata, 0);
-        let s = crate::ops::ingest_strata::ingest_strata(&ds, landcover, &|n, total| {
-            progress.set_total(total);
-            progress.advance(n);
-        });
-        progress.finish();
-        report.strata = Some(s?);
+        report.strata = Some(crate::ops::ingest_strata::ingest_strata(&ds, landcover, progress)?);
     }
     let granules = list_granules(&ds)?;
     collocate(&ds, opts, &granules, progress, &mut report)?;
@@ -281,18 +216,7 @@ fn ingest_als(ds: &Dataset, opts: &RunOptions, progress: &dyn Progress, report: 
         }
         return Ok(());
     }
-    let files = als::expand_inputs(&opts.als)?;
-    if files.is_empty() {
-        return Err(Error::Usage("--als: no LAS/LAZ file found in the inputs".into()));
-    }
-    let mut total = 0;
-    for f in &files {
-        total += crate::io::las::TileReader::open(f)?.header().number_of_points;
-    }
-    progress.start(Step::IngestAls, total);
-    let outcomes = als::ingest_tiles(ds, &files, &AlsOptions { keep_all_classes: false, epsg: opts.epsg }, &|n| progress.advance(n));
-    progress.finish();
-    report.tiles = outcomes?;
+    report.tiles = als::ingest(ds, &opts.als, &AlsOptions { keep_all_classes: false, epsg: opts.epsg }, progress)?;
     Ok(())
 }
 
@@ -303,20 +227,7 @@ fn ingest_gedi(ds: &Dataset, opts: &RunOptions, progress: &dyn Progress, report:
         }
         return Ok(());
     }
-    let l1b = gedi::expand_granule_inputs(&opts.l1b, "GEDI01_B")?;
-    let l2a = gedi::expand_granule_inputs(&opts.l2a, "GEDI02_A")?;
-    if l1b.is_empty() && l2a.is_empty() {
-        return Err(Error::Usage("--l1b/--l2a: no GEDI01_B or GEDI02_A .h5 file found in the inputs".into()));
-    }
-    let epsg = match opts.epsg {
-        Some(e) => e,
-        None => als::dataset_epsg(ds)?.unwrap_or(2154),
-    };
-    let gopts = GediOptions { epsg, geoid_offset: opts.geoid_offset, strict_join: false };
-    progress.start(Step::IngestGedi, gedi::pair_granules(&l1b, &l2a)?.0.len() as u64);
-    let r = gedi::ingest_into_dataset(ds, &l1b, &l2a, &gopts, &|| progress.advance(1));
-    progress.finish();
-    let (outcomes, ingest) = r?;
+    let (outcomes, ingest) = gedi::ingest(ds, &opts.l1b, &opts.l2a, opts.epsg, opts.geoid_offset, false, progress)?;
     report.warnings.extend(ingest.warnings());
     report.ingested = outcomes;
     Ok(())
@@ -416,7 +327,7 @@ fn collocate(ds: &Dataset, opts: &RunOptions, granules: &[GranuleFile], progress
     }
     let plan = Collocation::plan_files(ds, &opts.collocate, needed.iter().map(|g| g.path.clone()).collect())?;
     progress.start(Step::Collocate, plan.shots_to_process() as u64);
-    let solved = plan.solve(&|| progress.advance(1));
+    let solved = plan.solve(progress);
     progress.finish();
     let (rows, collocation) = solved?;
     // Keep the other granules' segments; replace those of the granules just collocated, and drop
@@ -698,9 +609,7 @@ fn simulate(ds: &Dataset, plans: &mut [GranulePlan], inputs: &StudyInputs, progr
     for p in plans.iter_mut().filter(|p| p.needs_sim) {
         let footprints = p.covered.iter().map(|c| (c.footprint.clone(), c.offset.clone())).collect();
         let extra = HashMap::from([(META_INPUT.to_string(), p.sim_input.clone())]);
-        let r = crate::ops::simulate::simulate_on_dataset_with(ds, footprints, &inputs.cfg, Profile::Default, &p.sim_path, &extra, &|k| {
-            progress.advance(k as u64)
-        });
+        let r = crate::ops::simulate::simulate_on_dataset_with(ds, footprints, &inputs.cfg, Profile::Default, &p.sim_path, &extra, progress);
         if r.is_err() {
             progress.finish();
         }

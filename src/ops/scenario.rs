@@ -6,18 +6,23 @@
 use std::path::{Path, PathBuf};
 
 use chrono::{DateTime, Datelike, Duration, TimeZone, Timelike, Utc};
-use serde_json::{json, Value};
 
 use crate::error::{Error, Result};
-use crate::io::granule::{v2_file_name, write_l1b_v2, write_l2a_v2, Beam, GranuleMeta, L1bShot, L2aShot, LandCover};
+use crate::io::granule::{v2_file_name, write_l1b_v2, write_l2a_v2, Beam, GranuleMeta};
+use crate::kernels::gedi::{L1bShot, L2aShot, LandCover};
 use crate::kernels::gedi::{beam_number, BeamType, BEAM_NAMES};
 use crate::kernels::geo::projection::Projector;
 use crate::io::las::TileReader;
-use crate::kernels::waveform::l2a::{L2aProcessor, Noise};
+use crate::kernels::waveform::forward::L2aRunner;
+use crate::kernels::waveform::l2a::Noise;
 use crate::kernels::scenario::effects::{EffectSet, Physics, NOMINAL_FSIGMA_M};
 use crate::kernels::scenario::plan::{plan, Extent, PlanSettings};
 use crate::kernels::scenario::real::{self, ENERGY_LOG_SPREAD, NOISE_MEAN_SPREAD, NOISE_STDDEV_LOG_SPREAD};
 use crate::kernels::scenario::rng::Stream;
+use crate::kernels::scenario::truth::{
+    finite, DroppedShot, GeoidTruth, GeolocationTruth, GranuleTruth, NoiseTruth, PlantedEffect, ShotTruthRecord, TileTruth, TrackTruth,
+    TruePhysics, Truth, TRUTH_FORMAT,
+};
 use crate::kernels::scenario::shot::{make_shot, ShotSpec};
 use crate::kernels::sim::{self, Footprint};
 
@@ -201,10 +206,10 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
     let projectors: Vec<Projector> = tiles.iter().map(|t| Projector::new(t.epsg)).collect::<Result<_>>()?;
     let mut l1b: Vec<Vec<Vec<L1bShot>>> = granules.iter().map(|_| vec![Vec::new(); BEAM_NAMES.len()]).collect();
     let mut l2a: Vec<Vec<Vec<L2aShot>>> = granules.iter().map(|_| vec![Vec::new(); BEAM_NAMES.len()]).collect();
-    let mut shots_json = Vec::new();
-    let mut dropped_json = Vec::new();
+    let mut shots_written = Vec::new();
+    let mut shots_dropped = Vec::new();
     let mut track_counts = vec![0usize; layout.tracks.len()];
-    let mut processor = L2aProcessor::new();
+    let mut processor = L2aRunner::default();
     let factor = opts.effects.noise_sigma_factor();
     for (i, ps) in layout.shots.iter().enumerate() {
         let track = &layout.tracks[ps.track];
@@ -257,32 +262,35 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
         match outcome {
             Ok((a, b, truth)) => {
                 track_counts[ps.track] += 1;
-                shots_json.push(json!({
-                    "shot_number": shot_number,
-                    "track": track.id,
-                    "x": ps.x, "y": ps.y,
-                    "true_x": ps.x + ps.dx, "true_y": ps.y + ps.dy,
-                    "dx": ps.dx, "dy": ps.dy,
-                    "als_ground_m": truth.als_ground_m,
-                    "true_top_m": truth.true_top_m,
-                    "gedi_ground_expected_m": truth.gedi_ground_expected_m,
-                    "noise_stddev": truth.noise_stddev,
-                    "selected_algorithm": b.selected_algorithm,
-                    "quality_flag": b.quality_flag,
-                }));
+                shots_written.push(ShotTruthRecord {
+                    shot_number,
+                    track: track.id.clone(),
+                    x: ps.x,
+                    y: ps.y,
+                    true_x: ps.x + ps.dx,
+                    true_y: ps.y + ps.dy,
+                    dx: ps.dx,
+                    dy: ps.dy,
+                    als_ground_m: finite(truth.als_ground_m),
+                    true_top_m: truth.true_top_m.and_then(finite),
+                    gedi_ground_expected_m: finite(truth.gedi_ground_expected_m),
+                    noise_stddev: finite(truth.noise_stddev),
+                    selected_algorithm: b.selected_algorithm,
+                    quality_flag: b.quality_flag,
+                });
                 l1b[track.granule][beam_idx].push(a);
                 l2a[track.granule][beam_idx].push(b);
             }
-            Err(reason) => dropped_json.push(json!({ "track": track.id, "x": ps.x, "y": ps.y, "reason": reason })),
+            Err(reason) => shots_dropped.push(DroppedShot { track: track.id.clone(), x: ps.x, y: ps.y, reason }),
         }
     }
 
-    if shots_json.is_empty() {
+    if shots_written.is_empty() {
         return Err(Error::Usage(format!(
             "--als: no shot fits {} m inside the tiles ({} planned, {} dropped); give larger tiles or more --passes",
             margin,
             layout.shots.len(),
-            dropped_json.len()
+            shots_dropped.len()
         )));
     }
 
@@ -303,100 +311,98 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
     let _ = std::fs::remove_dir_all(&tmp);
     result?;
 
-    let granules_json: Vec<Value> = granules
-        .iter()
-        .enumerate()
-        .map(|(i, g)| {
-            let heading = layout.tracks.iter().find(|t| t.granule == i).map(|t| t.heading_deg);
-            json!({ "l1b": format!("gedi/{}", g.l1b), "l2a": format!("gedi/{}", g.l2a), "tile": g.tile, "pass": g.pass,
-                    "start_utc": g.start.to_rfc3339(), "orbit": g.orbit, "sub_orbit": g.sub_orbit, "track": g.track, "heading_deg": heading })
-        })
-        .collect();
-    let tracks_json: Vec<Value> = layout
-        .tracks
-        .iter()
-        .zip(&track_counts)
-        .map(|(t, &n)| {
-            json!({ "id": t.id, "tile": t.tile, "granule": t.granule, "beam": t.beam,
-                    "beam_type": BeamType::from_name(t.beam).map(|b| b.as_str()),
-                    "heading_deg": t.heading_deg, "dx": t.dx, "dy": t.dy, "n_shots": n })
-        })
-        .collect();
-    let tiles_json: Vec<Value> = tiles
-        .iter()
-        .map(|t| {
-            json!({ "file": format!("als/{}", t.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()),
-                    "source": t.path.display().to_string(), "epsg": t.epsg,
-                    "extent": [t.extent.xmin, t.extent.ymin, t.extent.xmax, t.extent.ymax],
-                    "points_used": t.points.len(),
-                    "acquired_utc": t.acquired.map(|d| d.to_rfc3339()), "leaf_off": is_leaf_off(t.acquired) })
-        })
-        .collect();
-    let effects_json: Vec<Value> = opts
-        .effects
-        .effects
-        .iter()
-        .map(|e| {
-            let params: serde_json::Map<String, Value> = e
-                .params()
+    let truth = Truth {
+        format: TRUTH_FORMAT.to_string(),
+        effect: opts.effects.name(),
+        effect_spec: opts.effect_spec.clone(),
+        effects: opts.effects.effects.iter().map(PlantedEffect::of).collect(),
+        magnitude: opts.magnitude,
+        params_given: opts.params.clone(),
+        seed: opts.seed,
+        physics: TruePhysics {
+            weighting: physics.weighting.name().to_string(),
+            rho_ground_over_veg: physics.rho_ground_over_veg,
+            pulse_sigma_m: f64::from(physics.sim.pulse.sigma),
+            fsigma_m: f64::from(physics.sim.fsigma),
+            profile: "default".to_string(),
+        },
+        geoid: GeoidTruth {
+            n_m: opts.geoid_m,
+            dataset: "geophys_corr/geoid".to_string(),
+            relation: "GEDI elevation = ALS height (IGN69) + N + datum_dz_m".to_string(),
+        },
+        datum_dz_m: opts.effects.vertical_offset_m(),
+        noise: NoiseTruth {
+            noise_sigma_factor: factor,
+            median_noise_stddev_corrected: [("coverage", real::COVERAGE.noise_stddev), ("full_power", real::FULL_POWER.noise_stddev)]
                 .into_iter()
-                .map(|(k, v)| (k.to_string(), match v {
-                    crate::kernels::scenario::effects::ParamValue::Number(x) => json!(x),
-                    crate::kernels::scenario::effects::ParamValue::Text(s) => json!(s),
-                }))
-                .collect();
-            json!({ "name": e.name(), "params": params })
-        })
-        .collect();
-    let truth = json!({
-        "format": "gedisim-scenario-truth/1",
-        "effect": opts.effects.name(),
-        "effect_spec": opts.effect_spec,
-        "effects": effects_json,
-        "magnitude": opts.magnitude,
-        "params_given": opts.params.iter().map(|(k, v)| json!([k, v])).collect::<Vec<_>>(),
-        "seed": opts.seed,
-        "physics": {
-            "weighting": physics.weighting.name(),
-            "rho_ground_over_veg": physics.rho_ground_over_veg,
-            "pulse_sigma_m": physics.sim.pulse.sigma,
-            "fsigma_m": physics.sim.fsigma,
-            "profile": "default",
+                .map(|(k, v)| (k.to_string(), v))
+                .collect(),
+            shape: "GEDI_V1 (per-sample 0.52 sigma, Gaussian correlation 1.63 samples)".to_string(),
         },
-        "geoid": {
-            "n_m": opts.geoid_m,
-            "dataset": "geophys_corr/geoid",
-            "relation": "GEDI elevation = ALS height (IGN69) + N + datum_dz_m",
+        geolocation: GeolocationTruth {
+            convention: "true position = reported (x, y) + (dx, dy), as collocate reports offsets".to_string(),
+            track_offset_sigma_m: opts.track_offset_sigma_m,
+            clip_sigmas: 2.5,
         },
-        "datum_dz_m": opts.effects.vertical_offset_m(),
-        "noise": {
-            "noise_sigma_factor": factor,
-            "median_noise_stddev_corrected": { "coverage": real::COVERAGE.noise_stddev, "full_power": real::FULL_POWER.noise_stddev },
-            "shape": "GEDI_V1 (per-sample 0.52 sigma, Gaussian correlation 1.63 samples)",
-        },
-        "geolocation": {
-            "convention": "true position = reported (x, y) + (dx, dy), as collocate reports offsets",
-            "track_offset_sigma_m": opts.track_offset_sigma_m,
-            "clip_sigmas": 2.5,
-        },
-        "ground_detection_offset_m": (1..=6u8).map(|a| opts.effects.ground_offset_m(a)).collect::<Vec<_>>(),
-        "margin_m": margin,
-        "n_shots": shots_json.len(),
-        "n_dropped": dropped_json.len(),
-        "tiles": tiles_json,
-        "granules": granules_json,
-        "tracks": tracks_json,
-        "shots": shots_json,
-        "dropped": dropped_json,
-    });
+        ground_detection_offset_m: (1..=6u8).map(|a| opts.effects.ground_offset_m(a)).collect(),
+        margin_m: margin,
+        n_shots: shots_written.len(),
+        n_dropped: shots_dropped.len(),
+        tiles: tiles
+            .iter()
+            .map(|t| TileTruth {
+                file: format!("als/{}", t.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()),
+                source: t.path.display().to_string(),
+                epsg: t.epsg,
+                extent: [t.extent.xmin, t.extent.ymin, t.extent.xmax, t.extent.ymax],
+                points_used: t.points.len(),
+                acquired_utc: t.acquired.map(|d| d.to_rfc3339()),
+                leaf_off: is_leaf_off(t.acquired),
+            })
+            .collect(),
+        granules: granules
+            .iter()
+            .enumerate()
+            .map(|(i, g)| GranuleTruth {
+                l1b: format!("gedi/{}", g.l1b),
+                l2a: format!("gedi/{}", g.l2a),
+                tile: g.tile,
+                pass: g.pass,
+                start_utc: g.start.to_rfc3339(),
+                orbit: g.orbit,
+                sub_orbit: g.sub_orbit,
+                reference_track: g.track,
+                heading_deg: layout.tracks.iter().find(|t| t.granule == i).map(|t| t.heading_deg),
+            })
+            .collect(),
+        tracks: layout
+            .tracks
+            .iter()
+            .zip(&track_counts)
+            .map(|(t, &n)| TrackTruth {
+                id: t.id.clone(),
+                tile: t.tile,
+                granule: t.granule,
+                beam: t.beam.to_string(),
+                beam_type: BeamType::from_name(t.beam).map(|b| b.as_str().to_string()),
+                heading_deg: t.heading_deg,
+                dx: t.dx,
+                dy: t.dy,
+                n_shots: n,
+            })
+            .collect(),
+        shots: shots_written,
+        dropped: shots_dropped,
+    };
     let text = serde_json::to_string_pretty(&truth).map_err(|e| Error::file(&truth_path, e))?;
-    write_atomic(&truth_path, text.as_bytes())?;
+    crate::dataset::write_atomic(&truth_path, text.as_bytes())?;
     Ok(ScenarioReport {
         tiles: tiles.len(),
         granules: granules.len(),
         tracks: layout.tracks.len(),
-        shots: shots_json.len(),
-        dropped: dropped_json.len(),
+        shots: truth.n_shots,
+        dropped: truth.n_dropped,
         truth: truth_path,
     })
 }
@@ -446,10 +452,4 @@ fn write_outputs(
     Ok(())
 }
 
-/// Write `bytes` to `path` through a temporary file in the same folder.
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let tmp = path.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
-    std::fs::write(&tmp, bytes).map_err(|e| Error::file(&tmp, format!("cannot write: {e}")))?;
-    std::fs::rename(&tmp, path).map_err(|e| Error::file(path, format!("cannot move into place: {e}")))
-}
+

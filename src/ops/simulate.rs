@@ -1,24 +1,113 @@
-//! `simulate`: the simulation kernels driven from files — direct mode (one LAS/LAZ file and a
-//! footprint CSV) and dataset mode (every ingested shot against the `als/` table).
+//! `gedisim simulate`: the simulation kernels driven from files — direct mode (one LAS/LAZ file and
+//! a footprint CSV) and dataset mode (every ingested shot, or a footprint CSV such as inventory
+//! plots, against the `als/` table).
 
 use std::collections::HashMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use arrow::array::{Array, AsArray};
-use arrow::datatypes::{Float64Type, UInt64Type};
-
-use crate::dataset::als::{AlsTable, BBox};
+use crate::dataset::als::DROPPED_CLASSES;
+use crate::dataset::blocks::BlockSimulation;
+use crate::dataset::offsets::AppliedOffset;
+use crate::dataset::sim::{sim_batch, sim_metadata, sim_schema};
 use crate::dataset::{self, tables, AtomicParquet, Dataset};
 use crate::error::{Error, Result};
-use crate::ops::ingest_als::{cell_key, DROPPED_CLASSES};
-use crate::kernels::sim::{self, AlsPoints, Footprint, Profile, SimConfig, Weighting};
-use crate::dataset::offsets::{read_offsets, AppliedOffset};
-use crate::dataset::sim::{sim_batch, sim_metadata, sim_schema};
+use crate::kernels::sim::{self, AlsPoints, Footprint, Profile, PulseTiming, SimConfig, Weighting};
+use crate::ops::progress::{Progress, Step};
 
-/// Side of the square blocks of footprints simulated together in dataset mode (m): a block's
-/// points (plus the footprint radius around it) are read at once, so memory is bounded by the
-/// block, and the next block is read while one is simulated.
-pub const BLOCK_M: f64 = 200.0;
+/// What `gedisim simulate` reads and where it writes.
+#[derive(Debug, Clone)]
+pub enum Source {
+    /// Direct mode: one LAS/LAZ file and a footprint CSV, into `out`. With the `default` profile the
+    /// classes the ingest drops are dropped too, unless `keep_all_classes`.
+    Direct { als: PathBuf, footprints: PathBuf, out: PathBuf, keep_all_classes: bool },
+    /// Dataset mode: every ingested shot (moved by its collocation offset) into
+    /// `<dataset>/sim/shots.parquet`, or the `footprints` CSV into `out` (default
+    /// `<dataset>/sim/<CSV name>.parquet`).
+    Dataset { dataset: PathBuf, footprints: Option<PathBuf>, out: Option<PathBuf> },
+}
+
+/// The pulse of a simulation.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PulseChoice {
+    /// Gaussian of σ (m), or the 15 ns FWHM when `None`.
+    Gaussian(Option<f32>),
+    /// A two-column pulse file (range m, amplitude).
+    File(PathBuf),
+}
+
+/// Options of `gedisim simulate`.
+#[derive(Debug, Clone)]
+pub struct SimulateOptions {
+    pub source: Source,
+    pub profile: Profile,
+    /// Footprint Gaussian σ (m).
+    pub fsigma: f32,
+    pub normalise_density: bool,
+    /// Convolve each return with the pulse while binning instead of after.
+    pub pulse_before: bool,
+    pub pulse: PulseChoice,
+}
+
+/// What `gedisim simulate` did.
+#[derive(Debug, Clone)]
+pub struct SimulateReport {
+    pub simulated: usize,
+    pub skipped: usize,
+    pub out: PathBuf,
+}
+
+/// The simulator settings of `opts` (profile, footprint, density normalisation, pulse).
+pub fn sim_config(opts: &SimulateOptions) -> Result<SimConfig> {
+    let mut cfg = SimConfig::new(opts.profile);
+    cfg.fsigma = opts.fsigma;
+    cfg.normalise_density = opts.normalise_density;
+    if opts.pulse_before {
+        cfg.pulse_timing = PulseTiming::BeforeBinning;
+    }
+    cfg.pulse = match &opts.pulse {
+        PulseChoice::Gaussian(Some(s)) => sim::Pulse::gaussian(*s, cfg.res as f32)?,
+        PulseChoice::Gaussian(None) => cfg.pulse,
+        PulseChoice::File(path) => crate::io::pulse::read_pulse_file(path)?,
+    };
+    Ok(cfg)
+}
+
+/// `gedisim simulate`: direct or dataset mode (see [`Source`]); dataset mode streams in blocks
+/// as one [`Step::Simulate`].
+pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<SimulateReport> {
+    let cfg = sim_config(opts)?;
+    let profile = opts.profile;
+    let ((simulated, skipped), out) = match &opts.source {
+        Source::Dataset { dataset, footprints, out } => {
+            let ds = Dataset::open(dataset)?;
+            let (footprints, dest) = match footprints {
+                Some(csv) => {
+                    let stem = csv.file_stem().and_then(|s| s.to_str()).unwrap_or("footprints");
+                    let dest = match out {
+                        Some(out) => out.clone(),
+                        None => ds.table_file(tables::SIM, stem)?,
+                    };
+                    (crate::io::footprints::read_footprints_csv(csv)?.into_iter().map(|f| (f, None)).collect(), dest)
+                }
+                None if out.is_some() => return Err(Error::Usage("--out in dataset mode needs --footprints".into())),
+                None => (crate::dataset::shots::shot_footprints(&ds)?, ds.table_file(tables::SIM, "shots")?),
+            };
+            progress.start(Step::Simulate, footprints.len() as u64);
+            let r = simulate_on_dataset(&ds, footprints, &cfg, profile, &dest, progress);
+            progress.finish();
+            (r?, dest)
+        }
+        Source::Direct { als, footprints, out, keep_all_classes } => {
+            let footprints = crate::io::footprints::read_footprints_csv(footprints)?;
+            let mut points = crate::io::las::read_points(als)?;
+            if profile == Profile::Default && !keep_all_classes {
+                points = drop_ingest_classes(&points);
+            }
+            (simulate_direct(&points, &footprints, &cfg, profile, out)?, out.clone())
+        }
+    };
+    Ok(SimulateReport { simulated, skipped, out })
+}
 
 /// Keep only the points whose class the ingest keeps (so that direct mode with the `default`
 /// profile sees the same points as the dataset path).
@@ -37,57 +126,18 @@ pub fn simulate_direct(points: &AlsPoints, footprints: &[Footprint], cfg: &SimCo
     Ok((ok, results.len() - ok))
 }
 
-/// The shots' ids and positions (`shot_number`, `x`, `y`) from the `shots/` table, each moved by
-/// its collocation offset when `<dataset>/offsets/` has one (position + (dx, dy)), with the
-/// offset applied.
-pub fn shot_footprints(ds: &Dataset) -> Result<Vec<(Footprint, Option<AppliedOffset>)>> {
-    let offsets = read_offsets(ds)?;
-    let dir = ds.root().join(tables::SHOTS);
-    let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi`")))?;
-    let mut out = Vec::new();
-    for f in files {
-        let file = std::fs::File::open(&f).map_err(|e| Error::file(&f, e))?;
-        let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| Error::table(&f, e))?;
-        let mask = parquet::arrow::ProjectionMask::columns(builder.parquet_schema(), ["shot_number", "x", "y"]);
-        let reader = builder.with_projection(mask).build().map_err(|e| Error::table(&f, e))?;
-        for b in reader {
-            let b = b.map_err(|e| Error::table(&f, e))?;
-            let get = |n: &str| b.column_by_name(n).ok_or_else(|| Error::field(&f, n, "column missing from the shots table"));
-            let (sn, x, y) = (get("shot_number")?, get("x")?, get("y")?);
-            let (sn, x, y) = (sn.as_primitive::<UInt64Type>(), x.as_primitive::<Float64Type>(), y.as_primitive::<Float64Type>());
-            for i in 0..b.num_rows() {
-                if x.is_null(i) || y.is_null(i) {
-                    continue;
-                }
-                let off = offsets.get(&sn.value(i)).cloned();
-                let (dx, dy) = off.as_ref().map_or((0.0, 0.0), |o| (o.dx, o.dy));
-                out.push((Footprint { id: sn.value(i).to_string(), x: x.value(i) + dx, y: y.value(i) + dy }, off));
-            }
-        }
-    }
-    Ok(out)
-}
-
-/// Dataset mode: simulate every shot of `<dataset>/shots/` (moved by its collocation offset, if
-/// any) on the `als/` table into `<dataset>/sim/shots.parquet`. `on_batch(n)` reports progress.
-pub fn simulate_dataset(ds: &Dataset, cfg: &SimConfig, profile: Profile, on_batch: &dyn Fn(usize)) -> Result<(usize, usize)> {
-    let shots = shot_footprints(ds)?;
-    let dest = ds.table_file(tables::SIM, "shots")?;
-    simulate_on_dataset(ds, shots, cfg, profile, &dest, on_batch)
-}
-
 /// Simulate `footprints` (each with the collocation offset already applied to it, if any) on the
 /// dataset's `als/` table into `dest` (atomically), block by block (see [`BlockSimulation`]).
-/// `on_batch(n)` reports progress.
+/// `progress` advances by the footprints of each block.
 pub fn simulate_on_dataset(
     ds: &Dataset,
     footprints: Vec<(Footprint, Option<AppliedOffset>)>,
     cfg: &SimConfig,
     profile: Profile,
     dest: &Path,
-    on_batch: &dyn Fn(usize),
+    progress: &dyn Progress,
 ) -> Result<(usize, usize)> {
-    simulate_on_dataset_with(ds, footprints, cfg, profile, dest, &HashMap::new(), on_batch)
+    simulate_on_dataset_with(ds, footprints, cfg, profile, dest, &HashMap::new(), progress)
 }
 
 /// [`simulate_on_dataset`] with `extra` key-value metadata in the written file (beside the
@@ -99,7 +149,7 @@ pub fn simulate_on_dataset_with(
     profile: Profile,
     dest: &Path,
     extra: &HashMap<String, String>,
-    on_batch: &dyn Fn(usize),
+    progress: &dyn Progress,
 ) -> Result<(usize, usize)> {
     let mut metadata = sim_metadata(profile);
     metadata.extend(extra.iter().map(|(k, v)| (k.clone(), v.clone())));
@@ -111,107 +161,8 @@ pub fn simulate_on_dataset_with(
         ok += n_ok;
         skipped += block.results.len() - n_ok;
         writer.write(&block.batch()?)?;
-        on_batch(block.footprints.len());
+        progress.advance(block.footprints.len() as u64);
     }
     writer.finish()?;
     Ok((ok, skipped))
-}
-
-/// The simulation of footprints against a dataset's `als/` table as a stream of blocks
-/// ([`BLOCK_M`] squares of footprints, row-major): each block reads only the points within the
-/// footprint radius of its footprints, so memory is bounded by the block, never by the table,
-/// and the next block is read while one is simulated.
-pub struct BlockSimulation {
-    als: AlsTable,
-    cfg: SimConfig,
-    half: f64,
-    blocks: std::vec::IntoIter<Vec<(Footprint, Option<AppliedOffset>)>>,
-    current: Option<(Vec<(Footprint, Option<AppliedOffset>)>, Result<AlsPoints>)>,
-}
-
-/// One simulated block: its footprints, the offsets applied to them and their outcomes, in the
-/// same order.
-pub struct SimulatedBlock {
-    pub footprints: Vec<Footprint>,
-    pub applied: Vec<Option<AppliedOffset>>,
-    pub results: Vec<std::result::Result<sim::SimulatedFootprint, sim::SkipReason>>,
-}
-
-impl SimulatedBlock {
-    /// The block's `sim` rows.
-    pub fn batch(&self) -> Result<arrow::record_batch::RecordBatch> {
-        sim_batch(&self.footprints, &self.results, &Weighting::ALL, &self.applied)
-    }
-}
-
-impl BlockSimulation {
-    /// Prepare the blocks of `footprints` (the first block is read now).
-    pub fn new(ds: &Dataset, footprints: Vec<(Footprint, Option<AppliedOffset>)>, cfg: SimConfig) -> Result<Self> {
-        let als = AlsTable::open(ds)?;
-        let half = sim::footprint::gauss_sep(cfg.fsigma, sim::footprint::I_THRESH) as f64 + 1.0;
-        let mut blocks = blocks(footprints).into_iter();
-        let first = blocks.next();
-        let mut this = BlockSimulation { als, cfg, half, blocks, current: None };
-        this.current = first.map(|b| {
-            let points = this.read(&b);
-            (b, points)
-        });
-        Ok(this)
-    }
-
-    /// The points within the footprint radius of `block`'s footprints.
-    fn read(&self, block: &[(Footprint, Option<AppliedOffset>)]) -> Result<AlsPoints> {
-        let h = self.half;
-        let mut b: BBox = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
-        for (f, _) in block.iter().filter(|(f, _)| f.x.is_finite() && f.y.is_finite()) {
-            b = [b[0].min(f.x - h), b[1].min(f.y - h), b[2].max(f.x + h), b[3].max(f.y + h)];
-        }
-        if b[0] > b[2] {
-            return Ok(AlsPoints::default());
-        }
-        Ok(self.als.points_in(b)?.0)
-    }
-}
-
-impl Iterator for BlockSimulation {
-    type Item = Result<SimulatedBlock>;
-
-    fn next(&mut self) -> Option<Self::Item> {
-        let (block, points) = self.current.take()?;
-        let next = self.blocks.next();
-        let points = match points {
-            Ok(p) => p,
-            Err(e) => return Some(Err(e)),
-        };
-        let (footprints, applied): (Vec<Footprint>, Vec<Option<AppliedOffset>>) = block.into_iter().unzip();
-        let this = &*self;
-        let (results, ahead) =
-            rayon::join(|| sim::simulate(&points, &footprints, &this.cfg), || next.as_ref().map(|b| this.read(b)));
-        self.current = next.zip(ahead);
-        Some(results.map(|results| SimulatedBlock { footprints, applied, results }))
-    }
-}
-
-/// Footprints grouped by [`BLOCK_M`] square, blocks in row-major order (footprints without a
-/// finite position form a block of their own, simulated as skipped).
-pub fn blocks<T>(mut footprints: Vec<(Footprint, T)>) -> Vec<Vec<(Footprint, T)>> {
-    let key = |f: &Footprint| {
-        if f.x.is_finite() && f.y.is_finite() {
-            Some(((f.y / BLOCK_M).floor() as i64, (f.x / BLOCK_M).floor() as i64))
-        } else {
-            None
-        }
-    };
-    footprints.sort_by_key(|(f, _)| (key(f), cell_key(f.x, f.y)));
-    let mut out: Vec<Vec<(Footprint, T)>> = Vec::new();
-    let mut last = None;
-    for (f, t) in footprints {
-        let k = key(&f);
-        if out.is_empty() || k != last {
-            out.push(Vec::new());
-            last = k;
-        }
-        out.last_mut().expect("a block").push((f, t));
-    }
-    out
 }

@@ -7,19 +7,21 @@
 //! Without elevations the waveform is placed on GEDI's nominal 1 ns grid ([`GEDI_BIN_M`]): RH are
 //! still metres, `elev_lowestmode` is null.
 
-use std::sync::Arc;
+use std::sync::{Arc, LazyLock};
 
 use arrow::array::{Array, AsArray};
 use arrow::datatypes::{DataType, Float32Type, Float64Type, Int64Type};
 use datafusion::common::{exec_err, plan_err, Result as DfResult};
 use datafusion::logical_expr::{
+    Documentation,
     ColumnarValue, ScalarFunctionArgs, ScalarUDFImpl, Signature, Volatility,
 };
 
 use crate::kernels::waveform::l2a::{AlgorithmSettings, L2aProcessor, NoResult, Noise, WaveformGeolocation};
 use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
 use crate::dataset::l2a::{l2a_struct_fields, L2aColumns};
-use crate::dataset::list_f32;
+use super::args::{coerce_number, coerce_waveform};
+use super::DOC_SECTION;
 
 /// The `gedi_l2a` scalar function.
 #[derive(Debug, PartialEq, Eq, Hash)]
@@ -43,39 +45,6 @@ impl Default for GediL2a {
     }
 }
 
-/// The type a waveform argument is cast to: any list of numbers becomes `list<float32>`.
-pub(crate) fn coerce_waveform(name: &str, t: &DataType) -> DfResult<DataType> {
-    match t {
-        DataType::Null => Ok(list_f32()),
-        DataType::List(f) | DataType::LargeList(f) | DataType::FixedSizeList(f, _)
-            if f.data_type().is_numeric() || f.data_type().is_null() =>
-        {
-            Ok(list_f32())
-        }
-        other => plan_err!("{name}: the waveform must be a list of numbers, got {other}"),
-    }
-}
-
-/// The type a numeric argument is cast to (`target`), or a planning error naming the argument.
-pub(crate) fn coerce_number(
-    name: &str,
-    arg: &str,
-    t: &DataType,
-    target: DataType,
-) -> DfResult<DataType> {
-    let ok = t.is_null()
-        || if target == DataType::Int64 {
-            t.is_integer()
-        } else {
-            t.is_numeric()
-        };
-    if ok {
-        Ok(target)
-    } else {
-        plan_err!("{name}: {arg} must be a number, got {t}")
-    }
-}
-
 const ARGS: [&str; 6] = [
     "rxwaveform",
     "noise_mean",
@@ -85,9 +54,28 @@ const ARGS: [&str; 6] = [
     "elevation_lastbin",
 ];
 
+static DOCUMENTATION: LazyLock<Documentation> = LazyLock::new(|| {
+    Documentation::builder(
+        DOC_SECTION,
+        "GEDI L2A (algorithm 1..6) of one waveform, as a struct {toploc, botloc, zcross, elev_lowestmode, rh, sensitivity, energy_total, num_modes, no_result_reason}: the same kernel and values as `gedisim l2a` (docs/l2a.md). rh[k+1] is RH k (m above the ground found).",
+        "gedi_l2a(rxwaveform, noise_mean, noise_stddev, algorithm [, elevation_bin0, elevation_lastbin])",
+    )
+    .with_argument("rxwaveform", "received waveform (list of numbers, DN, 1 ns samples)")
+    .with_argument("noise_mean", "noise mean (DN), e.g. L1B noise_mean_corrected")
+    .with_argument("noise_stddev", "noise standard deviation (DN), e.g. L1B noise_stddev_corrected")
+    .with_argument("algorithm", "GEDI L2A algorithm setting, 1..6")
+    .with_argument("elevation_bin0", "optional: elevation of the first sample (m); without it elev_lowestmode is null")
+    .with_argument("elevation_lastbin", "optional: elevation of the last sample (m)")
+    .with_sql_example("select shot_number, gedi_l2a(rxwaveform, noise_mean_corrected, noise_stddev_corrected, 1).rh from shots limit 3")
+    .build()
+});
+
 impl ScalarUDFImpl for GediL2a {
     fn name(&self) -> &str {
         "gedi_l2a"
+    }
+    fn documentation(&self) -> Option<&Documentation> {
+        Some(&DOCUMENTATION)
     }
     fn signature(&self) -> &Signature {
         &self.signature

@@ -1,15 +1,19 @@
 //! The DataFusion session: the dataset's tables registered by name, and gedisim's SQL functions
 //! (thin wrappers over the kernels).
 
+pub mod args;
 pub mod l2a;
+pub mod link_margin_twin;
 pub mod noise_twin;
 pub mod rh;
 pub mod simulate;
+pub mod twin;
 
 use std::path::Path;
 
 use datafusion::datasource::file_format::parquet::ParquetFormat;
 use datafusion::datasource::listing::ListingOptions;
+use datafusion::logical_expr::{DocSection, ScalarUDF};
 use datafusion::prelude::{SessionConfig, SessionContext};
 use std::sync::Arc;
 
@@ -33,14 +37,26 @@ pub async fn session(ds: &Dataset) -> Result<SessionContext> {
     Ok(ctx)
 }
 
-/// Register gedisim's SQL functions: `gedi_rh(wave, z0, dz, ground)`, `gedi_l2a(…)`,
-/// `gedi_noise_twin(…)`, `gedi_link_margin_twin(…)` and the table function `gedi_simulate([profile])`.
+/// The section gedisim's functions are documented under (`documentation()`, `information_schema`).
+pub const DOC_SECTION: DocSection = DocSection { include: true, label: "gedisim", description: Some("GEDI waveform functions") };
+
+/// gedisim's scalar functions, one file each: `gedi_rh` ([`rh`]), `gedi_l2a` ([`l2a`]),
+/// `gedi_noise_twin` ([`noise_twin`]), `gedi_link_margin_twin` ([`link_margin_twin`]).
+pub fn scalar_functions() -> Vec<ScalarUDF> {
+    vec![
+        ScalarUDF::new_from_impl(rh::GediRh::new()),
+        ScalarUDF::new_from_impl(l2a::GediL2a::new()),
+        ScalarUDF::new_from_impl(twin::GediTwin::new(&noise_twin::NOISE_TWIN)),
+        ScalarUDF::new_from_impl(twin::GediTwin::new(&link_margin_twin::LINK_MARGIN_TWIN)),
+    ]
+}
+
+/// Register gedisim's SQL functions: [`scalar_functions`] and the table function
+/// `gedi_simulate([profile])` ([`simulate`]), which reads `ds`.
 pub fn register_functions(ctx: &SessionContext, ds: &Dataset) {
-    use datafusion::logical_expr::ScalarUDF;
-    ctx.register_udf(ScalarUDF::new_from_impl(rh::GediRh::new()));
-    ctx.register_udf(ScalarUDF::new_from_impl(l2a::GediL2a::new()));
-    ctx.register_udf(ScalarUDF::new_from_impl(noise_twin::GediNoiseTwin::shot()));
-    ctx.register_udf(ScalarUDF::new_from_impl(noise_twin::GediNoiseTwin::link_margin()));
+    for f in scalar_functions() {
+        ctx.register_udf(f);
+    }
     ctx.register_udtf("gedi_simulate", Arc::new(simulate::GediSimulate::new(ds.clone())));
 }
 

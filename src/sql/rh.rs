@@ -1,12 +1,14 @@
 //! `gedi_rh(wave, z0, dz, ground)`: RH0…RH100 (m above `ground`) of a waveform list column whose
-//! sample k is labelled `z0 − k·dz` (the `sim` table's convention). Wraps `process::rh`.
+//! sample k is labelled `z0 − k·dz` (the `sim` table's convention). Wraps [`crate::kernels::waveform::rh`].
 
-use std::sync::Arc;
+use std::sync::{Arc, LazyLock};
 
 use arrow::array::{Array, AsArray};
 use arrow::datatypes::{DataType, Float32Type, Float64Type};
 use datafusion::common::{exec_err, Result as DfResult};
-use datafusion::logical_expr::{ColumnarValue, ScalarFunctionArgs, ScalarUDFImpl, Signature, Volatility};
+use datafusion::logical_expr::{ColumnarValue, Documentation, ScalarFunctionArgs, ScalarUDFImpl, Signature, Volatility};
+
+use super::DOC_SECTION;
 
 use crate::kernels::waveform::rh::rh_profile;
 use crate::dataset::{list_f32, list_f32_builder};
@@ -35,9 +37,26 @@ impl Default for GediRh {
     }
 }
 
+static DOCUMENTATION: LazyLock<Documentation> = LazyLock::new(|| {
+    Documentation::builder(
+        DOC_SECTION,
+        "RH0…RH100 (m above `ground`) of a simulated waveform, as gediMetric computes them: a list of 101 values, element k+1 is RH k.",
+        "gedi_rh(wave, z0, dz, ground)",
+    )
+    .with_argument("wave", "waveform (list<float32>); sample k at elevation z0 − k·dz")
+    .with_argument("z0", "elevation of sample 0 (m)")
+    .with_argument("dz", "sample spacing (m)")
+    .with_argument("ground", "ground elevation the heights are measured from (m)")
+    .with_sql_example("select id, gedi_rh(wave, z0, dz, als_ground)[99] as rh98 from sim where weighting = 'count' limit 3")
+    .build()
+});
+
 impl ScalarUDFImpl for GediRh {
     fn name(&self) -> &str {
         "gedi_rh"
+    }
+    fn documentation(&self) -> Option<&Documentation> {
+        Some(&DOCUMENTATION)
     }
     fn signature(&self) -> &Signature {
         &self.signature

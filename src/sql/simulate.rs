@@ -1,5 +1,5 @@
 //! `gedi_simulate([profile])`: the simulation as a SQL table function. It streams the `sim`
-//! rows of every ingested shot, block by block ([`crate::ops::simulate::BlockSimulation`]): each
+//! rows of every ingested shot, block by block ([`crate::dataset::blocks::BlockSimulation`]): each
 //! block reads only the ALS row groups its footprints touch, then the simulation kernel. Shots are moved by
 //! their collocation offsets when the dataset has an `offsets/` table.
 
@@ -19,7 +19,8 @@ use datafusion::physical_plan::{ExecutionPlan, SendableRecordBatchStream};
 
 use crate::dataset::Dataset;
 use crate::kernels::sim::{Profile, SimConfig};
-use crate::ops::simulate::{shot_footprints, BlockSimulation};
+use crate::dataset::blocks::BlockSimulation;
+use crate::dataset::shots::shot_footprints;
 use crate::dataset::sim::sim_schema;
 
 /// The `gedi_simulate` table function of one dataset.

@@ -52,3 +52,27 @@ pub mod nasa;
 
 pub mod planted;
 pub mod scene;
+
+/// A [`gedisim::ops::progress::Progress`] that records what it is told: the steps started with
+/// their totals, the units advanced and the notes.
+#[derive(Default)]
+pub struct Recorder {
+    pub events: std::sync::Mutex<Vec<String>>,
+    pub advanced: std::sync::atomic::AtomicU64,
+}
+
+impl gedisim::ops::progress::Progress for Recorder {
+    fn start(&self, step: gedisim::ops::progress::Step, total: u64) {
+        self.events.lock().unwrap().push(format!("start {} {total}", step.label()));
+    }
+    fn set_total(&self, total: u64) {
+        self.events.lock().unwrap().push(format!("total {total}"));
+    }
+    fn advance(&self, n: u64) {
+        self.advanced.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+    }
+    fn note(&self, text: &str) {
+        self.events.lock().unwrap().push(text.to_string());
+    }
+    fn finish(&self) {}
+}

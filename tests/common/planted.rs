@@ -6,7 +6,8 @@ use std::path::Path;
 
 use gedisim::dataset::als::{AlsTable, BBox};
 use gedisim::dataset::Dataset;
-use gedisim::io::granule::{write_l1b_v2, Beam, GranuleMeta, L1bShot};
+use gedisim::io::granule::{write_l1b_v2, Beam, GranuleMeta};
+use gedisim::kernels::gedi::L1bShot;
 use gedisim::kernels::geo::projection::Projector;
 use gedisim::kernels::waveform::l2a::Noise;
 use gedisim::kernels::waveform::noise_twin::{NoiseShape, ShotTwin, GEDI_BIN_M};

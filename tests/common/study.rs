@@ -11,7 +11,8 @@ use arrow::array::{
 use arrow::datatypes::{DataType, Field, Schema};
 use gedisim::dataset::{write_parquet, Dataset};
 use gedisim::kernels::study::align::VerticalReference;
-use gedisim::dataset::results::{results_batch, results_metadata, results_schema, ResultInput, StudyAlgorithm};
+use gedisim::dataset::results::{results_batch, results_metadata, results_schema};
+use gedisim::kernels::study::select::{ResultInput, StudyAlgorithm};
 
 /// Deterministic uniform numbers in [0, 1) (xorshift64*).
 pub struct Rng(u64);

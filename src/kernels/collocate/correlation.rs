@@ -5,7 +5,7 @@
 //! Both waveforms sit on the same absolute grid of bins of `dz` and are zero outside their signal
 //! extents. At lag λ (bins) the real bin m + λ is paired with the simulated bin m, i.e. the real
 //! waveform lies λ·dz higher than the ALS surface it matches: λ·dz is the vertical offset. As in
-//! collocateWaves (simulator-reference.md §3) the correlation window is the union of the two signal
+//! collocateWaves (docs/simulator-reference.md §3) the correlation window is the union of the two signal
 //! extents and the means are taken over that window, so for N window bins
 //! r = (Σab − ΣaΣb/N) / √((Σa² − (Σa)²/N)(Σb² − (Σb)²/N)); only Σab and N depend on the lag.
 
@@ -201,6 +201,7 @@ mod tests {
         let real = GridProfile::from_bins(103, &real_vals).unwrap();
         let window = LagWindow::around(2, 6);
         let r = p.correlate(&real, window);
+        #[allow(clippy::needless_range_loop)] // `li` is also the lag index of `window`
         for li in 0..window.len {
             let lag = window.lag(li);
             // Union window in simulated bins.

@@ -4,7 +4,7 @@
 //! ±`max_shift` m at `step` m and the vertical offset dz that maximise the mean Pearson
 //! correlation between each real waveform (denoised as collocateWaves does) and the waveform
 //! simulated from the ALS at the shifted position (count weighting). Unlike the reference, which
-//! re-simulates every footprint at every grid node (simulator-reference.md §3):
+//! re-simulates every footprint at every grid node (docs/simulator-reference.md §3):
 //! * all horizontal offsets of a shot come from one pass over its points ([`raster`]: the
 //!   footprint Gaussian is separable, the pulse convolution linear);
 //! * the vertical offset is solved by cross-correlation along z ([`correlation`]), after a coarse

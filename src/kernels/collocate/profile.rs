@@ -1,5 +1,5 @@
 //! The real waveform as the collocation compares it: denoised as collocateWaves does
-//! (simulator-reference.md §3: noise from the first 12 m, μ + 4σ, features of ≥ 6 samples extended
+//! (docs/simulator-reference.md §3: noise from the first 12 m, μ + 4σ, features of ≥ 6 samples extended
 //! while above μ), put on orthometric heights with the geoid offset, resampled onto the absolute
 //! vertical grid of the simulation and cut to its signal extent.
 

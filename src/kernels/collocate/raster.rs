@@ -2,7 +2,7 @@
 //! built in one pass over the shot's ALS points.
 //!
 //! The footprint weight of a return at (x, y) for a footprint centred at (cx, cy) is
-//! G(d) = g(x − cx)·g(y − cy)/(σ√(2π)) with g(u) = exp(−u²/(2σ²)) (simulator-reference.md §1.3).
+//! G(d) = g(x − cx)·g(y − cy)/(σ√(2π)) with g(u) = exp(−u²/(2σ²)) (docs/simulator-reference.md §1.3).
 //! For the offsets cx = x₀ + i·step, cy = y₀ + j·step each return needs 2n values gx[i], gy[j]
 //! (n offsets per axis) instead of n² distances and exponentials, and its weight for offset (i, j)
 //! is the product, added to W[bin][i][j] where bin is the return's bin on the absolute vertical

@@ -1,4 +1,4 @@
-//! Which shots share an offset (CONTRACTS.md, "Collocate"): runs of consecutive covered shots cut
+//! Which shots share an offset (docs/contracts.md, "Collocate"): runs of consecutive covered shots cut
 //! into segments of at most `--segment` shots, per beam, per granule (all beams, along track), or
 //! one window of neighbours per shot.
 
@@ -7,8 +7,10 @@
 pub enum Level {
     /// Each beam of a granule, cut into runs of consecutive covered shots.
     Beam,
-    /// All beams of a granule share an offset per along-track run.
-    Track,
+    /// All beams of a granule share an offset per along-track run. (A *track* is one beam's ground
+    /// track everywhere in gedisim; `track` is accepted on the command line for this level, as
+    /// docs/contracts.md first named it.)
+    Granule,
     /// One offset per shot, with its neighbours for support.
     Shot,
 }
@@ -18,13 +20,13 @@ impl Level {
     pub fn name(self) -> &'static str {
         match self {
             Level::Beam => "beam",
-            Level::Track => "track",
+            Level::Granule => "granule",
             Level::Shot => "shot",
         }
     }
 }
 
-/// Fewest shots (beam) or along-track steps (track) of a segment: a shorter remainder joins the
+/// Fewest shots (beam) or along-track steps (granule) of a segment: a shorter remainder joins the
 /// previous segment of its run, a shorter run is reported and not solved.
 pub const MIN_SEGMENT: usize = 20;
 
@@ -61,7 +63,7 @@ pub struct ShortRun {
 }
 
 /// Segments of `slots` (sorted by `step`, ties in any order) at `level`; `segment` is the
-/// maximal length (shots at the beam level, steps at the track level). A run is a maximal
+/// maximal length (shots at the beam level, steps at the granule level). A run is a maximal
 /// sequence of covered shots at consecutive steps. Runs shorter than
 /// min(`segment`, `min_segment`) (default [`MIN_SEGMENT`]) are returned apart (beam and track
 /// levels).
@@ -79,7 +81,7 @@ pub fn plan(slots: &[Slot], level: Level, segment: usize, min_segment: usize) ->
                     plans.push(SegmentPlan { support: s.clone(), applies_to: s });
                 });
             }
-            Level::Track => {
+            Level::Granule => {
                 // Cut by distinct steps; every usable shot of a step belongs to its segment.
                 let mut steps: Vec<(i64, Vec<usize>)> = Vec::new();
                 for i in run {
@@ -136,7 +138,7 @@ fn cut(len: usize, segment: usize, min_len: usize, short: &mut Vec<ShortRun>, sh
 }
 
 /// Maximal sequences of covered slots at consecutive steps (indices into `slots`): a step with
-/// no covered slot ends a run (at the beam level, an uncovered shot; at the track level, a step
+/// no covered slot ends a run (at the beam level, an uncovered shot; at the granule level, a step
 /// where no beam is covered).
 fn runs(slots: &[Slot]) -> Vec<Vec<usize>> {
     let mut out: Vec<Vec<usize>> = Vec::new();
@@ -197,7 +199,7 @@ mod tests {
             let b = !(20..25).contains(&step);
             slots.push(Slot { step, covered: b, usable: b });
         }
-        let (plans, short) = plan(&slots, Level::Track, 40, MIN_SEGMENT);
+        let (plans, short) = plan(&slots, Level::Granule, 40, MIN_SEGMENT);
         assert!(short.is_empty());
         assert_eq!(plans.len(), 1, "50 steps: 40 + a remainder of 10 joins");
         assert_eq!(plans[0].support.len(), 95);
@@ -205,7 +207,7 @@ mod tests {
         for s in slots.iter_mut().filter(|s| s.step == 30) {
             s.covered = false;
         }
-        let (plans, short) = plan(&slots, Level::Track, 40, MIN_SEGMENT);
+        let (plans, short) = plan(&slots, Level::Granule, 40, MIN_SEGMENT);
         assert_eq!(plans.len(), 1);
         assert_eq!(short.len(), 1, "the 19 steps after the gap are too short");
     }

@@ -5,7 +5,7 @@
 
 use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
 use crate::kernels::waveform::l2a::Noise;
-use crate::kernels::sim::N_WEIGHTINGS;
+use crate::kernels::sim::{self, Profile, SimConfig, Weighting, N_WEIGHTINGS};
 
 /// Footprint σ (m) at which every shot is simulated; other widths are interpolated between them.
 pub const FSIGMA_GRID: [f64; 6] = [3.5, 4.5, 5.5, 7.0, 8.5, 10.0];
@@ -199,4 +199,68 @@ pub fn set_nominal_noise(cases: &mut [ShotCase]) {
 /// Check the RH lists of a case (101 values each).
 pub fn rh_ok(rh: &[f32]) -> bool {
     rh.len() == RH_LEN && rh.iter().all(|v| v.is_finite())
+}
+
+/// Vertical margin added above and below the simulated waveforms (m): room for the widest pulse
+/// the diagnosis tries (σ 3.8 m, 4σ kernels).
+pub const PAD_M: f64 = 16.0;
+
+/// The simulator settings of the diagnosis: the study's nominal one (15 ns pulse, σ_f 5.5 m,
+/// default profile) and, for every width of [`FSIGMA_GRID`], the same without pulse (the chain
+/// convolves its own) and without the coverage skip (the nominal run decides coverage).
+pub fn configs() -> (SimConfig, Vec<SimConfig>) {
+    let nominal = SimConfig::new(Profile::Default);
+    let variants = FSIGMA_GRID
+        .iter()
+        .map(|&f| SimConfig { fsigma: f as f32, pulse: sim::Pulse::dirac(), min_covered_fraction: None, ..nominal.clone() })
+        .collect();
+    (nominal, variants)
+}
+
+/// Search of the re-collocation of short segments: ±8 m every metre around the reported position.
+pub const RECOLLOCATE_SHIFT_M: f64 = 8.0;
+
+pub const RECOLLOCATE_STEP_M: f64 = 1.0;
+
+/// Index of the nominal σ_f 5.5 m in [`FSIGMA_GRID`] (where a site's ALS ground is taken).
+pub const NOMINAL_WIDTH: usize = 2;
+
+/// Put every width's parts of one position on one bin grid with [`PAD_M`] of empty bins above
+/// and below. The default profile's bins lie on one absolute lattice, so the grids differ by
+/// whole bins.
+pub fn site_of(vs: &[&sim::SimulatedFootprint], als_ground: f64, offset: (f64, f64)) -> Site {
+    let dz = vs[0].dz;
+    let top = vs.iter().map(|v| v.z0).fold(f64::NEG_INFINITY, f64::max) + PAD_M;
+    let bottom = vs.iter().map(|v| v.z0 - (v.n_bins() as f64 - 1.0) * dz).fold(f64::INFINITY, f64::min) - PAD_M;
+    let n = ((top - bottom) / dz).round() as usize + 1;
+    let place = |src: &[f32], z0: f64| {
+        let mut out = vec![0f32; n];
+        let off = ((top - z0) / dz).round() as usize;
+        for (k, &v) in src.iter().enumerate() {
+            if let Some(o) = out.get_mut(off + k) {
+                *o = v;
+            }
+        }
+        out
+    };
+    let variants = vs
+        .iter()
+        .map(|v| SimVariant {
+            weightings: Weighting::ALL.map(|w| {
+                let p = v.get(w);
+                Parts { ground: place(&p.ground, v.z0), canopy: place(&p.canopy, v.z0) }
+            }),
+        })
+        .collect();
+    Site { z0: top, variants, als_ground, offset }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nominal_width_is_the_nominal_footprint() {
+        assert_eq!(FSIGMA_GRID[NOMINAL_WIDTH], crate::kernels::scenario::effects::NOMINAL_FSIGMA_M);
+    }
 }

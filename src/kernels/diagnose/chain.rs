@@ -16,8 +16,9 @@ use rayon::prelude::*;
 
 use super::case::{RealAlgorithm, ShotCase, Site, FSIGMA_GRID, SITE_STEP_M};
 use crate::kernels::gedi::{N_ALGORITHMS, RH_LEN};
-use crate::kernels::waveform::l2a::{AlgorithmSettings, L2aOutcome, L2aProcessor, Noise, WaveformGeolocation};
-use crate::kernels::waveform::noise_twin::{NoiseShape, ShotTwin, GEDI_BIN_M};
+use crate::kernels::waveform::l2a::Noise;
+use crate::kernels::waveform::forward::{forward, signal_span, L2aRunner, RecordWindow};
+use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
 use crate::kernels::scenario::effects::{Effect, GeoLevel, WaveParts, WeightMethod, NOMINAL_FSIGMA_M, NOMINAL_PULSE_SIGMA_M};
 use crate::kernels::scenario::EffectSet;
 use crate::kernels::sim::Weighting;
@@ -104,14 +105,12 @@ pub struct Products {
 /// Reusable buffers of one worker.
 #[derive(Debug, Default)]
 pub struct Scratch {
-    l2a: L2aProcessor,
-    outcomes: Vec<L2aOutcome>,
-    settings: Vec<AlgorithmSettings>,
+    l2a: L2aRunner,
 }
 
 impl Scratch {
     pub fn new() -> Scratch {
-        Scratch { settings: AlgorithmSettings::all_gedi(), ..Default::default() }
+        Scratch::default()
     }
 }
 
@@ -243,7 +242,8 @@ pub fn reposition(cases: &[&ShotCase], model: &Model) -> Model {
         .collect();
     // Per unit moved as one (segment or shot): summed r per site (NaN once any shot lacks the
     // site) and its shots.
-    let mut units: HashMap<(&str, u64), (Vec<f64>, Vec<u64>)> = HashMap::new();
+    type Unit = (Vec<f64>, Vec<u64>);
+    let mut units: HashMap<(&str, u64), Unit> = HashMap::new();
     for (c, sc) in cases.iter().zip(&scores) {
         if sc.is_empty() {
             continue;
@@ -282,30 +282,14 @@ pub fn predict(case: &ShotCase, model: &Model, scratch: &mut Scratch) -> [Option
 /// waveform (DN), its noise, and its L2A products.
 #[allow(clippy::type_complexity)]
 fn twin(case: &ShotCase, model: &Model, wave: &[f64], z0: f64, seed: u64, scratch: &mut Scratch) -> Option<(Vec<f32>, Noise, [Option<Products>; N_ALGORITHMS])> {
-    let max = wave.iter().cloned().fold(0.0, f64::max);
-    if !(max > 0.0) {
-        return None;
-    }
-    let cut = max * 1e-9;
-    let first = wave.iter().position(|&v| v > cut)?;
-    let last = wave.iter().rposition(|&v| v > cut)?;
+    let (first, signal) = signal_span(wave)?;
     let real = &case.real;
     let z_first = z0 - first as f64 * case.sim.dz;
-    let start = ((real.bin0 - z_first) / crate::kernels::waveform::noise_twin::GEDI_BIN_M).round() as isize;
-    let factor = model.set().noise_sigma_factor();
-    let twin = ShotTwin {
-        energy_total: real.energy,
-        noise: Noise { mean: real.noise.mean, stddev: real.nominal_noise_stddev * factor },
-        sample_count: real.sample_count,
-        tx_pulse: None,
-        quantum: 0.0,
-        noise_shape: NoiseShape::GEDI_V1,
-    };
-    let twin = twin.apply(&wave[first..=last], case.sim.dz, start, seed).ok()?;
-    let geo = WaveformGeolocation::vertical(real.sample_count, real.bin0, real.lastbin);
-    let Scratch { l2a, outcomes, settings } = scratch;
-    l2a.process_all(&twin.wave, twin.noise, &geo, settings, outcomes);
-    let products = std::array::from_fn(|a| match outcomes.get(a) {
+    let start = ((real.bin0 - z_first) / GEDI_BIN_M).round() as isize;
+    let window = RecordWindow { sample_count: real.sample_count, start, bin0: real.bin0, lastbin: real.lastbin };
+    let noise = Noise { mean: real.noise.mean, stddev: real.nominal_noise_stddev * model.set().noise_sigma_factor() };
+    let twin = forward(signal, case.sim.dz, &window, real.energy, noise, seed, &mut scratch.l2a).ok()?;
+    let products = std::array::from_fn(|a| match scratch.l2a.outcomes.get(a) {
         Some(Ok(r)) if r.elev_lowestmode.is_finite() => Some(Products {
             ground: r.elev_lowestmode,
             rh: std::array::from_fn(|k| r.rh_cm[k] as f32 / 100.0),

@@ -72,6 +72,7 @@ impl<'a> Folds<'a> {
 
     /// Evaluate each fold's cases with its own model, its shots re-placed for it; gaps in case
     /// order.
+    #[allow(clippy::needless_range_loop)] // the fold index selects in several arrays
     pub fn held_out(&self, models: &[Model; 2]) -> Vec<ShotGap> {
         let mut out: Vec<Option<ShotGap>> = vec![None; self.cases.len()];
         for f in 0..2 {
@@ -226,6 +227,7 @@ pub fn compare(folds: &Folds, before: &[ShotGap], after: &[ShotGap], seed_label:
 /// The held-out comparison of `geolocation` (`models`: the state's fold models with it): the
 /// RH gap as [`compare`] gives it against the state's, and the shrink, intervals and gain from
 /// the spread ([`Spread`]) with a bootstrap over tracks.
+#[allow(clippy::needless_range_loop)] // the fold index selects in several arrays
 fn compare_spread(folds: &Folds, state: &State, models: &[Model; 2], after: &[ShotGap]) -> Comparison {
     let n = folds.cases.len();
     let mut real_before = vec![ShotGap::default(); n];

@@ -156,8 +156,9 @@ fn param_err(field: &str, message: impl fmt::Display) -> EffectError {
     EffectError::Param { field: field.to_string(), message: message.to_string() }
 }
 
-/// A parameter value as recorded in truth.json.
-#[derive(Debug, Clone, PartialEq)]
+/// A parameter value as recorded in truth.json and diagnosis.json (a JSON number or string).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(untagged)]
 pub enum ParamValue {
     Number(f64),
     Text(String),
@@ -321,7 +322,7 @@ impl Effect {
             }
             "footprint" => {
                 let s = num("fsigma_m")?;
-                Effect::Footprint { fsigma_m: check("fsigma_m", s, s >= 0.5 && s <= 30.0, "0.5..30 m")? }
+                Effect::Footprint { fsigma_m: check("fsigma_m", s, (0.5..=30.0).contains(&s), "0.5..30 m")? }
             }
             "noise" => {
                 let f = num("noise_sigma_factor")?;
@@ -340,7 +341,7 @@ impl Effect {
                 let g = num("gain")?;
                 Effect::Occlusion {
                     height_m: check("height_m", h, h > OCCLUSION_FLOOR_M && h <= 100.0, "0.5..100 m")?,
-                    gain: check("gain", g, g >= -1.0 && g <= 100.0, "-1..100")?,
+                    gain: check("gain", g, (-1.0..=100.0).contains(&g), "-1..100")?,
                 }
             }
             "ground_detection" => {

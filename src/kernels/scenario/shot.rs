@@ -4,10 +4,11 @@
 
 use super::effects::{EffectSet, Physics, WaveParts};
 use super::real;
-use crate::io::granule::{L1bShot, L2aAlgorithm, L2aShot, LandCover};
+use crate::kernels::gedi::{L1bShot, L2aAlgorithm, L2aShot, LandCover};
 use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
-use crate::kernels::waveform::l2a::{AlgorithmSettings, L2aOutcome, L2aProcessor, Noise, WaveformGeolocation};
-use crate::kernels::waveform::noise_twin::{NoiseShape, ShotTwin, GEDI_BIN_M};
+use crate::kernels::waveform::forward::{forward, signal_span, L2aRunner, RecordWindow};
+use crate::kernels::waveform::l2a::{L2aOutcome, Noise};
+use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
 use crate::kernels::sim::{SimulatedFootprint, Weighting};
 
 /// NASA's fill value for L2A fields without a result.
@@ -88,7 +89,7 @@ pub fn make_shot(
     physics: &Physics,
     effects: &EffectSet,
     spec: &ShotSpec,
-    l2a: &mut L2aProcessor,
+    l2a: &mut L2aRunner,
 ) -> Result<(L1bShot, L2aShot, ShotTruth), ShotError> {
     let w = sim.get(physics.weighting);
     // Ground of the count weighting when the effect's weighting has none (e.g. int with no ground intensity).
@@ -102,14 +103,7 @@ pub fn make_shot(
     };
     effects.apply_waveform(&mut parts);
     let wave: Vec<f64> = parts.compose(physics.rho_ground_over_veg).into_iter().map(|v| v.max(0.0)).collect();
-    let max = wave.iter().cloned().fold(0.0, f64::max);
-    if !(max > 0.0) {
-        return Err(ShotError::NoEnergy);
-    }
-    let cut = max * 1e-9;
-    let first = wave.iter().position(|&v| v > cut).ok_or(ShotError::NoEnergy)?;
-    let last = wave.iter().rposition(|&v| v > cut).ok_or(ShotError::NoEnergy)?;
-    let signal = &wave[first..=last];
+    let (first, signal) = signal_span(&wave).ok_or(ShotError::NoEnergy)?;
     let z_first = sim.z0 - first as f64 * sim.dz;
 
     // Record window (orthometric): top above the signal start, bottom below the ground, on a
@@ -122,19 +116,11 @@ pub fn make_shot(
     if n > usize::from(u16::MAX) {
         return Err(ShotError::TooLong(n));
     }
-    let twin = ShotTwin {
-        energy_total: spec.energy,
-        noise: spec.noise,
-        sample_count: n,
-        tx_pulse: None,
-        quantum: 0.0,
-        noise_shape: NoiseShape::GEDI_V1,
-    }
-    .apply(signal, sim.dz, start, spec.noise_seed)?;
-
     let datum = effects.vertical_offset_m();
     let elevation_bin0 = bin0_ortho + spec.geoid_m + datum;
     let elevation_lastbin = elevation_bin0 - (n - 1) as f64 * GEDI_BIN_M;
+    let window = RecordWindow { sample_count: n, start, bin0: elevation_bin0, lastbin: elevation_lastbin };
+    let twin = forward(signal, sim.dz, &window, spec.energy, spec.noise, spec.noise_seed, l2a)?;
     let dem = ground_z + spec.geoid_m + spec.dem_error_m;
     let l1b = L1bShot {
         shot_number: spec.shot_number,
@@ -155,10 +141,6 @@ pub fn make_shot(
         digital_elevation_model: dem as f32,
     };
 
-    let geo = WaveformGeolocation::vertical(n, elevation_bin0, elevation_lastbin);
-    let settings = AlgorithmSettings::all_gedi();
-    let mut outcomes: Vec<L2aOutcome> = Vec::with_capacity(settings.len());
-    l2a.process_all(&twin.wave, twin.noise, &geo, &settings, &mut outcomes);
     let energy_total: f64 = twin.wave.iter().map(|&v| f64::from(v) - twin.noise.mean).sum();
     let mut shot = L2aShot {
         shot_number: spec.shot_number,
@@ -168,7 +150,7 @@ pub fn make_shot(
         land_cover: spec.land_cover.clone(),
         ..Default::default()
     };
-    for (i, outcome) in outcomes.iter().enumerate().take(N_ALGORITHMS) {
+    for (i, outcome) in l2a.outcomes.iter().enumerate().take(N_ALGORITHMS) {
         let alg = (i + 1) as u8;
         shot.algorithms[i] = algorithm_products(outcome, effects.ground_offset_m(alg), spec, dem);
     }

@@ -1,5 +1,5 @@
 //! ALS sampling density: the 1.5 m grid of pulses (last returns) used to normalise the footprint
-//! weights (simulator-reference.md §1.5), the coverage it implies, and the header densities.
+//! weights (docs/simulator-reference.md §1.5), the coverage it implies, and the header densities.
 
 use super::points::AlsPoints;
 

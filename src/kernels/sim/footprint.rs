@@ -1,5 +1,5 @@
 //! Footprint weights: the Gaussian laser intensity on the ground and the radius beyond which it
-//! is ignored (simulator-reference.md §1.3).
+//! is ignored (docs/simulator-reference.md §1.3).
 
 /// Intensity cut-off of the reference (gediRat `iThresh`): a return contributes only when its
 /// footprint weight exceeds this value; the Gaussian pulse is truncated at the same value.
@@ -8,7 +8,7 @@ pub const I_THRESH: f32 = 0.0006;
 /// Normalised Gaussian density G(x; σ) = exp(−x²/(2σ²)) / (σ√(2π)), in f64 with the reference's
 /// operation order (libclidar `gaussian`), so that its f32 casts round identically.
 pub fn gaussian(x: f64, sigma: f64) -> f64 {
-    (-1.0 * x * x / (2.0 * sigma * sigma)).exp() / (sigma * (2.0 * std::f64::consts::PI).sqrt())
+    (-x * x / (2.0 * sigma * sigma)).exp() / (sigma * (2.0 * std::f64::consts::PI).sqrt())
 }
 
 /// Weight of a return at horizontal distance `d` (m) from the footprint centre: the Gaussian

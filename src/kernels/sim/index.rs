@@ -1,6 +1,6 @@
 //! Candidate selection: which ALS points are visited for a footprint, and in which order.
 //!
-//! * [`Octree`] reproduces the gediRat batch (`-listCoord`, simulator-reference.md §1.1, §1.4):
+//! * [`Octree`] reproduces the gediRat batch (`-listCoord`, docs/simulator-reference.md §1.1, §1.4):
 //!   only points inside some footprint's square box are kept; they are filed, in file order, into
 //!   a 40 × 40 top-level grid over the batch's bounding box; a footprint visits the cells of its
 //!   box (upper index rounded up by 0.5), x outer and y inner. The waveform's extent and the f32

@@ -1,6 +1,6 @@
 //! Pure simulation kernels: ALS points in, simulated GEDI waveforms out. No I/O, no Arrow.
 //!
-//! The pipeline of one footprint (simulator-reference.md §1): candidate points ([`index`]),
+//! The pipeline of one footprint (docs/simulator-reference.md §1): candidate points ([`index`]),
 //! footprint weights ([`footprint`]), density normalisation ([`density`]), count/frac/int
 //! weighting with a ground/canopy split, binning at `res`, pulse convolution ([`pulse`], [`wave`]),
 //! outlier cleaning, unit-integral normalisation, then truths ([`truth`]) and RH
@@ -58,7 +58,7 @@ impl Profile {
     }
 }
 
-/// The decisions where gediRat/gediMetric differ from a clean simulator (simulator-reference.md
+/// The decisions where gediRat/gediMetric differ from a clean simulator (docs/simulator-reference.md
 /// §5); `true` reproduces the reference. `docs/simulator.md` measures the effect of each.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Quirks {
@@ -85,7 +85,7 @@ pub struct Quirks {
     pub printed_metrics: bool,
 }
 
-/// Return weighting of a waveform (simulator-reference.md §1.3).
+/// Return weighting of a waveform (docs/simulator-reference.md §1.3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Weighting {
     /// Each return weighted by the footprint intensity at its position.

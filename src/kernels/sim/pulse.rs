@@ -1,4 +1,4 @@
-//! Transmitted pulse shapes (simulator-reference.md §1.6): Gaussian from σ or FWHM, tabulated from
+//! Transmitted pulse shapes (docs/simulator-reference.md §1.6): Gaussian from σ or FWHM, tabulated from
 //! (range, amplitude) pairs (a pulse file or a per-shot GEDI transmit waveform), or a Dirac.
 
 use crate::error::{Error, Result};

@@ -1,5 +1,5 @@
 //! "True" footprint properties from the simulated waveforms, as gediMetric computes them with
-//! `-ground` (simulator-reference.md §2.1): ALS ground, canopy top, ground slope and ALS cover.
+//! `-ground` (docs/simulator-reference.md §2.1): ALS ground, canopy top, ground slope and ALS cover.
 
 /// Reflectance ratio ρv/ρg = 0.57/0.40 used for the ALS cover (fixed in the reference, Q9).
 pub const RHO_RATIO: f32 = 0.57 / 0.40;

@@ -1,5 +1,5 @@
 //! Waveform arrays of one footprint: binning of weighted returns, pulse convolution, outlier
-//! cleaning and unit-integral normalisation (simulator-reference.md §1.4, §1.7–§1.10).
+//! cleaning and unit-integral normalisation (docs/simulator-reference.md §1.4, §1.7–§1.10).
 //!
 //! The arrays are generic over the accumulator type: the `gedirat` profile sums in f32 in the
 //! reference's order (bit parity), the `default` profile sums in f64, so its results (rounded to
@@ -78,6 +78,11 @@ impl<T: Sample> WaveSet<T> {
     /// Number of bins.
     pub fn len(&self) -> usize {
         self.total[0].len()
+    }
+
+    /// Whether the arrays hold no bin.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
     }
 
     /// Adds `scale ×` the weights of `c` to bin `bin` (ignored outside the arrays).

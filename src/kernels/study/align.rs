@@ -1,4 +1,4 @@
-//! Real GEDI RH brought onto the ALS ground (CONTRACTS.md "The study", gedi-products.md §5).
+//! Real GEDI RH brought onto the ALS ground (docs/contracts.md "The study", docs/gedi-products.md §5).
 //!
 //! GEDI RH values are heights above GEDI's own ground (`elev_lowestmode`). The RH point k sits at
 //! `z_ground,GEDI + RH_GEDI[k]`, so its height above the ALS ground is
@@ -55,7 +55,7 @@ pub fn align_rh(rh_gedi: &[f32], gedi_ground: f64, als_ground: f64) -> Vec<f32> 
 mod tests {
     use super::*;
 
-    /// gedi-products.md §5's example: ALS ground 100 m, GEDI ground 99 m (1 m too low), canopy
+    /// docs/gedi-products.md §5's example: ALS ground 100 m, GEDI ground 99 m (1 m too low), canopy
     /// top 120 m: GEDI RH100 = 21 m, aligned RH100 = 20 m (every RH 1 m lower).
     #[test]
     fn gedi_ground_one_metre_low_lowers_every_rh_by_one_metre() {

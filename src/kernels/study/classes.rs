@@ -1,11 +1,11 @@
 //! The study's strata and filter as pure functions: sensitivity groups, slope and cover classes,
 //! phenology from `leaf_off_flag`, forest type from Corine Land Cover, and the quality filter
-//! (CONTRACTS.md "The study"; gedi-products.md §5).
+//! (docs/contracts.md "The study"; docs/gedi-products.md §5).
 
 /// The value of every class column when its input is missing or invalid.
 pub const UNKNOWN: &str = "unknown";
 
-/// Lowest sensitivity kept by the study (gedi-products.md §5).
+/// Lowest sensitivity kept by the study (docs/gedi-products.md §5).
 pub const MIN_SENSITIVITY: f64 = 0.90;
 /// Upper bound of the `low` sensitivity group (inclusive).
 pub const LOW_SENSITIVITY_MAX: f64 = 0.96;
@@ -89,7 +89,7 @@ pub fn parse_forest_type(s: &str) -> Option<&'static str> {
     FOREST_TYPES.iter().copied().find(|t| t.eq_ignore_ascii_case(s))
 }
 
-/// The study's quality filter for one algorithm (gedi-products.md §5): `quality_flag_aN = 1`,
+/// The study's quality filter for one algorithm (docs/gedi-products.md §5): `quality_flag_aN = 1`,
 /// `degrade_flag = 0` (per shot) and sensitivity ≥ 0.90. Missing values fail.
 pub fn passes_quality(quality_flag: Option<u8>, degrade_flag: Option<u8>, sensitivity: Option<f64>) -> bool {
     quality_flag == Some(1) && degrade_flag == Some(0) && sensitivity.and_then(sensitivity_group).is_some()

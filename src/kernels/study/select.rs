@@ -1,6 +1,6 @@
 //! Which shot × weighting × algorithm rows the study keeps, and why the others go.
 //!
-//! The study's filters (CONTRACTS.md "The study", gedi-products.md §5) are applied in a fixed
+//! The study's filters (docs/contracts.md "The study", docs/gedi-products.md §5) are applied in a fixed
 //! order and every candidate row (shot × 3 weightings × 7 algorithms) that fails is counted at
 //! the **first** filter it fails, so the counts add up: candidates = Σ removed + kept. The order
 //! puts the ALS side first (most shots of a real granule are nowhere near the ALS), then the
@@ -20,7 +20,6 @@
 use crate::kernels::gedi::RH_LEN;
 use crate::kernels::study::align::VerticalReference;
 use crate::kernels::study::classes::sensitivity_group;
-use crate::dataset::results::{ResultInput, StudyAlgorithm};
 
 /// Default of `--max-days-apart`: a GEDI shot more than a year before or after the ALS
 /// acquisition window is dropped. Within a year canopy growth (< 1 m in these forests) stays
@@ -376,11 +375,64 @@ fn row(shot: &ShotFacts, ctx: &ShotContext, rules: &StudyRules, w: usize, a: usi
     })
 }
 
+/// Which L2A algorithm a row's GEDI ground and RH come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StudyAlgorithm {
+    /// The shot's `selected_algorithm` (root `rh`, `elev_lowestmode`, `sensitivity`).
+    Default,
+    /// Algorithm aN, N = 1…6 (`rh_aN`, `elev_lowestmode_aN`, `sensitivity_aN`).
+    A(u8),
+}
+
+impl StudyAlgorithm {
+    /// `default` or `a1` … `a6`.
+    pub fn label(&self) -> String {
+        match self {
+            StudyAlgorithm::Default => "default".to_string(),
+            StudyAlgorithm::A(n) => format!("a{n}"),
+        }
+    }
+}
+
+/// What `run` knows about one shot × weighting × algorithm; [`results_batch`] derives the rest.
+#[derive(Debug, Clone)]
+pub struct ResultInput {
+    pub shot_number: u64,
+    pub granule: String,
+    pub beam: String,
+    /// `coverage` | `full_power` (the shots table's `beam_type`).
+    pub beam_type: String,
+    /// From `strata/`; `None` → `unknown`.
+    pub forest_type: Option<String>,
+    /// L2A `leaf_off_flag` (V2); `None` for V1 → phenology `unknown`.
+    pub leaf_off_flag: Option<u8>,
+    pub selected_algorithm: Option<u8>,
+    /// Sensitivity of this algorithm (root `sensitivity` for `default`); must be ≥ 0.90.
+    pub sensitivity: f64,
+    /// ALS truth of this weighting (`sim.slope_deg`, `sim.als_cover`).
+    pub slope_deg: Option<f64>,
+    pub als_cover: Option<f64>,
+    /// `count` | `frac` | `int`.
+    pub weighting: String,
+    pub algorithm: StudyAlgorithm,
+    /// ALS ground of this weighting (`sim.als_ground`), m, ALS datum.
+    pub als_ground: f64,
+    /// GEDI ground of this algorithm, m, WGS84 ellipsoid (`elev_lowestmode[_aN]`).
+    pub elev_lowestmode: f64,
+    /// How to bring `elev_lowestmode` into the ALS datum.
+    pub vertical_reference: VerticalReference,
+    /// Simulated RH0…RH100 (`sim.rh`), m above `als_ground`.
+    pub rh_sim: Vec<f32>,
+    /// Real RH0…RH100 of this algorithm as stored (m above GEDI's ground).
+    pub rh_gedi: Vec<f32>,
+    /// Collocation correlation at the optimum (`offsets.r_after`), when collocated.
+    pub r_collocation: Option<f64>,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::kernels::study::classes::passes_quality;
-    use crate::dataset::results::results_batch;
 
     fn rh(top: f32) -> Vec<f32> {
         (0..RH_LEN).map(|k| top * k as f32 / 100.0).collect()
@@ -450,9 +502,8 @@ mod tests {
         assert_eq!(rows[8].slope_deg, Some(6.0), "the truths of the row's weighting");
         assert_eq!(rows[0].forest_type.as_deref(), Some("mixed"));
         assert_eq!(rows[0].vertical_reference, VerticalReference::Geoid { geoid_offset: 50.0 });
-        // The rows build a valid results batch, GEDI ground 349 − 50 = 299: 1 m below the ALS.
-        let b = results_batch(&rows).unwrap();
-        assert_eq!(b.num_rows(), 21);
+        // What a results batch requires of every row (dataset::results checks it again).
+        assert!(rows.iter().all(|r| r.rh_sim.len() == RH_LEN && r.rh_gedi.len() == RH_LEN && r.sensitivity >= 0.9));
     }
 
     #[test]
@@ -496,7 +547,7 @@ mod tests {
             (3, 3, 3, 12)
         );
         assert_eq!(rows.len(), 12);
-        assert!(rows.iter().all(|r| !matches!(r.algorithm, StudyAlgorithm::A(3 | 4 | 5))));
+        assert!(rows.iter().all(|r| !matches!(r.algorithm, StudyAlgorithm::A(3..=5))));
         // Cover 1 in frac, RH100 70 m in int: 7 rows each.
         let mut odd = sims();
         odd[1].als_cover = Some(1.0);

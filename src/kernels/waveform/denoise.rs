@@ -3,7 +3,7 @@
 //! [`denoise_leading_noise`] is the reference's denoiser for collocation (noise from the first
 //! 12 m of the record). [`denoise`] turns a real waveform into a "noise-free" one with known noise
 //! statistics (e.g. to check the noise twin). It follows
-//! gediMetric's feature detection (simulator-reference.md §2.4), detecting on a smoothed copy: a
+//! gediMetric's feature detection (docs/simulator-reference.md §2.4), detecting on a smoothed copy: a
 //! feature starts where the smoothed waveform reaches μ + k·σ and is extended both ways while it
 //! stays above μ; inside features the output is the **unsmoothed** max(w − μ, 0), as gediMetric
 //! writes it, elsewhere 0. The output is not smoothed because L2A smooths again: a smoothed
@@ -63,7 +63,7 @@ pub fn denoise(wave: &[f32], noise: Noise, settings: DenoiseSettings) -> Vec<f64
 }
 
 /// Settings of the reference's noise-tracking denoiser (gediMetric/collocateWaves `denoise`,
-/// simulator-reference.md §2.4, §3): noise statistics from the leading samples, features from
+/// docs/simulator-reference.md §2.4, §3): noise statistics from the leading samples, features from
 /// μ + k·σ, extended while above μ.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LeadingNoiseDenoise {

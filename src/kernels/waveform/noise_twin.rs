@@ -6,7 +6,7 @@
 //! - [`ShotTwin`] (mode a) copies one real shot: its energy (gain), noise mean and σ, record length
 //!   and optionally its transmit pulse; the noise has the correlation and per-sample level of real
 //!   GEDI records ([`NoiseShape::GEDI_V1`], measured) or is white.
-//! - [`LinkMarginTwin`] (mode b) is gediMetric's link-margin model (simulator-reference.md §2.3):
+//! - [`LinkMarginTwin`] (mode b) is gediMetric's link-margin model (docs/simulator-reference.md §2.3):
 //!   σ solved from a link margin in dB, signal rescaled so that the noise is `true_sig` DN on an
 //!   `offset` DN level, 12-bit floor digitisation.
 //!
@@ -222,7 +222,7 @@ impl ShotTwin {
     }
 }
 
-/// Mode (b): gediMetric's link-margin noise model (simulator-reference.md §2.3, §4).
+/// Mode (b): gediMetric's link-margin noise model (docs/simulator-reference.md §2.3, §4).
 #[derive(Debug, Clone, PartialEq)]
 pub struct LinkMarginTwin {
     /// Link margin (dB) at the reference canopy cover `cover`.

@@ -4,7 +4,7 @@
 //! RH*p* is the elevation label of the first bin, walking from the bottom of the waveform upwards,
 //! at which the cumulative energy reaches *p* % of the total, minus the ground elevation. There is
 //! no interpolation: RH values are bin labels minus the ground. The reference prints 21 values at
-//! 5 % steps; `rh[5k]` here corresponds to its RH at 5k % (simulator-reference.md §2.2).
+//! 5 % steps; `rh[5k]` here corresponds to its RH at 5k % (docs/simulator-reference.md §2.2).
 
 /// Number of RH values (0 … 100 % at 1 % steps).
 pub const N_RH: usize = 101;

@@ -74,18 +74,9 @@ pub fn render(fig: &impl Figure, dir: &Path, name: &str) -> Result<[PathBuf; 2]>
     }
     let png_path = dir.join(format!("{name}.png"));
     let svg_path = dir.join(format!("{name}.svg"));
-    write_atomic(&png_path, &png_bytes)?;
-    write_atomic(&svg_path, svg.as_bytes())?;
+    crate::dataset::write_atomic(&png_path, &png_bytes)?;
+    crate::dataset::write_atomic(&svg_path, svg.as_bytes())?;
     Ok([png_path, svg_path])
-}
-
-/// Write `bytes` to `path` through a temporary name.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
-    name.push(format!(".{}.tmp", std::process::id()));
-    let tmp = path.with_file_name(name);
-    std::fs::write(&tmp, bytes).map_err(|e| Error::file(&tmp, format!("cannot write: {e}")))?;
-    std::fs::rename(&tmp, path).map_err(|e| Error::file(path, format!("cannot rename into place: {e}")))
 }
 
 /// The legend of a chart's labelled series, drawn the same way in every figure.

@@ -18,6 +18,7 @@ use arrow::array::{Array, AsArray, RecordBatch};
 use arrow::datatypes::{DataType, Float64Type, SchemaRef};
 
 use crate::dataset::{self, tables, Dataset};
+use crate::ops::progress::{Progress, Step};
 use crate::error::{Error, Result};
 
 /// One of the study's tables: its name (file stem), a title and its SQL.
@@ -171,7 +172,7 @@ pub fn write_named_table(dir: &Path, name: &str, batch: &RecordBatch) -> Result<
         let batch = lists_as_text(batch).map_err(|e| Error::table(&csv, e))?;
         w.write(&batch).map_err(|e| Error::table(&csv, e))?;
     }
-    figures::write_atomic(&csv, &bytes)?;
+    crate::dataset::write_atomic(&csv, &bytes)?;
     Ok([pq, csv])
 }
 
@@ -213,8 +214,16 @@ pub struct ReportSummary {
     pub dir: PathBuf,
 }
 
-/// The whole report into `out` (default `<dataset>/report/`). `on_step(what)` reports progress.
-pub fn run_report(ds: &Dataset, out: Option<&Path>, on_step: &dyn Fn(&str)) -> Result<ReportSummary> {
+/// `gedisim report`: the whole report into `out` (default `<dataset>/report/`), as one
+/// [`Step::Report`] whose notes name what it is doing.
+pub fn run_report(ds: &Dataset, out: Option<&Path>, progress: &dyn Progress) -> Result<ReportSummary> {
+    progress.start(Step::Report, 0);
+    let summary = report(ds, out, &|what| progress.note(what));
+    progress.finish();
+    summary
+}
+
+fn report(ds: &Dataset, out: Option<&Path>, on_step: &dyn Fn(&str)) -> Result<ReportSummary> {
     let dir = match out {
         Some(d) => d.to_path_buf(),
         None => ds.root().join(tables::REPORT),
@@ -265,7 +274,7 @@ pub fn run_report(ds: &Dataset, out: Option<&Path>, on_step: &dyn Fn(&str)) -> R
     on_step("report.html");
     let page = html::page(ds, &ran, &summary, &drawn, &geo_notes)?;
     summary.html = dir.join("report.html");
-    figures::write_atomic(&summary.html, page.as_bytes())?;
+    crate::dataset::write_atomic(&summary.html, page.as_bytes())?;
     Ok(summary)
 }
 

@@ -5,7 +5,7 @@ use super::{Mode, WaveformGeolocation, RH_COUNT};
 
 /// The zcross-smoothed waveform minus the noise mean, linearly interpolated on the sub-bin grid
 /// from botloc (j = 0) up to toploc (j = steps). Measured: this reproduces NASA's `rx_cumulative`
-/// far better than the raw waveform (gedi-products.md §4.6).
+/// far better than the raw waveform (docs/gedi-products.md §4.6).
 pub(super) struct EnergyProfile<'a> {
     /// Interpolated energy above the noise mean at each grid step.
     values: &'a [f64],

@@ -1,4 +1,4 @@
-//! Sample position → elevation, latitude and longitude (gedi-products.md §1, exact on NASA's data).
+//! Sample position → elevation, latitude and longitude (docs/gedi-products.md §1, exact on NASA's data).
 
 /// Coordinates of the first (`bin0`) and last stored sample of one waveform.
 ///

@@ -60,7 +60,7 @@ pub struct AlgorithmSettings {
 }
 
 /// `[locs width, zcross width, front k, back k]` per algorithm (row 0 = a1), as stored in the
-/// granules' `rx_processing_aN/ancillary` (gedi-products.md §4.2).
+/// granules' `rx_processing_aN/ancillary` (docs/gedi-products.md §4.2).
 const GEDI_TABLE: [[f64; 4]; 6] = [
     [6.5, 6.5, 3.0, 6.0],
     [6.5, 3.5, 3.0, 3.0],
