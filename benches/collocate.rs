@@ -10,17 +10,17 @@
 //! Reference (docs/contracts.md, docs/simulator-reference.md §6.4): collocateWaves on a planted 40-shot
 //! track of the same scene, same grid: 105.7 s wall, 1.27 GB max RSS.
 
+mod common;
 #[path = "../tests/common/planted.rs"]
 mod planted;
-mod common;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use arrow::array::AsArray;
 use arrow::datatypes::{Float64Type, UInt32Type};
-use gedisim::dataset::Dataset;
 use common::{field, run, scene_25m};
+use gedisim::dataset::Dataset;
 use planted::{write_planted_l1b, Plant, PlantedBeam};
 
 /// Scene extent (docs/simulator-reference.md §6.3).
@@ -55,7 +55,16 @@ fn main() {
     let plant = Plant { shift: (4.0, -3.0), datum: 47.5, l1b_geoid: 47.3, noise_sigma: 2.5, seed: 11 };
     let l1b: PathBuf = tmp.path().join(gedisim::io::granule::v2_file_name("01_B", "2019108080338", 1964, 2, 5337));
     write_planted_l1b(&ds, &[beam], &plant, &l1b);
-    run(&["ingest", "gedi", "--l1b", l1b.to_str().unwrap(), "--out", tmp.path().to_str().unwrap(), "--geoid-offset", "0"]);
+    run(&[
+        "ingest",
+        "gedi",
+        "--l1b",
+        l1b.to_str().unwrap(),
+        "--out",
+        tmp.path().to_str().unwrap(),
+        "--geoid-offset",
+        "0",
+    ]);
 
     let t = Instant::now();
     let out = run(&["collocate", "--dataset", tmp.path().to_str().unwrap(), "--stats"]);
@@ -63,7 +72,9 @@ fn main() {
     let rss_mb = field(&out, " MB,");
     println!("collocate benchmark: 24,719,400 ALS points, 40 shots, ±10 m at 1 m (441 offsets), vertical solve included (2 cores)");
     println!("  gedisim collocate : {wall:.2} s wall (process), {}", out.trim());
-    println!("  reference         : {REFERENCE_S} s, {REFERENCE_GB} GB (collocateWaves, docs/simulator-reference.md §6.4)");
+    println!(
+        "  reference         : {REFERENCE_S} s, {REFERENCE_GB} GB (collocateWaves, docs/simulator-reference.md §6.4)"
+    );
     let cpu = field(&out, " s, peak");
     println!(
         "  speed-up {:.0}× (wall), {:.0}× (CPU time against the reference's single-threaded user time 100.0 s); memory {:.1}× smaller",

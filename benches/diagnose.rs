@@ -16,7 +16,17 @@ use std::time::Instant;
 
 use serde_json::Value;
 
-const EFFECTS: [&str; 9] = ["datum", "ground_detection", "canopy_change", "occlusion", "weighting", "pulse", "footprint", "noise", "geolocation"];
+const EFFECTS: [&str; 9] = [
+    "datum",
+    "ground_detection",
+    "canopy_change",
+    "occlusion",
+    "weighting",
+    "pulse",
+    "footprint",
+    "noise",
+    "geolocation",
+];
 
 /// Main parameter of an effect (the one `--magnitude` scales) and its nominal value.
 fn main_param(effect: &str) -> (&'static str, f64) {
@@ -34,7 +44,12 @@ fn main_param(effect: &str) -> (&'static str, f64) {
 }
 
 fn list(var: &str, default: &str) -> Vec<String> {
-    std::env::var(var).unwrap_or_else(|_| default.to_string()).split(',').map(|s| s.trim().to_string()).filter(|s| !s.is_empty()).collect()
+    std::env::var(var)
+        .unwrap_or_else(|_| default.to_string())
+        .split(',')
+        .map(|s| s.trim().to_string())
+        .filter(|s| !s.is_empty())
+        .collect()
 }
 
 fn run(args: &[&str]) -> bool {
@@ -95,7 +110,8 @@ fn world(dir: &Path, effect: &str, magnitude: &str, seed: &str) -> Option<Row> {
 
 fn main() {
     let tmp = tempfile::tempdir().expect("temporary folder");
-    let dir = std::env::var("GEDISIM_BENCH_DIR").map(std::path::PathBuf::from).unwrap_or_else(|_| tmp.path().to_path_buf());
+    let dir =
+        std::env::var("GEDISIM_BENCH_DIR").map(std::path::PathBuf::from).unwrap_or_else(|_| tmp.path().to_path_buf());
     let effects = list("GEDISIM_BENCH_EFFECTS", &EFFECTS.join(","));
     let magnitudes = list("GEDISIM_BENCH_MAGNITUDES", "1,2");
     let seeds = list("GEDISIM_BENCH_SEEDS", "1,2");
@@ -109,7 +125,10 @@ fn main() {
         }
     }
     jobs.extend(controls.iter().map(|s| ("none".to_string(), "1".to_string(), s.clone())));
-    println!("{:<17} {:>4} {:>4}  {:<17} {:>11} {:>7}  {:>9} {:>9} {:>7}  {:>6}", "effect", "mag", "seed", "first", "unexplained", "shrink", "truth", "fitted", "error", "s");
+    println!(
+        "{:<17} {:>4} {:>4}  {:<17} {:>11} {:>7}  {:>9} {:>9} {:>7}  {:>6}",
+        "effect", "mag", "seed", "first", "unexplained", "shrink", "truth", "fitted", "error", "s"
+    );
     let mut rows = Vec::new();
     for (e, m, s) in &jobs {
         let Some(r) = world(&dir, e, m, s) else {
@@ -119,7 +138,16 @@ fn main() {
         let err = (r.fitted - r.truth).abs() / r.truth.abs();
         println!(
             "{:<17} {:>4} {:>4}  {:<17} {:>11} {:>7.2}  {:>9.3} {:>9.3} {:>6.0}%  {:>6.0}",
-            r.effect, r.magnitude, r.seed, r.first, r.unexplained, r.shrink, r.truth, r.fitted, 100.0 * err, r.seconds
+            r.effect,
+            r.magnitude,
+            r.seed,
+            r.first,
+            r.unexplained,
+            r.shrink,
+            r.truth,
+            r.fitted,
+            100.0 * err,
+            r.seconds
         );
         rows.push(r);
     }
@@ -131,7 +159,12 @@ fn main() {
     let within = right.iter().filter(|r| (r.fitted - r.truth).abs() <= 0.2 * r.truth.abs()).count();
     let controls: Vec<&Row> = rows.iter().filter(|r| r.effect == "none").collect();
     println!();
-    println!("right effect first (and named): {}/{} = {:.0} %", right.len(), with.len(), 100.0 * right.len() as f64 / n);
+    println!(
+        "right effect first (and named): {}/{} = {:.0} %",
+        right.len(),
+        with.len(),
+        100.0 * right.len() as f64 / n
+    );
     if !shrinks.is_empty() {
         println!(
             "held-out shrink when right: median {:.2}, min {:.2}; ≥ 0.70 in {}/{}",

@@ -37,12 +37,7 @@ impl Timing {
     fn print(&self, label: &str, pairs: usize) {
         let per_cpu = self
             .cpu
-            .map(|c| {
-                format!(
-                    "{:.0} pairs/s per CPU-second ({c:.3} s CPU)",
-                    pairs as f64 / c
-                )
-            })
+            .map(|c| format!("{:.0} pairs/s per CPU-second ({c:.3} s CPU)", pairs as f64 / c))
             .unwrap_or_else(|| "CPU time unavailable".into());
         println!(
             "{label}: {pairs} pairs ({} processed) in {:.3} s wall = {:.0} pairs/s; {per_cpu}",
@@ -78,11 +73,7 @@ fn main() {
                 let (start, cpu) = (Instant::now(), thread_cpu_ns());
                 let ok = run();
                 let cpu = cpu.zip(thread_cpu_ns()).map(|(a, b)| (b - a) as f64 * 1e-9);
-                Timing {
-                    wall: start.elapsed().as_secs_f64(),
-                    cpu,
-                    ok,
-                }
+                Timing { wall: start.elapsed().as_secs_f64(), cpu, ok }
             })
             .min_by(|a, b| a.cpu.unwrap_or(a.wall).total_cmp(&b.cpu.unwrap_or(b.wall)))
             .expect("at least one repetition")
@@ -98,10 +89,7 @@ fn main() {
         }
         ok
     });
-    timing.print(
-        "process_all (CLI path: one waveform, six algorithms)",
-        pairs,
-    );
+    timing.print("process_all (CLI path: one waveform, six algorithms)", pairs);
 
     let timing = best(&mut || {
         let mut ok = 0;

@@ -59,13 +59,20 @@ fn report(title: &str, two: &str, all: &str, ingest: Option<&str>) {
     println!("{title}");
     println!("  2 footprints    : {}", two.trim());
     println!("  2000 footprints : {}", all.trim());
-    println!("  per additional footprint: {per_wave_ms:.3} ms (reference {ref_per_wave_ms:.1} ms): {:.0}× faster", ref_per_wave_ms / per_wave_ms);
+    println!(
+        "  per additional footprint: {per_wave_ms:.3} ms (reference {ref_per_wave_ms:.1} ms): {:.0}× faster",
+        ref_per_wave_ms / per_wave_ms
+    );
     println!("  end to end (2000): {t2000:.2} s vs {REF_2000_S} s: {:.1}× faster", REF_2000_S / t2000);
     println!("  peak RSS {rss:.0} MB = {:.1} % of the reference's {REF_RSS_GB} GB", rss / (REF_RSS_GB * 1e3) * 100.0);
     if let Some(ingest) = ingest {
         let ti = field(ingest, " s,");
         println!("  one-time ingest : {}", ingest.trim());
-        println!("  ingest + 2000 footprints: {:.2} s vs {REF_2000_S} s: {:.1}× faster", ti + t2000, REF_2000_S / (ti + t2000));
+        println!(
+            "  ingest + 2000 footprints: {:.2} s vs {REF_2000_S} s: {:.1}× faster",
+            ti + t2000,
+            REF_2000_S / (ti + t2000)
+        );
     }
 }
 

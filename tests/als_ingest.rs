@@ -80,7 +80,9 @@ fn real_tiles_counts_attributes_and_metadata() {
                 lo = lo.min(s);
                 hi = hi.max(s);
             }
-            classes.extend(p.column_by_name("classification").unwrap().as_primitive::<UInt8Type>().values().iter().copied());
+            classes.extend(
+                p.column_by_name("classification").unwrap().as_primitive::<UInt8Type>().values().iter().copied(),
+            );
             let rn = p.column_by_name("return_number").unwrap().as_primitive::<UInt8Type>();
             let nr = p.column_by_name("number_of_returns").unwrap().as_primitive::<UInt8Type>();
             assert!(rn.values().iter().zip(nr.values()).all(|(r, n)| r <= n && *r >= 1));
@@ -128,7 +130,9 @@ fn bbox_query_reads_only_the_row_groups_it_needs() {
             .map(|b| {
                 let x = b.column_by_name("x").unwrap().as_primitive::<Float64Type>();
                 let y = b.column_by_name("y").unwrap().as_primitive::<Float64Type>();
-                (0..b.num_rows()).filter(|&i| (x0..=x1).contains(&x.value(i)) && (y0..=y1).contains(&y.value(i))).count()
+                (0..b.num_rows())
+                    .filter(|&i| (x0..=x1).contains(&x.value(i)) && (y0..=y1).contains(&y.value(i)))
+                    .count()
             })
             .sum()
     };
@@ -199,7 +203,12 @@ fn write_las(path: &Path, format: u8, wkt: bool, extra_bytes: u16, evlr: bool) {
         b.vlrs.push(las::Vlr { user_id: "LASF_Spec".into(), record_id: 4, description: "extra".into(), data: d });
     }
     if evlr {
-        b.evlrs.push(las::Vlr { user_id: "PDAL".into(), record_id: 13, description: "pipeline".into(), data: vec![b'x'; 70_000] });
+        b.evlrs.push(las::Vlr {
+            user_id: "PDAL".into(),
+            record_id: 13,
+            description: "pipeline".into(),
+            data: vec![b'x'; 70_000],
+        });
     }
     let header = b.into_header().unwrap();
     let mut w = las::Writer::from_path(path, header).unwrap();
@@ -269,12 +278,21 @@ fn tile_without_crs_needs_epsg() {
     assert!(!ok);
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(err.contains("nocrs.las") && err.contains("CRS") && err.contains("--epsg"), "{err}");
-    let (ok, _, err) = gedisim(&["ingest", "als", f.to_str().unwrap(), "--out", ds.to_str().unwrap(), "--epsg", "2154"]);
+    let (ok, _, err) =
+        gedisim(&["ingest", "als", f.to_str().unwrap(), "--out", ds.to_str().unwrap(), "--epsg", "2154"]);
     assert!(ok, "{err}");
     // A contradicting --epsg is refused.
     let g = tmp.path().join("crs.las");
     write_las(&g, 1, true, 0, false);
-    let (ok, _, err) = gedisim(&["ingest", "als", g.to_str().unwrap(), "--out", tmp.path().join("ds2").to_str().unwrap(), "--epsg", "32631"]);
+    let (ok, _, err) = gedisim(&[
+        "ingest",
+        "als",
+        g.to_str().unwrap(),
+        "--out",
+        tmp.path().join("ds2").to_str().unwrap(),
+        "--epsg",
+        "32631",
+    ]);
     assert!(!ok && err.contains("EPSG:2154"), "{err}");
 }
 

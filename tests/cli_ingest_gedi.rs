@@ -12,7 +12,16 @@ fn ingest_gedi_writes_shots_once_and_sql_reads_them() {
     let tmp = tempfile::tempdir().unwrap();
     let ds = tmp.path().join("ds");
     let (l1b, l2a) = (data(L1B), data(L2A));
-    let args = ["ingest", "gedi", "--l1b", l1b.to_str().unwrap(), "--l2a", l2a.to_str().unwrap(), "--out", ds.to_str().unwrap()];
+    let args = [
+        "ingest",
+        "gedi",
+        "--l1b",
+        l1b.to_str().unwrap(),
+        "--l2a",
+        l2a.to_str().unwrap(),
+        "--out",
+        ds.to_str().unwrap(),
+    ];
     let (ok, _, err) = gedisim(&args);
     assert!(ok, "{err}");
     assert!(err.contains("301 shots"), "{err}");
@@ -32,7 +41,8 @@ fn ingest_gedi_writes_shots_once_and_sql_reads_them() {
 #[test]
 fn missing_input_file_is_a_one_line_error() {
     let tmp = tempfile::tempdir().unwrap();
-    let (ok, _, err) = gedisim(&["ingest", "gedi", "--l1b", "/nonexistent/GEDI01_B_x.h5", "--out", tmp.path().to_str().unwrap()]);
+    let (ok, _, err) =
+        gedisim(&["ingest", "gedi", "--l1b", "/nonexistent/GEDI01_B_x.h5", "--out", tmp.path().to_str().unwrap()]);
     assert!(!ok);
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(err.contains("/nonexistent/GEDI01_B_x.h5"), "{err}");

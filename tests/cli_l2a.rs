@@ -13,7 +13,12 @@ use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use common::{data, gedisim};
 
 fn read(path: &std::path::Path) -> Vec<arrow::record_batch::RecordBatch> {
-    ParquetRecordBatchReaderBuilder::try_new(File::open(path).unwrap()).unwrap().build().unwrap().map(|b| b.unwrap()).collect()
+    ParquetRecordBatchReaderBuilder::try_new(File::open(path).unwrap())
+        .unwrap()
+        .build()
+        .unwrap()
+        .map(|b| b.unwrap())
+        .collect()
 }
 
 #[test]
@@ -24,7 +29,8 @@ fn l2a_cli_rows_agree_with_nasa() {
     let out = tmp.path().join("l2a.parquet");
     let (ok, _, err) = gedisim(&["l2a", "--l1b", l1b.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     assert!(ok, "{err}");
-    let (ok, _, err) = gedisim(&["l2a", "--l1b", l1b.to_str().unwrap(), "--out", out.to_str().unwrap(), "--algorithms", "7"]);
+    let (ok, _, err) =
+        gedisim(&["l2a", "--l1b", l1b.to_str().unwrap(), "--out", out.to_str().unwrap(), "--algorithms", "7"]);
     assert!(!ok && err.contains("--algorithms"), "{err}");
 
     // NASA's values per (shot, algorithm), through our own ingest.
@@ -66,7 +72,11 @@ fn l2a_cli_rows_agree_with_nasa() {
         }
     }
     let (rh_rate, elev_rate) = (rh_ok as f64 / rh_all as f64, elev_ok as f64 / compared as f64);
-    println!("gedisim l2a vs NASA: {compared} shot-algorithms, RH within 0.15 m {:.1} %, ground within ½ sample {:.1} %", 100.0 * rh_rate, 100.0 * elev_rate);
+    println!(
+        "gedisim l2a vs NASA: {compared} shot-algorithms, RH within 0.15 m {:.1} %, ground within ½ sample {:.1} %",
+        100.0 * rh_rate,
+        100.0 * elev_rate
+    );
     assert_eq!(compared, 1800);
     assert!(rh_rate >= 0.99 && elev_rate >= 0.99, "{rh_rate} {elev_rate}");
 }
@@ -79,7 +89,8 @@ fn l2a_cli_reports_bad_waveforms_as_no_result_rows() {
     use gedisim::kernels::gedi::L1bShot;
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join(v2_file_name("01_B", "2023100120000", 1, 1, 1));
-    let signal: Vec<f32> = (0..600).map(|i| 220.0 + 400.0 * (-0.5 * ((i as f32 - 300.0) / 6.0).powi(2)).exp()).collect();
+    let signal: Vec<f32> =
+        (0..600).map(|i| 220.0 + 400.0 * (-0.5 * ((i as f32 - 300.0) / 6.0).powi(2)).exp()).collect();
     let shot = |k: u64, wave: Vec<f32>, sd: f64| L1bShot {
         shot_number: 29_320_600_200_465_601 + k,
         rx_waveform: wave.clone(),
@@ -116,7 +127,8 @@ fn l2a_cli_reports_bad_waveforms_as_no_result_rows() {
         let st = b.column_by_name("status").unwrap().as_string::<i32>();
         let rh = b.column_by_name("rh").unwrap().as_list::<i32>();
         for i in 0..b.num_rows() {
-            status.insert((sn.value(i) - 29_320_600_200_465_601, alg.value(i)), (st.value(i).to_string(), rh.is_null(i)));
+            status
+                .insert((sn.value(i) - 29_320_600_200_465_601, alg.value(i)), (st.value(i).to_string(), rh.is_null(i)));
         }
     }
     assert_eq!(status.len(), 5 * 6, "every shot keeps one row per algorithm");

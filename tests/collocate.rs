@@ -17,10 +17,15 @@ fn max_relative_difference(points: &sim::AlsPoints, centre: (f64, f64), offsets:
     let cfg = CollocateConfig::new(10.0, 1.0).unwrap();
     let model = CollocateConfig::model();
     let cand: Vec<u32> = (0..points.len() as u32).collect();
-    let waves = offset_waves(&points.x, &points.y, &points.z, &cand, centre, &cfg.grid, &model).expect("points contribute");
+    let waves =
+        offset_waves(&points.x, &points.y, &points.z, &cand, centre, &cfg.grid, &model).expect("points contribute");
     let mut worst = 0f64;
     for &(i, j) in offsets {
-        let fp = Footprint { id: format!("{i},{j}"), x: centre.0 + cfg.grid.offset(i) + nudge, y: centre.1 + cfg.grid.offset(j) };
+        let fp = Footprint {
+            id: format!("{i},{j}"),
+            x: centre.0 + cfg.grid.offset(i) + nudge,
+            y: centre.1 + cfg.grid.offset(j),
+        };
         let brute = sim::simulate(points, &[fp], &model).unwrap().remove(0).expect("simulated");
         let b = &brute.get(Weighting::Count).wave;
         // Brute-force bin k is labelled by its centre z0 − k·dz: absolute bin round(label/dz − ½).
@@ -46,7 +51,9 @@ fn max_relative_difference(points: &sim::AlsPoints, centre: (f64, f64), offsets:
 fn raster_matches_brute_force_simulation_at_every_tested_offset() {
     let offsets = [(10, 10), (14, 7), (0, 0), (20, 20), (0, 20), (3, 16), (10, 0)];
     let mut report = Vec::new();
-    for (tile, centre) in [("lidarforfuel_1_42", (817622.0, 6460817.0)), ("lidarforfuel_2_bas_lig", (368528.0, 6807456.0))] {
+    for (tile, centre) in
+        [("lidarforfuel_1_42", (817622.0, 6460817.0)), ("lidarforfuel_2_bas_lig", (368528.0, 6807456.0))]
+    {
         let points = gedisim::io::las::read_points(&data(&format!("als/{tile}.laz"))).unwrap();
         let points = gedisim::ops::simulate::drop_ingest_classes(&points);
         let worst = max_relative_difference(&points, centre, &offsets, 0.0);
@@ -56,9 +63,12 @@ fn raster_matches_brute_force_simulation_at_every_tested_offset() {
         let nudged = max_relative_difference(&points, centre, &offsets[..1], 0.05);
         assert!(nudged > 1e-4, "{tile}: a 5 cm displacement is not detected ({nudged:e})");
     }
-    println!("raster vs brute-force simulation, max |difference| / peak over {} offsets: {}", offsets.len(), report.join(", "));
+    println!(
+        "raster vs brute-force simulation, max |difference| / peak over {} offsets: {}",
+        offsets.len(),
+        report.join(", ")
+    );
 }
-
 
 // ---------------------------------------------------------------------------------------------
 // Planted offsets on a real tile replicated 3 × 3 (300 m × 300 m, 2.2 M points)
@@ -84,8 +94,20 @@ const PLANT: Plant = Plant { shift: (4.0, -3.0), datum: 47.5, l1b_geoid: 47.3, n
 fn beams() -> Vec<PlantedBeam> {
     let (x0, y0) = TILE_MIN;
     vec![
-        PlantedBeam { name: "BEAM0101", start: (x0 + 40.0, y0 + 60.0), end: (x0 + 240.0, y0 + 260.0), shots: 24, energy: 6000.0 },
-        PlantedBeam { name: "BEAM0000", start: (x0 + 60.0, y0 + 40.0), end: (x0 + 260.0, y0 + 240.0), shots: 24, energy: 3000.0 },
+        PlantedBeam {
+            name: "BEAM0101",
+            start: (x0 + 40.0, y0 + 60.0),
+            end: (x0 + 240.0, y0 + 260.0),
+            shots: 24,
+            energy: 6000.0,
+        },
+        PlantedBeam {
+            name: "BEAM0000",
+            start: (x0 + 60.0, y0 + 40.0),
+            end: (x0 + 260.0, y0 + 240.0),
+            shots: 24,
+            energy: 3000.0,
+        },
     ]
 }
 
@@ -101,7 +123,8 @@ fn base_dataset() -> &'static Path {
         let base = tmp.join("collocate-base");
         let _ = std::fs::remove_dir_all(&base);
         let ds = Dataset::create(&base).unwrap();
-        gedisim::ops::ingest_als::ingest_tiles(&ds, &[scene], &Default::default(), &gedisim::ops::progress::NoProgress).unwrap();
+        gedisim::ops::ingest_als::ingest_tiles(&ds, &[scene], &Default::default(), &gedisim::ops::progress::NoProgress)
+            .unwrap();
         base
     })
 }
@@ -149,8 +172,10 @@ fn read_offsets(ds: &Path) -> Vec<Row> {
         let (id, beam, level) = (s("segment_id"), s("beam"), s("level"));
         let shots = b.column_by_name("shot_numbers").unwrap().as_list::<i32>().clone();
         let n = b.column_by_name("n_shots").unwrap().as_primitive::<UInt32Type>().clone();
-        let names = ["dx", "dy", "dz", "geoid_offset", "r_before", "r_after", "dx_halfwidth", "dy_halfwidth", "dz_halfwidth"];
-        let cols: Vec<_> = names.iter().map(|c| b.column_by_name(c).unwrap().as_primitive::<Float64Type>().clone()).collect();
+        let names =
+            ["dx", "dy", "dz", "geoid_offset", "r_before", "r_after", "dx_halfwidth", "dy_halfwidth", "dz_halfwidth"];
+        let cols: Vec<_> =
+            names.iter().map(|c| b.column_by_name(c).unwrap().as_primitive::<Float64Type>().clone()).collect();
         for i in 0..b.num_rows() {
             let list = shots.value(i);
             rows.push(Row {
@@ -180,7 +205,11 @@ fn print_rows(rows: &[Row], dz_true: f64) {
         let [dx, dy, dz, _, rb, ra, hx, hy, hz] = r.v;
         println!(
             "{} | {} | {dx:+.2} {dy:+.2} {dz:+.3} ({:+.2} {:+.2} {:+.3}) | {rb:.3} → {ra:.4} | {hx:.2} {hy:.2} {hz:.3}",
-            r.segment_id, r.n_shots, dx - PLANT.shift.0, dy - PLANT.shift.1, dz - dz_true
+            r.segment_id,
+            r.n_shots,
+            dx - PLANT.shift.0,
+            dy - PLANT.shift.1,
+            dz - dz_true
         );
     }
 }
@@ -260,16 +289,24 @@ fn shot_level_gives_every_shot_an_offset_from_its_neighbours() {
     let (ex, ey, ez) = (err(0, PLANT.shift.0), err(1, PLANT.shift.1), err(2, dz_true));
     let hw = |k: usize| rows.iter().map(|r| r.v[k]).sum::<f64>() / rows.len() as f64;
     println!("shot level, 48 shots (windows of ≤ 5): |error| median / p90 / max");
-    println!("  dx {:.2} / {:.2} / {:.2} m, dy {:.2} / {:.2} / {:.2} m, dz {:.3} / {:.3} / {:.3} m", ex.0, ex.1, ex.2, ey.0, ey.1, ey.2, ez.0, ez.1, ez.2);
+    println!(
+        "  dx {:.2} / {:.2} / {:.2} m, dy {:.2} / {:.2} / {:.2} m, dz {:.3} / {:.3} / {:.3} m",
+        ex.0, ex.1, ex.2, ey.0, ey.1, ey.2, ez.0, ez.1, ez.2
+    );
     println!("  mean halfwidths dx {:.2} dy {:.2} dz {:.3} m", hw(6), hw(7), hw(8));
     for r in &rows {
         assert_eq!(r.shots.len(), 1);
         assert!(r.n_shots >= 3 && r.n_shots <= 5, "{r:?}");
     }
-    let within_1m = rows.iter().filter(|r| (r.v[0] - PLANT.shift.0).abs() <= 1.0 && (r.v[1] - PLANT.shift.1).abs() <= 1.0).count();
+    let within_1m =
+        rows.iter().filter(|r| (r.v[0] - PLANT.shift.0).abs() <= 1.0 && (r.v[1] - PLANT.shift.1).abs() <= 1.0).count();
     let inside_region = rows
         .iter()
-        .filter(|r| (r.v[0] - PLANT.shift.0).abs() <= r.v[6] && (r.v[1] - PLANT.shift.1).abs() <= r.v[7] && (r.v[2] - dz_true).abs() <= r.v[8])
+        .filter(|r| {
+            (r.v[0] - PLANT.shift.0).abs() <= r.v[6]
+                && (r.v[1] - PLANT.shift.1).abs() <= r.v[7]
+                && (r.v[2] - dz_true).abs() <= r.v[8]
+        })
         .count();
     println!("  {within_1m}/48 shots within 1 m on both axes; planted offset inside the reported half-extents for {inside_region}/48");
     // Asserted: what the shot level reaches (docs/collocation.md): the vertical goal for every
@@ -290,7 +327,13 @@ fn shot_level_gives_every_shot_an_offset_from_its_neighbours() {
 fn one_tile_dataset() -> tempfile::TempDir {
     let tmp = tempfile::tempdir().unwrap();
     let ds = Dataset::create(tmp.path()).unwrap();
-    gedisim::ops::ingest_als::ingest_tiles(&ds, &[data("als/lidarforfuel_2_bas_lig.laz")], &Default::default(), &gedisim::ops::progress::NoProgress).unwrap();
+    gedisim::ops::ingest_als::ingest_tiles(
+        &ds,
+        &[data("als/lidarforfuel_2_bas_lig.laz")],
+        &Default::default(),
+        &gedisim::ops::progress::NoProgress,
+    )
+    .unwrap();
     tmp
 }
 
@@ -336,8 +379,12 @@ fn shots_off_the_als_and_short_runs_are_reported_not_solved() {
     // The 300 real shots of the shared granule lie far from the tile: all skipped as no_als.
     let tmp = one_tile_dataset();
     let dir = tmp.path().to_str().unwrap();
-    let (l1b, l2a) = (data("gedi/GEDI01_B_2019108080338_O01964_T05337_02_003_01_sub.h5"), data("gedi/GEDI02_A_2019108080338_O01964_T05337_02_001_01_sub.h5"));
-    let (ok, _, err) = gedisim(&["ingest", "gedi", "--l1b", l1b.to_str().unwrap(), "--l2a", l2a.to_str().unwrap(), "--out", dir]);
+    let (l1b, l2a) = (
+        data("gedi/GEDI01_B_2019108080338_O01964_T05337_02_003_01_sub.h5"),
+        data("gedi/GEDI02_A_2019108080338_O01964_T05337_02_001_01_sub.h5"),
+    );
+    let (ok, _, err) =
+        gedisim(&["ingest", "gedi", "--l1b", l1b.to_str().unwrap(), "--l2a", l2a.to_str().unwrap(), "--out", dir]);
     assert!(ok, "{err}");
     let (ok, _, err) = gedisim(&["collocate", "--dataset", dir]);
     assert!(ok, "{err}");
@@ -349,7 +396,13 @@ fn shots_off_the_als_and_short_runs_are_reported_not_solved() {
     let tmp = one_tile_dataset();
     let ds = Dataset::open(tmp.path()).unwrap();
     let (x0, y0) = TILE_MIN;
-    let beam = PlantedBeam { name: "BEAM1011", start: (x0 + 35.0, y0 + 35.0), end: (x0 + 65.0, y0 + 65.0), shots: 10, energy: 6000.0 };
+    let beam = PlantedBeam {
+        name: "BEAM1011",
+        start: (x0 + 35.0, y0 + 35.0),
+        end: (x0 + 65.0, y0 + 65.0),
+        shots: 10,
+        energy: 6000.0,
+    };
     let l1b = tmp.path().join(gedisim::io::granule::v2_file_name("01_B", "2019108080338", 1964, 2, 5337));
     write_planted_l1b(&ds, &[beam], &PLANT, &l1b);
     let dir = tmp.path().to_str().unwrap();

@@ -32,7 +32,13 @@ fn diagnose_world(dir: &Path, effect: &str, extra: &[&str]) -> Value {
     ]);
     assert!(ok, "{err}");
     assert!(stdout.contains("Baseline gap"), "{stdout}");
-    for f in ["diagnosis.json", "where_strata.csv", "effects.parquet", "bias_profile_before_after.png", "waveform_residual.svg"] {
+    for f in [
+        "diagnosis.json",
+        "where_strata.csv",
+        "effects.parquet",
+        "bias_profile_before_after.png",
+        "waveform_residual.svg",
+    ] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
     serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap()).unwrap()
@@ -59,10 +65,18 @@ fn check_contract(d: &Value) {
     // Best first: the effects that explain (shrink and gain intervals above their bars, and for
     // geolocation offsets of at least 1 m fitted on both folds), then the rest, each group by its
     // score (mean of the RH and waveform shrinks; the excess-MSD shrink for geolocation).
-    let resolved = |e: &Value| e["name"] != "geolocation" || e["fold_params"].as_array().unwrap().iter().all(|p| num(&p["shot_sigma_m"]) >= 1.0);
-    let explains = |e: &Value| resolved(e) && num(&e["held_out"]["ci95"][0]) >= 0.10 && num(&e["held_out"]["gain_m_ci95"][0]) >= 0.02;
+    let resolved = |e: &Value| {
+        e["name"] != "geolocation"
+            || e["fold_params"].as_array().unwrap().iter().all(|p| num(&p["shot_sigma_m"]) >= 1.0)
+    };
+    let explains = |e: &Value| {
+        resolved(e) && num(&e["held_out"]["ci95"][0]) >= 0.10 && num(&e["held_out"]["gain_m_ci95"][0]) >= 0.02
+    };
     let keys: Vec<(bool, f64)> = effects.iter().map(|e| (explains(e), num(&e["held_out"]["score"]))).collect();
-    assert!(keys.windows(2).all(|w| w[0].0 & !w[1].0 || (w[0].0 == w[1].0 && w[0].1 >= w[1].1)), "best first: {keys:?}");
+    assert!(
+        keys.windows(2).all(|w| w[0].0 & !w[1].0 || (w[0].0 == w[1].0 && w[0].1 >= w[1].1)),
+        "best first: {keys:?}"
+    );
     assert_eq!(d["unexplained"], !keys[0].0);
     for e in effects {
         let h = &e["held_out"];

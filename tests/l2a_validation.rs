@@ -68,20 +68,14 @@ impl Agreement {
         self.toploc_exact += usize::from(r.toploc == nasa.toploc);
         self.botloc_exact += usize::from(r.botloc == nasa.botloc);
         self.zcross_exact += usize::from(r.zcross == nasa.zcross);
-        self.rh_exact += r
-            .rh_cm
-            .iter()
-            .zip(&nasa.rh_cm)
-            .filter(|(a, b)| a == b)
-            .count();
+        self.rh_exact += r.rh_cm.iter().zip(&nasa.rh_cm).filter(|(a, b)| a == b).count();
         for k in 0..RH_COUNT {
             // Both in integer cm: compare the cm values to avoid float noise at the tolerance.
             let ok = (r.rh_cm[k] - nasa.rh_cm[k]).abs() <= (RH_TOL_M * 100.0).round() as i32;
             self.rh_per_k[k] += usize::from(ok);
             self.rh_values += usize::from(ok);
         }
-        self.sensitivity +=
-            usize::from((r.sensitivity - nasa.sensitivity).abs() <= SENSITIVITY_TOL);
+        self.sensitivity += usize::from((r.sensitivity - nasa.sensitivity).abs() <= SENSITIVITY_TOL);
         // Ground choice: the number of detected modes passed over below the ground mode.
         let ours = r.num_modes - 1 - r.selected_mode;
         let theirs = nasa.num_modes.saturating_sub(1 + nasa.selected_mode);
@@ -97,12 +91,7 @@ impl Agreement {
     }
 
     fn rh_worst(&self) -> (usize, f64) {
-        let (k, &c) = self
-            .rh_per_k
-            .iter()
-            .enumerate()
-            .min_by_key(|(_, &c)| c)
-            .unwrap_or((0, &0));
+        let (k, &c) = self.rh_per_k.iter().enumerate().min_by_key(|(_, &c)| c).unwrap_or((0, &0));
         (k, self.rate(c))
     }
 }
@@ -155,10 +144,7 @@ fn l2a_matches_nasa_stored_results() {
     assert_eq!(shots.len(), 300, "the shared pair joins on 300 shots");
     let table = validate(&shots);
     print_table("All shots", &table[0]);
-    print_table(
-        "Calibration half (BEAM0001, BEAM0011, BEAM0110, BEAM1011)",
-        &table[1],
-    );
+    print_table("Calibration half (BEAM0001, BEAM0011, BEAM0110, BEAM1011)", &table[1]);
     print_table("Held-out half (BEAM0010, BEAM0101, BEAM1000)", &table[2]);
 
     // Floors: just below the rates measured on all shots (docs/l2a.md), per algorithm a1..a6.
@@ -174,13 +160,7 @@ fn l2a_matches_nasa_stored_results() {
         assert!(a.rate(a.botloc) >= floors_position[1][alg], "{name} botloc");
         assert!(a.rate(a.zcross) >= floors_position[2][alg], "{name} zcross");
         assert!(a.rh_rate(a.rh_values) >= floor_rh[alg], "{name} rh");
-        assert!(
-            a.rate(a.sensitivity) >= floor_sensitivity[alg],
-            "{name} sensitivity"
-        );
+        assert!(a.rate(a.sensitivity) >= floor_sensitivity[alg], "{name} sensitivity");
     }
-    assert!(
-        table[0][1].rate(table[0][1].ground_choice) >= 98.3,
-        "a2 ground choice"
-    );
+    assert!(table[0][1].rate(table[0][1].ground_choice) >= 98.3, "a2 ground choice");
 }

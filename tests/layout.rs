@@ -17,7 +17,9 @@ fn allowed(layer: &str) -> &'static [&'static str] {
         "sql" => &["dataset", "io", "kernels", "error"],
         "ops" => &["sql", "dataset", "io", "kernels", "error"],
         "cli" => &["ops", "dataset", "kernels", "error"],
-        other => panic!("src/{other}: a folder the layout does not name (add it to tests/layout.rs and docs/ARCHITECTURE.md)"),
+        other => panic!(
+            "src/{other}: a folder the layout does not name (add it to tests/layout.rs and docs/ARCHITECTURE.md)"
+        ),
     }
 }
 
@@ -58,7 +60,9 @@ fn module_of(file: &Path) -> Option<String> {
 /// The module a path `A::B::…` names: `A::B` when `src/A/B.rs` or `src/A/B/` exists, else `A`.
 fn module_named(a: &str, b: Option<&str>) -> String {
     match b {
-        Some(b) if src().join(a).join(format!("{b}.rs")).exists() || src().join(a).join(b).is_dir() => format!("{a}::{b}"),
+        Some(b) if src().join(a).join(format!("{b}.rs")).exists() || src().join(a).join(b).is_dir() => {
+            format!("{a}::{b}")
+        }
         _ => a.to_string(),
     }
 }
@@ -81,7 +85,12 @@ fn edges() -> BTreeMap<String, BTreeMap<String, String>> {
             let mut rest = line;
             while let Some(i) = rest.find(prefix) {
                 rest = &rest[i + prefix.len()..];
-                let names: Vec<&str> = rest.split(|c: char| !(c.is_alphanumeric() || c == '_' || c == ':')).next().unwrap_or("").split("::").collect();
+                let names: Vec<&str> = rest
+                    .split(|c: char| !(c.is_alphanumeric() || c == '_' || c == ':'))
+                    .next()
+                    .unwrap_or("")
+                    .split("::")
+                    .collect();
                 let to = match names.first() {
                     Some(&"Error") | Some(&"Result") => "error".to_string(),
                     Some(a) if !a.is_empty() => module_named(a, names.get(1).copied()),
@@ -125,7 +134,11 @@ fn kernels_do_no_io() {
         for (n, line) in code.lines().enumerate() {
             for c in IO_CRATES {
                 let named = line.contains(&format!("{c}::")) && !line.contains(&format!("_{c}::"));
-                if named && (line.trim_start().starts_with("use ") || line.contains(&format!(" {c}::")) || line.contains(&format!("({c}::"))) {
+                if named
+                    && (line.trim_start().starts_with("use ")
+                        || line.contains(&format!(" {c}::"))
+                        || line.contains(&format!("({c}::")))
+                {
                     wrong.push(format!("{}:{}: {}", f.display(), n + 1, line.trim()));
                 }
             }
@@ -150,7 +163,8 @@ fn no_module_imports_one_of_its_importers() {
                     let mut key = c[..c.len() - 1].to_vec();
                     key.sort();
                     if cycles.insert(key) {
-                        let hops: Vec<String> = c.windows(2).map(|w| format!("{} ({})", w[0], g[&w[0]][&w[1]])).collect();
+                        let hops: Vec<String> =
+                            c.windows(2).map(|w| format!("{} ({})", w[0], g[&w[0]][&w[1]])).collect();
                         eprintln!("cycle: {} → {}", hops.join(" → "), start);
                     }
                 } else if seen.insert(next.clone()) {
@@ -171,7 +185,8 @@ fn every_top_level_folder_is_a_layer() {
         if p.is_dir() {
             let name = p.file_name().unwrap().to_string_lossy().to_string();
             let _ = allowed(&name);
-            let doc = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/ARCHITECTURE.md")).unwrap();
+            let doc =
+                std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/ARCHITECTURE.md")).unwrap();
             assert!(doc.contains(&format!("`src/{name}/`")), "docs/ARCHITECTURE.md does not map src/{name}/");
         }
     }

@@ -50,9 +50,7 @@ fn twin_rates(shots: &[RealShot], shape: NoiseShape) -> ([[usize; 6]; 6], [usize
         for (draw, out) in outcomes.iter_mut().enumerate() {
             // The cleaned waveform is already on the GEDI grid and spans the whole record.
             let seed = 1000 + index as u64 + 1_000_000 * draw as u64;
-            let made = twin
-                .apply(&clean, GEDI_BIN_M, 0, seed)
-                .expect("twin of a real shot");
+            let made = twin.apply(&clean, GEDI_BIN_M, 0, seed).expect("twin of a real shot");
             processor.process_all(&made.wave, made.noise, &shot.geo, &settings, out);
         }
         for alg in 0..settings.len() {
@@ -97,10 +95,7 @@ fn shot_twin_of_each_denoised_real_waveform_reproduces_nasa_l2a() {
     let pct = |c: usize| 100.0 * c as f64 / (n * DRAWS as f64);
     let pct_pairs = |c: usize| 100.0 * c as f64 / (n * (DRAWS / 2) as f64);
     let mut measured = Vec::new();
-    for (name, shape) in [
-        ("GEDI_V1 (measured)", NoiseShape::GEDI_V1),
-        ("WHITE", NoiseShape::WHITE),
-    ] {
+    for (name, shape) in [("GEDI_V1 (measured)", NoiseShape::GEDI_V1), ("WHITE", NoiseShape::WHITE)] {
         let (counts, between) = twin_rates(&shots, shape);
         println!(
             "\nNoise twin (mode a, noise shape {name}) on {} real shots, {DRAWS} noise draws each (% of shot-draws)",
@@ -132,12 +127,7 @@ fn shot_twin_of_each_denoised_real_waveform_reproduces_nasa_l2a() {
     let floors_between = [99.3, 97.6, 94.9, 99.3, 56.8, 88.9];
     let (counts, between) = &measured[0];
     for alg in 0..6 {
-        assert_eq!(
-            counts[alg][0],
-            shots.len() * DRAWS as usize,
-            "a{}: every twin is processed",
-            alg + 1
-        );
+        assert_eq!(counts[alg][0], shots.len() * DRAWS as usize, "a{}: every twin is processed", alg + 1);
         assert!(
             pct(counts[alg][4]) >= floors[alg],
             "a{}: {:.1} % of shots agree with NASA",
@@ -165,10 +155,7 @@ fn real_record_noise_has_the_measured_shape() {
         for s in shots.iter().filter(|s| s.is_calibration() == calibration) {
             // Noise only: up to 40 samples above NASA's signal start, at most 150 samples.
             let end = (s.nasa[0].toploc as usize).saturating_sub(40).min(150);
-            let x: Vec<f64> = s.wave[..end]
-                .iter()
-                .map(|&w| (f64::from(w) - s.noise.mean) / s.noise.stddev)
-                .collect();
+            let x: Vec<f64> = s.wave[..end].iter().map(|&w| (f64::from(w) - s.noise.mean) / s.noise.stddev).collect();
             let m = x.iter().sum::<f64>() / x.len() as f64;
             let x: Vec<f64> = x.iter().map(|v| v - m).collect();
             for (l, lag) in lags.iter_mut().enumerate() {
@@ -192,10 +179,7 @@ fn real_record_noise_has_the_measured_shape() {
     println!("real record noise, calibration half: per-sample σ = {cal_ratio:.3}·noise_stddev, filter σ {cal_corr:.3} samples, autocorrelation lags 1–4 {cal_rho:.3?}");
     println!("real record noise, held-out half:    per-sample σ = {held_ratio:.3}·noise_stddev, filter σ {held_corr:.3} samples, autocorrelation lags 1–4 {held_rho:.3?}");
     let shape = NoiseShape::GEDI_V1;
-    assert!(
-        (cal_ratio - shape.per_sample_ratio).abs() < 0.01,
-        "{cal_ratio}"
-    );
+    assert!((cal_ratio - shape.per_sample_ratio).abs() < 0.01, "{cal_ratio}");
     assert!((cal_corr - shape.correlation).abs() < 0.01, "{cal_corr}");
     // The held-out half has the same shape within 10 %.
     assert!((held_ratio / cal_ratio - 1.0).abs() < 0.1, "{held_ratio}");
@@ -227,10 +211,7 @@ fn real_record_noise_has_the_measured_shape() {
                 .collect(),
         );
         let twin_sd = |shape: NoiseShape| {
-            let noise = gedisim::kernels::waveform::l2a::Noise {
-                mean: 200.0,
-                stddev: 3.0,
-            };
+            let noise = gedisim::kernels::waveform::l2a::Noise { mean: 200.0, stddev: 3.0 };
             let twin = ShotTwin {
                 energy_total: 1e-9,
                 noise,
@@ -267,22 +248,16 @@ fn link_margin_twin_is_processed_like_a_gedi_waveform() {
     let sim: Vec<f64> = (0..300)
         .map(|i| {
             let z = i as f64;
-            0.3 * (-0.5 * ((z - 100.0) / 15.0).powi(2)).exp()
-                + (-0.5 * ((z - 230.0) / 6.0).powi(2)).exp()
+            0.3 * (-0.5 * ((z - 100.0) / 15.0).powi(2)).exp() + (-0.5 * ((z - 230.0) / 6.0).powi(2)).exp()
         })
         .collect();
     let mut processor = L2aProcessor::new();
     for db in [8.0, 3.0] {
         let twin = LinkMarginTwin::new(db, 0.5);
         let made = twin.apply(&sim, SIM_BIN_M, 11).expect("link-margin twin");
-        let geo = gedisim::kernels::waveform::l2a::WaveformGeolocation::from_spacing(
-            made.wave.len(),
-            100.0,
-            GEDI_BIN_M,
-        );
-        let r = processor
-            .process(&made.wave, made.noise, &geo, &AlgorithmSettings::a1())
-            .expect("processed");
+        let geo =
+            gedisim::kernels::waveform::l2a::WaveformGeolocation::from_spacing(made.wave.len(), 100.0, GEDI_BIN_M);
+        let r = processor.process(&made.wave, made.noise, &geo, &AlgorithmSettings::a1()).expect("processed");
         // The ground peak sits at 230 bins of 0.15 m below the top, 200 noise samples later.
         let ground = 200.0 + 230.0 * SIM_BIN_M / GEDI_BIN_M;
         println!(

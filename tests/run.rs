@@ -12,12 +12,12 @@ use std::path::{Path, PathBuf};
 use arrow::array::{Array, AsArray, RecordBatch};
 use arrow::datatypes::{DataType, Float32Type, Float64Type, Int64Type};
 use common::{data, files_with_suffix, gedisim};
-use gedisim::kernels::collocate::segments::Level;
-use gedisim::ops::collocate::CollocateOptions;
 use gedisim::dataset::Dataset;
+use gedisim::kernels::collocate::segments::Level;
+use gedisim::kernels::study::select::{Filter, StudyRules};
+use gedisim::ops::collocate::CollocateOptions;
 use gedisim::ops::progress::NoProgress;
 use gedisim::ops::run::{run_study, RunOptions, RunReport};
-use gedisim::kernels::study::select::{Filter, StudyRules};
 
 /// A small flat leaf-off tile keeps the worlds fast.
 const TILE: &str = "als/lidarforfuel_2_bas_lig.laz";
@@ -71,26 +71,35 @@ fn keys(batches: &[RecordBatch]) -> BTreeSet<(String, String, String)> {
         let col = |i: usize| arrow::compute::cast(b.column(i), &DataType::Utf8).unwrap();
         let (s, w, a) = (col(0), col(1), col(2));
         for i in 0..b.num_rows() {
-            out.insert((s.as_string::<i32>().value(i).into(), w.as_string::<i32>().value(i).into(), a.as_string::<i32>().value(i).into()));
+            out.insert((
+                s.as_string::<i32>().value(i).into(),
+                w.as_string::<i32>().value(i).into(),
+                a.as_string::<i32>().value(i).into(),
+            ));
         }
     }
     out
 }
 
 fn strings(b: &RecordBatch, name: &str) -> Vec<String> {
-    let c = arrow::compute::cast(b.column_by_name(name).unwrap_or_else(|| panic!("no column {name}")), &DataType::Utf8).unwrap();
+    let c = arrow::compute::cast(b.column_by_name(name).unwrap_or_else(|| panic!("no column {name}")), &DataType::Utf8)
+        .unwrap();
     (0..c.len()).map(|i| c.as_string::<i32>().value(i).to_string()).collect()
 }
 
 fn floats(b: &RecordBatch, name: &str) -> Vec<f64> {
-    let c = arrow::compute::cast(b.column_by_name(name).unwrap_or_else(|| panic!("no column {name}")), &DataType::Float64).unwrap();
+    let c =
+        arrow::compute::cast(b.column_by_name(name).unwrap_or_else(|| panic!("no column {name}")), &DataType::Float64)
+            .unwrap();
     let c = c.as_primitive::<Float64Type>();
     (0..c.len()).map(|i| if c.is_null(i) { f64::NAN } else { c.value(i) }).collect()
 }
 
 fn lists(b: &RecordBatch, name: &str) -> Vec<Vec<f64>> {
     let c = b.column_by_name(name).unwrap().as_list::<i32>();
-    (0..c.len()).map(|i| c.value(i).as_primitive::<Float32Type>().values().iter().map(|&v| v as f64).collect()).collect()
+    (0..c.len())
+        .map(|i| c.value(i).as_primitive::<Float32Type>().values().iter().map(|&v| v as f64).collect())
+        .collect()
 }
 
 fn read_parquet(path: &Path) -> RecordBatch {
@@ -127,7 +136,8 @@ UNION ALL SELECT shot_number, weighting, 'a6' FROM base WHERE quality_flag_a6 = 
 fn run_keeps_exactly_what_passes_the_filters_and_the_report_contracts_hold() {
     let tmp = tempfile::tempdir().unwrap();
     let world = world(tmp.path(), 5, 3);
-    let truth: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(world.join("truth.json")).unwrap()).unwrap();
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(world.join("truth.json")).unwrap()).unwrap();
     let n_shots = truth["n_shots"].as_u64().unwrap();
     let ds_dir = tmp.path().join("ds");
     let mut opts = options(&world, &ds_dir, &files_with_suffix(&world.join("gedi"), ".h5"));
@@ -150,7 +160,10 @@ fn run_keeps_exactly_what_passes_the_filters_and_the_report_contracts_hold() {
 
     // One file per granule in sim/ and results/, named as in shots/.
     let stems = |t: &str| -> Vec<String> {
-        files_with_suffix(&ds_dir.join(t), ".parquet").iter().map(|p| p.file_stem().unwrap().to_string_lossy().into_owned()).collect()
+        files_with_suffix(&ds_dir.join(t), ".parquet")
+            .iter()
+            .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+            .collect()
     };
     assert_eq!(stems("results"), stems("shots"));
     assert_eq!(stems("sim"), stems("shots"));
@@ -208,19 +221,33 @@ fn run_keeps_exactly_what_passes_the_filters_and_the_report_contracts_hold() {
     let (w, a, g) = (strings(&res, "weighting"), strings(&res, "algorithm"), strings(&res, "sensitivity_group"));
     assert!(msd.num_rows() >= 21);
     for i in 0..msd.num_rows() {
-        let sel: Vec<usize> = (0..res.num_rows()).filter(|&j| w[j] == mw[i] && a[j] == ma[i] && (mg[i] == "all" || g[j] == mg[i])).collect();
-        let direct = sel.iter().map(|&j| (1..=99).map(|k| (aligned[j][k] - sim[j][k]).powi(2)).sum::<f64>()).sum::<f64>() / (99 * sel.len()) as f64;
-        assert!((sb[i] + sdsd[i] + lcs[i] - direct).abs() < 1e-9, "{} {} {}: {} vs {direct}", mw[i], ma[i], mg[i], sb[i] + sdsd[i] + lcs[i]);
+        let sel: Vec<usize> = (0..res.num_rows())
+            .filter(|&j| w[j] == mw[i] && a[j] == ma[i] && (mg[i] == "all" || g[j] == mg[i]))
+            .collect();
+        let direct =
+            sel.iter().map(|&j| (1..=99).map(|k| (aligned[j][k] - sim[j][k]).powi(2)).sum::<f64>()).sum::<f64>()
+                / (99 * sel.len()) as f64;
+        assert!(
+            (sb[i] + sdsd[i] + lcs[i] - direct).abs() < 1e-9,
+            "{} {} {}: {} vs {direct}",
+            mw[i],
+            ma[i],
+            mg[i],
+            sb[i] + sdsd[i] + lcs[i]
+        );
         assert!((m[i] - direct).abs() < 1e-9);
         assert_eq!(mn.value(i) as usize, sel.len());
     }
 }
 
 fn mtimes(dir: &Path) -> Vec<(PathBuf, std::time::SystemTime)> {
-    files_with_suffix(dir, ".parquet").into_iter().map(|p| {
-        let t = std::fs::metadata(&p).unwrap().modified().unwrap();
-        (p, t)
-    }).collect()
+    files_with_suffix(dir, ".parquet")
+        .into_iter()
+        .map(|p| {
+            let t = std::fs::metadata(&p).unwrap().modified().unwrap();
+            (p, t)
+        })
+        .collect()
 }
 
 fn simulated(r: &RunReport) -> Vec<String> {

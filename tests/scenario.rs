@@ -7,8 +7,8 @@ use std::path::Path;
 
 use arrow::array::{Array, Float64Array, StringArray};
 use common::{data, files_with_suffix, gedisim};
-use gedisim::ops::ingest_gedi::{read_gedi, GediOptions};
 use gedisim::kernels::scenario::real;
+use gedisim::ops::ingest_gedi::{read_gedi, GediOptions};
 
 /// A small flat leaf-off tile keeps the worlds fast.
 const TILE: &str = "als/lidarforfuel_2_bas_lig.laz";
@@ -30,7 +30,8 @@ fn truth(out: &Path) -> serde_json::Value {
 fn ingest(world: &Path, ds: &Path) -> usize {
     let gedi = world.join("gedi");
     let g = gedi.to_str().unwrap();
-    let (ok, _, err) = gedisim(&["ingest", "gedi", "--l1b", g, "--l2a", g, "--out", ds.to_str().unwrap(), "--strict-join"]);
+    let (ok, _, err) =
+        gedisim(&["ingest", "gedi", "--l1b", g, "--l2a", g, "--out", ds.to_str().unwrap(), "--strict-join"]);
     assert!(ok, "{err}");
     assert!(!err.contains("warning"), "{err}");
     let shots = err.lines().filter_map(|l| l.split(": ").nth(1)?.strip_suffix(" shots")?.parse::<usize>().ok()).sum();
@@ -96,7 +97,10 @@ fn same_seed_gives_identical_granules_and_another_seed_does_not() {
         assert_eq!(x.file_name(), y.file_name());
         assert!(std::fs::read(x).unwrap() == std::fs::read(y).unwrap(), "{} differs", x.display());
     }
-    assert_eq!(std::fs::read(tmp.path().join("a/truth.json")).unwrap(), std::fs::read(tmp.path().join("b/truth.json")).unwrap());
+    assert_eq!(
+        std::fs::read(tmp.path().join("a/truth.json")).unwrap(),
+        std::fs::read(tmp.path().join("b/truth.json")).unwrap()
+    );
     let waves = |files: &[std::path::PathBuf]| {
         let l1b: Vec<_> = files.iter().filter(|f| f.to_string_lossy().contains("GEDI01_B")).cloned().collect();
         let (batches, _) = read_gedi(&l1b, &[], &GediOptions::default()).unwrap();
@@ -106,7 +110,8 @@ fn same_seed_gives_identical_granules_and_another_seed_does_not() {
     // A world is not silently overwritten.
     let world = tmp.path().join("a");
     let tile = data(TILE);
-    let (ok, _, err) = gedisim(&["scenario", "--effect", "none", "--als", tile.to_str().unwrap(), "--out", world.to_str().unwrap()]);
+    let (ok, _, err) =
+        gedisim(&["scenario", "--effect", "none", "--als", tile.to_str().unwrap(), "--out", world.to_str().unwrap()]);
     assert!(!ok && err.contains("--force") && err.trim().lines().count() == 1, "{err}");
 }
 
@@ -114,7 +119,10 @@ fn same_seed_gives_identical_granules_and_another_seed_does_not() {
 fn pair_effect_is_planted_and_recorded() {
     let tmp = tempfile::tempdir().unwrap();
     let world = tmp.path().join("w");
-    let err = scenario(&world, &["--effect", "datum+ground_detection", "--param", "dz_m=-1", "--param", "algorithm=2", "--passes", "2"]);
+    let err = scenario(
+        &world,
+        &["--effect", "datum+ground_detection", "--param", "dz_m=-1", "--param", "algorithm=2", "--passes", "2"],
+    );
     assert!(err.contains("datum+ground_detection"), "{err}");
     let t = truth(&world);
     assert_eq!(t["effect"], "datum+ground_detection");
@@ -130,7 +138,9 @@ fn pair_effect_is_planted_and_recorded() {
         let col = |n: &str| b.column_by_name(n).unwrap().as_any().downcast_ref::<Float64Array>().unwrap().clone();
         let (a1, a2) = (col("elev_lowestmode_a1"), col("elev_lowestmode_a2"));
         let geoid = col("geoid");
-        assert!(b.column_by_name("beam_type").unwrap().as_any().downcast_ref::<StringArray>().unwrap().null_count() == 0);
+        assert!(
+            b.column_by_name("beam_type").unwrap().as_any().downcast_ref::<StringArray>().unwrap().null_count() == 0
+        );
         for i in 0..b.num_rows() {
             assert!((geoid.value(i) - 49.0).abs() < 1e-5);
             diffs.push(a2.value(i) - a1.value(i));
@@ -176,7 +186,11 @@ fn scenario_constants_match_the_real_granule() {
     let median = |mut v: Vec<f64>| {
         v.sort_by(f64::total_cmp);
         let n = v.len();
-        if n % 2 == 1 { v[n / 2] } else { (v[n / 2 - 1] + v[n / 2]) / 2.0 }
+        if n % 2 == 1 {
+            v[n / 2]
+        } else {
+            (v[n / 2 - 1] + v[n / 2]) / 2.0
+        }
     };
     for (kind, rec) in [("coverage", real::COVERAGE), ("full_power", real::FULL_POWER)] {
         let (mut sd, mut mean) = (Vec::new(), Vec::new());

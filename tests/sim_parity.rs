@@ -34,7 +34,8 @@ fn untar(bytes: &[u8]) -> HashMap<String, String> {
     let mut at = 0;
     while at + 512 <= bytes.len() && bytes[at] != 0 {
         let header = &bytes[at..at + 512];
-        let field = |a: usize, b: usize| String::from_utf8_lossy(&header[a..b]).trim_end_matches('\0').trim().to_string();
+        let field =
+            |a: usize, b: usize| String::from_utf8_lossy(&header[a..b]).trim_end_matches('\0').trim().to_string();
         let name = field(0, 100);
         let size = usize::from_str_radix(&field(124, 136), 8).unwrap();
         let body = &bytes[at + 512..at + 512 + size];
@@ -180,13 +181,19 @@ fn compare(sim: &SimulatedFootprint, w: Weighting, golden: &GoldenWave, metric: 
     let slope: f64 = metric[3].parse().unwrap();
     let cover: f64 = metric[4].parse().unwrap();
     let (ours_g, ours_top, ours_slope) = (tr.als_ground.unwrap(), tr.true_top.unwrap(), tr.slope_deg.unwrap());
-    let devs = [(ours_g - g).abs(), (ours_top - top).abs(), (ours_slope as f64 - slope).abs(), (tr.als_cover as f64 - cover).abs()];
+    let devs = [
+        (ours_g - g).abs(),
+        (ours_top - top).abs(),
+        (ours_slope as f64 - slope).abs(),
+        (tr.als_cover as f64 - cover).abs(),
+    ];
     t.max_dev_ground = t.max_dev_ground.max(devs[0]);
     t.max_dev_top = t.max_dev_top.max(devs[1]);
     t.max_dev_slope = t.max_dev_slope.max(devs[2]);
     t.max_dev_cover = t.max_dev_cover.max(devs[3]);
     t.truths += 4;
-    let ours_printed = [format!("{ours_g:.2}"), format!("{ours_top:.2}"), format!("{ours_slope:.4}"), format!("{:.4}", tr.als_cover)];
+    let ours_printed =
+        [format!("{ours_g:.2}"), format!("{ours_top:.2}"), format!("{ours_slope:.4}"), format!("{:.4}", tr.als_cover)];
     t.truths_identical += (0..4).filter(|&i| ours_printed[i] == metric[i + 1]).count();
     let id = &sim.id;
     assert!(devs[0] <= 0.005 + 1e-9, "{id} {}: ground {ours_g} vs {g}", w.name());
@@ -264,7 +271,11 @@ struct Effect {
     skipped: usize,
 }
 
-fn effect(base: &[Result<SimulatedFootprint, gedisim::kernels::sim::SkipReason>], other: &[Result<SimulatedFootprint, gedisim::kernels::sim::SkipReason>], e: &mut Effect) {
+fn effect(
+    base: &[Result<SimulatedFootprint, gedisim::kernels::sim::SkipReason>],
+    other: &[Result<SimulatedFootprint, gedisim::kernels::sim::SkipReason>],
+    e: &mut Effect,
+) {
     for (a, b) in base.iter().zip(other) {
         let (Ok(a), Ok(b)) = (a, b) else {
             e.skipped += usize::from(a.is_ok() != b.is_ok());
@@ -286,7 +297,8 @@ fn effect(base: &[Result<SimulatedFootprint, gedisim::kernels::sim::SkipReason>]
             // RH0 and RH100 hinge on the faintest bins; RH1…RH99 show the bulk of the change.
             let inner = ra[1..100].iter().zip(&rb[1..100]).map(|(x, y)| (x - y).abs() as f64).fold(0.0, f64::max);
             e.max_rh_inner_dev = e.max_rh_inner_dev.max(inner);
-            e.max_ground_dev = e.max_ground_dev.max((wa.truth.als_ground.unwrap() - wb.truth.als_ground.unwrap()).abs());
+            e.max_ground_dev =
+                e.max_ground_dev.max((wa.truth.als_ground.unwrap() - wb.truth.als_ground.unwrap()).abs());
             e.max_top_dev = e.max_top_dev.max((wa.truth.true_top.unwrap() - wb.truth.true_top.unwrap()).abs());
         }
     }
@@ -332,7 +344,15 @@ fn effect_of_each_default_decision() {
     for (name, e) in &effects {
         println!(
             "| {name} | {} | {} | {:.1e} | {} | {:.2} | {:.2} | {:.4} | {:.2} | {} |",
-            e.compared, e.same_grid, e.max_wave_dev, e.rh_changed, e.max_rh_dev, e.max_rh_inner_dev, e.max_ground_dev, e.max_top_dev, e.skipped
+            e.compared,
+            e.same_grid,
+            e.max_wave_dev,
+            e.rh_changed,
+            e.max_rh_dev,
+            e.max_rh_inner_dev,
+            e.max_ground_dev,
+            e.max_top_dev,
+            e.skipped
         );
     }
     println!(

@@ -10,14 +10,20 @@ use arrow::datatypes::{DataType, Field, Float32Type, Float64Type, Schema};
 
 use common::data;
 use gedisim::dataset::{self, Dataset};
-use gedisim::ops::ingest_als::{ingest_tiles, AlsOptions};
 use gedisim::kernels::sim::{self, Footprint, Profile, SimConfig, Weighting};
+use gedisim::ops::ingest_als::{ingest_tiles, AlsOptions};
 
 /// A dataset with one real tile and a `shots` table of 12 positions on it (plus one off it).
 fn dataset() -> (tempfile::TempDir, Dataset, Vec<Footprint>) {
     let tmp = tempfile::tempdir().unwrap();
     let ds = Dataset::create(tmp.path()).unwrap();
-    ingest_tiles(&ds, &[data("als/lidarforfuel_2_bas_lig.laz")], &AlsOptions::default(), &gedisim::ops::progress::NoProgress).unwrap();
+    ingest_tiles(
+        &ds,
+        &[data("als/lidarforfuel_2_bas_lig.laz")],
+        &AlsOptions::default(),
+        &gedisim::ops::progress::NoProgress,
+    )
+    .unwrap();
     let mut fps = Vec::new();
     for i in 0..4 {
         for j in 0..3 {
@@ -83,7 +89,11 @@ fn sql_query_matches_the_direct_path_and_the_kernels() {
                     let sql_rh: Vec<f32> = sql_rh.as_primitive::<Float32Type>().values().to_vec();
                     assert_eq!(sql_rh, ww.rh.unwrap().to_vec(), "{} {}", shot.value(i), w.name());
                     let from_wave = rh2.value(i);
-                    assert_eq!(from_wave.as_primitive::<Float32Type>().values().to_vec(), sql_rh, "gedi_rh agrees with the kernel");
+                    assert_eq!(
+                        from_wave.as_primitive::<Float32Type>().values().to_vec(),
+                        sql_rh,
+                        "gedi_rh agrees with the kernel"
+                    );
                     compared += 1;
                 }
             }

@@ -50,7 +50,13 @@ pub fn collocate(a: CollocateArgs) -> Result<()> {
     let start = Instant::now();
     let level = collocate_level(a.level);
     let ds = Dataset::open(&a.dataset)?;
-    let opts = CollocateOptions { level, segment: a.segment, max_shift: a.max_shift, step: a.step, min_segment: a.min_segment };
+    let opts = CollocateOptions {
+        level,
+        segment: a.segment,
+        max_shift: a.max_shift,
+        step: a.step,
+        min_segment: a.min_segment,
+    };
     let report = gedisim::ops::collocate::collocate(&ds, &opts, &Bars::new())?;
     for s in &report.short_runs {
         eprintln!("too short, not collocated: {s}");

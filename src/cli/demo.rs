@@ -31,10 +31,23 @@ pub struct DemoArgs {
 
 pub fn demo(a: DemoArgs) -> Result<()> {
     let start = Instant::now();
-    let opts = gedisim::ops::demo::DemoOptions { out: a.out.clone(), effect: a.effect, seed: a.seed, passes: a.passes, force: a.force };
+    let opts = gedisim::ops::demo::DemoOptions {
+        out: a.out.clone(),
+        effect: a.effect,
+        seed: a.seed,
+        passes: a.passes,
+        force: a.force,
+    };
     let d = gedisim::ops::demo::run_demo(&opts, &Bars::new())?;
     match &d.world {
-        Some(w) => eprintln!("world: {} tiles, {} granules, {} shots, effect {} → {}", w.tiles, w.granules, w.shots, opts.effect, d.world_dir.display()),
+        Some(w) => eprintln!(
+            "world: {} tiles, {} granules, {} shots, effect {} → {}",
+            w.tiles,
+            w.granules,
+            w.shots,
+            opts.effect,
+            d.world_dir.display()
+        ),
         None => eprintln!("world: reusing {} (effect {}, seed {})", d.world_dir.display(), opts.effect, opts.seed),
     }
     print_run(&d.run);

@@ -59,7 +59,12 @@ pub fn diagnose(a: DiagnoseArgs) -> Result<()> {
         eprintln!("no offsets table: collocated per beam first ({} segments → {})", c.segments, c.table.display());
     }
     let out = &r.output;
-    eprintln!("shots: {} read, {} used; dropped: {}", out.cases.shots_read, out.diagnosis.n_shots, gedisim::ops::diagnose::dropped_text(&out.cases));
+    eprintln!(
+        "shots: {} read, {} used; dropped: {}",
+        out.cases.shots_read,
+        out.diagnosis.n_shots,
+        gedisim::ops::diagnose::dropped_text(&out.cases)
+    );
     for line in gedisim::ops::diagnose::summary_lines(&out.diagnosis) {
         println!("{line}");
     }

@@ -6,7 +6,6 @@ use clap::Args;
 
 use gedisim::Result;
 
-
 #[derive(Args)]
 pub struct ExportGeoArgs {
     /// Dataset directory.

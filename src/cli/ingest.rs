@@ -95,14 +95,17 @@ pub fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
         return Err(Error::Usage("give --l1b and/or --l2a files".into()));
     }
     let ds = Dataset::create(&a.out)?;
-    let (outcomes, report) = gedisim::ops::ingest_gedi::ingest(&ds, &a.l1b, &a.l2a, a.epsg, a.geoid_offset, a.strict_join, &Bars::new())?;
+    let (outcomes, report) =
+        gedisim::ops::ingest_gedi::ingest(&ds, &a.l1b, &a.l2a, a.epsg, a.geoid_offset, a.strict_join, &Bars::new())?;
     for w in report.warnings() {
         eprintln!("warning: {w}");
     }
     for o in outcomes {
         match o {
             GranuleOutcome::Ingested { granule, shots } => eprintln!("{granule}: {shots} shots"),
-            GranuleOutcome::AlreadyIngested { granule } => eprintln!("{granule}: already ingested (same content), skipped"),
+            GranuleOutcome::AlreadyIngested { granule } => {
+                eprintln!("{granule}: already ingested (same content), skipped")
+            }
         }
     }
     Ok(())
@@ -116,7 +119,10 @@ pub fn ingest_strata(a: IngestStrataArgs) -> Result<()> {
     let counts: Vec<String> = counts.iter().map(|(k, v)| format!("{k} {v}")).collect();
     eprintln!("{} shots → {} ({})", report.rows, report.path.display(), counts.join(", "));
     if report.outside > 0 || report.no_position > 0 {
-        eprintln!("{} shots outside the raster and {} without a position: forest type `unknown`", report.outside, report.no_position);
+        eprintln!(
+            "{} shots outside the raster and {} without a position: forest type `unknown`",
+            report.outside, report.no_position
+        );
     }
     if report.not_in_dataset > 0 {
         eprintln!("warning: {} CSV rows name shots that are not in the dataset's shots table", report.not_in_dataset);

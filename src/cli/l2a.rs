@@ -6,7 +6,6 @@ use clap::Args;
 
 use gedisim::Result;
 
-
 #[derive(Args)]
 pub struct L2aArgs {
     /// GEDI L1B file (V1 or V2).

@@ -8,8 +8,8 @@ mod diagnose;
 mod export;
 mod ingest;
 mod l2a;
-mod reporters;
 mod report;
+mod reporters;
 mod run;
 mod scenario;
 mod simulate;
@@ -34,7 +34,11 @@ use simulate::SimulateArgs;
 use sql::SqlArgs;
 
 #[derive(Parser)]
-#[command(name = "gedisim", version, about = "Simulate GEDI waveforms from ALS, process them like GEDI L2A, and diagnose the sim-to-real gap")]
+#[command(
+    name = "gedisim",
+    version,
+    about = "Simulate GEDI waveforms from ALS, process them like GEDI L2A, and diagnose the sim-to-real gap"
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
@@ -95,9 +99,7 @@ pub enum ExportCommand {
 #[derive(Subcommand)]
 pub enum BenchCommand {
     /// Decode a LAS/LAZ file with the las crate alone (the baseline of the ingest benchmark).
-    Decode {
-        file: PathBuf,
-    },
+    Decode { file: PathBuf },
 }
 
 pub fn run(cli: Cli) -> Result<()> {

@@ -2,12 +2,11 @@
 
 use std::path::PathBuf;
 
-use clap::Args;
 use super::reporters::Bars;
+use clap::Args;
 
 use gedisim::dataset::Dataset;
 use gedisim::Result;
-
 
 #[derive(Args)]
 pub struct ReportArgs {

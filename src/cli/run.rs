@@ -83,12 +83,30 @@ pub fn print_ingest_and_collocation(r: &gedisim::ops::run::RunReport) {
     use gedisim::ops::ingest_als::TileOutcome;
     use gedisim::ops::ingest_gedi::GranuleOutcome;
     if !r.tiles.is_empty() {
-        let new: Vec<u64> = r.tiles.iter().filter_map(|t| if let TileOutcome::Ingested { points, .. } = t { Some(*points) } else { None }).collect();
-        eprintln!("ALS: {} tiles ingested ({} points), {} already ingested", new.len(), new.iter().sum::<u64>(), r.tiles.len() - new.len());
+        let new: Vec<u64> = r
+            .tiles
+            .iter()
+            .filter_map(|t| if let TileOutcome::Ingested { points, .. } = t { Some(*points) } else { None })
+            .collect();
+        eprintln!(
+            "ALS: {} tiles ingested ({} points), {} already ingested",
+            new.len(),
+            new.iter().sum::<u64>(),
+            r.tiles.len() - new.len()
+        );
     }
     if !r.ingested.is_empty() {
-        let new: Vec<usize> = r.ingested.iter().filter_map(|g| if let GranuleOutcome::Ingested { shots, .. } = g { Some(*shots) } else { None }).collect();
-        eprintln!("GEDI: {} granules ingested ({} shots), {} already ingested", new.len(), new.iter().sum::<usize>(), r.ingested.len() - new.len());
+        let new: Vec<usize> = r
+            .ingested
+            .iter()
+            .filter_map(|g| if let GranuleOutcome::Ingested { shots, .. } = g { Some(*shots) } else { None })
+            .collect();
+        eprintln!(
+            "GEDI: {} granules ingested ({} shots), {} already ingested",
+            new.len(),
+            new.iter().sum::<usize>(),
+            r.ingested.len() - new.len()
+        );
     }
     for w in &r.warnings {
         eprintln!("warning: {w}");
@@ -102,7 +120,8 @@ pub fn print_ingest_and_collocation(r: &gedisim::ops::run::RunReport) {
     match &r.collocation {
         Some(c) => {
             let skipped: Vec<String> = c.skipped.iter().map(|(k, v)| format!("{k} {v}")).collect();
-            let skipped = if skipped.is_empty() { String::new() } else { format!("; shots not used: {}", skipped.join(", ")) };
+            let skipped =
+                if skipped.is_empty() { String::new() } else { format!("; shots not used: {}", skipped.join(", ")) };
             eprintln!(
                 "collocation: {} granules, {} shots read, {} segments solved, {} runs too short{skipped} → {}",
                 r.collocated.len(),
@@ -130,7 +149,11 @@ pub fn print_run(r: &gedisim::ops::run::RunReport) {
         }
     } else {
         let (ok, skipped) = simulated.iter().filter_map(|g| g.simulated).fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-        eprintln!("simulation: {} shots of {} granules ({ok} simulated, {skipped} skipped by the simulator)", ok + skipped, simulated.len());
+        eprintln!(
+            "simulation: {} shots of {} granules ({ok} simulated, {skipped} skipped by the simulator)",
+            ok + skipped,
+            simulated.len()
+        );
     }
     let written = r.granules_processed();
     eprintln!("results: {written} granules written, {} up to date", r.granules.len() - written);

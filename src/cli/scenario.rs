@@ -7,7 +7,6 @@ use clap::Args;
 use gedisim::ops::ingest_als::{self as als};
 use gedisim::{Error, Result};
 
-
 #[derive(Args)]
 pub struct ScenarioArgs {
     /// Withheld effect: none, geolocation, datum, weighting, pulse, footprint, noise,
@@ -56,7 +55,8 @@ pub fn scenario(a: ScenarioArgs) -> Result<()> {
                 .ok_or_else(|| Error::Usage(format!("--param {p}: expected key=value")))
         })
         .collect::<Result<Vec<_>>>()?;
-    let effects = gedisim::kernels::scenario::EffectSet::parse(&a.effect, a.magnitude, &params).map_err(|e| Error::Usage(e.to_string()))?;
+    let effects = gedisim::kernels::scenario::EffectSet::parse(&a.effect, a.magnitude, &params)
+        .map_err(|e| Error::Usage(e.to_string()))?;
     let inputs = if a.als.is_empty() {
         vec![PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/als")]
     } else {

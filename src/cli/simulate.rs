@@ -70,7 +70,9 @@ pub fn simulate(a: SimulateArgs) -> Result<()> {
             };
             Source::Direct { als, footprints, out, keep_all_classes: a.keep_all_classes }
         }
-        (None, None) => return Err(Error::Usage("give --als, --footprints and --out (direct mode) or --dataset".into())),
+        (None, None) => {
+            return Err(Error::Usage("give --als, --footprints and --out (direct mode) or --dataset".into()))
+        }
     };
     let opts = SimulateOptions {
         source,
@@ -88,7 +90,12 @@ pub fn simulate(a: SimulateArgs) -> Result<()> {
     };
     let start = Instant::now();
     let r = gedisim::ops::simulate::simulate(&opts, &Bars::new())?;
-    eprintln!("{} footprints simulated, {} skipped (see the status column) → {}", r.simulated, r.skipped, r.out.display());
+    eprintln!(
+        "{} footprints simulated, {} skipped (see the status column) → {}",
+        r.simulated,
+        r.skipped,
+        r.out.display()
+    );
     if a.stats {
         let s = start.elapsed().as_secs_f64();
         let n = r.simulated + r.skipped;

@@ -6,7 +6,6 @@ use clap::Args;
 
 use gedisim::{Error, Result};
 
-
 #[derive(Args)]
 pub struct SqlArgs {
     /// Dataset directory.

@@ -7,15 +7,17 @@ use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use arrow::array::{Array, ArrayRef, AsArray, Float32Array, Float64Array, StringArray, UInt16Array, UInt64Array, UInt8Array};
+use arrow::array::{
+    Array, ArrayRef, AsArray, Float32Array, Float64Array, StringArray, UInt16Array, UInt64Array, UInt8Array,
+};
 use arrow::datatypes::{DataType, Field, Schema, SchemaRef, TimeUnit};
-use arrow::record_batch::RecordBatch;
 use arrow::datatypes::{Float32Type, Float64Type, UInt16Type, UInt8Type};
+use arrow::record_batch::RecordBatch;
 use parquet::arrow::arrow_reader::{ArrowReaderMetadata, ArrowReaderOptions, ParquetRecordBatchReaderBuilder};
 use parquet::arrow::ProjectionMask;
-use rayon::prelude::*;
 use parquet::file::metadata::ParquetMetaData;
 use parquet::file::statistics::Statistics;
+use rayon::prelude::*;
 
 use crate::dataset::{self, tables, Dataset};
 use crate::error::{Error, Result};
@@ -112,7 +114,8 @@ pub fn dataset_epsg(dataset: &Dataset) -> Result<Option<u32>> {
     let files = dataset::table_files(&tiles_dir).map_err(|e| Error::file(&tiles_dir, e))?;
     let Some(first) = files.first() else { return Ok(None) };
     let file = File::open(first).map_err(|e| Error::file(first, e))?;
-    let reader = parquet::file::serialized_reader::SerializedFileReader::new(file).map_err(|e| Error::table(first, e))?;
+    let reader =
+        parquet::file::serialized_reader::SerializedFileReader::new(file).map_err(|e| Error::table(first, e))?;
     use parquet::file::reader::FileReader;
     let kv = reader.metadata().file_metadata().key_value_metadata().cloned().unwrap_or_default();
     Ok(kv.iter().find(|k| k.key == meta::EPSG).and_then(|k| k.value.as_deref()?.parse().ok()))
@@ -174,12 +177,14 @@ impl AlsTable {
     /// Open the `als/` table of a dataset (reads only the footers).
     pub fn open(ds: &Dataset) -> Result<Self> {
         let dir = ds.root().join(tables::ALS);
-        let paths = dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no ALS table ({e}): run `gedisim ingest als`")))?;
+        let paths = dataset::table_files(&dir)
+            .map_err(|e| Error::file(&dir, format!("no ALS table ({e}): run `gedisim ingest als`")))?;
         let mut files = Vec::new();
         let mut cover_index: HashMap<(i64, i64), Vec<(usize, usize)>> = HashMap::new();
         for path in paths {
             let file = File::open(&path).map_err(|e| Error::file(&path, e))?;
-            let meta = ArrowReaderMetadata::load(&file, ArrowReaderOptions::new()).map_err(|e| Error::table(&path, e))?;
+            let meta =
+                ArrowReaderMetadata::load(&file, ArrowReaderOptions::new()).map_err(|e| Error::table(&path, e))?;
             let groups = row_group_boxes(meta.metadata(), &path)?;
             for (g, b) in groups.iter().enumerate() {
                 let cell = |v: f64| (v / COVER_CELL).floor() as i64;
@@ -232,10 +237,8 @@ impl AlsTable {
                 }
             }
         }
-        let parts = jobs
-            .par_iter()
-            .map(|(fi, g, hit)| self.read_xyz(*fi, *g, hit))
-            .collect::<Result<Vec<PointCloud>>>()?;
+        let parts =
+            jobs.par_iter().map(|(fi, g, hit)| self.read_xyz(*fi, *g, hit)).collect::<Result<Vec<PointCloud>>>()?;
         let n = parts.iter().map(PointCloud::len).sum();
         let mut out = PointCloud { x: Vec::with_capacity(n), y: Vec::with_capacity(n), z: Vec::with_capacity(n) };
         for p in parts {
@@ -369,10 +372,14 @@ fn row_group_boxes(meta: &ParquetMetaData, path: &Path) -> Result<Vec<BBox>> {
 
 /// Append the rows of `b` (those inside `keep`, when given) to `out`.
 fn append(out: &mut AlsPoints, b: &arrow::record_batch::RecordBatch, keep: Option<BBox>, path: &Path) -> Result<()> {
-    let col = |name: &str| b.column_by_name(name).ok_or_else(|| Error::field(path, name, "column missing from the ALS table"));
+    let col = |name: &str| {
+        b.column_by_name(name).ok_or_else(|| Error::field(path, name, "column missing from the ALS table"))
+    };
     let (x, y) = (col("x")?.as_primitive::<Float64Type>().values(), col("y")?.as_primitive::<Float64Type>().values());
     let rows: Vec<usize> = match keep {
-        Some(k) => (0..b.num_rows()).filter(|&i| x[i] >= k[0] && x[i] <= k[2] && y[i] >= k[1] && y[i] <= k[3]).collect(),
+        Some(k) => {
+            (0..b.num_rows()).filter(|&i| x[i] >= k[0] && x[i] <= k[2] && y[i] >= k[1] && y[i] <= k[3]).collect()
+        }
         None => (0..b.num_rows()).collect(),
     };
     fn put<T: Copy>(dst: &mut Vec<T>, src: &[T], rows: &[usize]) {

@@ -10,7 +10,6 @@ use crate::dataset::Dataset;
 use crate::error::Result;
 use crate::kernels::sim::{self, AlsPoints, Footprint, SimConfig, Weighting};
 
-
 /// Side of the square blocks of footprints simulated together in dataset mode (m): a block's
 /// points (plus the footprint radius around it) are read at once, so memory is bounded by the
 /// block, and the next block is read while one is simulated.

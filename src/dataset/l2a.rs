@@ -5,7 +5,7 @@
 use std::sync::Arc;
 
 use arrow::array::{
-    Array, ArrayRef, AsArray, Float32Array, Float64Array, ListBuilder, Float32Builder, RecordBatch, StringArray,
+    Array, ArrayRef, AsArray, Float32Array, Float32Builder, Float64Array, ListBuilder, RecordBatch, StringArray,
     UInt64Array, UInt8Array,
 };
 use arrow::datatypes::{DataType, Field, Fields, Float32Type, Float64Type, Schema, SchemaRef, UInt64Type};

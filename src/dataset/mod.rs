@@ -25,11 +25,11 @@ use arrow::datatypes::SchemaRef;
 use arrow::record_batch::RecordBatch;
 use parquet::arrow::arrow_writer::{compute_leaves, ArrowColumnChunk, ArrowRowGroupWriterFactory};
 use parquet::arrow::ArrowWriter;
-use parquet::file::writer::SerializedFileWriter;
-use rayon::prelude::*;
 use parquet::basic::{Compression, ZstdLevel};
 use parquet::file::metadata::KeyValue;
 use parquet::file::properties::{EnabledStatistics, WriterProperties};
+use parquet::file::writer::SerializedFileWriter;
+use rayon::prelude::*;
 use sha2::{Digest, Sha256};
 
 use crate::error::{Error, Result};
@@ -65,7 +65,8 @@ pub struct Dataset {
 impl Dataset {
     /// Open (and create if needed) the dataset at `root`.
     pub fn create(root: &Path) -> Result<Self> {
-        std::fs::create_dir_all(root).map_err(|e| Error::file(root, format!("cannot create dataset directory: {e}")))?;
+        std::fs::create_dir_all(root)
+            .map_err(|e| Error::file(root, format!("cannot create dataset directory: {e}")))?;
         Ok(Dataset { root: root.to_path_buf() })
     }
 
@@ -199,7 +200,8 @@ impl AtomicParquet {
         }
         .map_err(|e| Error::table(&self.dest, e))?;
         file.sync_all().map_err(|e| Error::file(&self.tmp, e))?;
-        std::fs::rename(&self.tmp, &self.dest).map_err(|e| Error::file(&self.dest, format!("cannot rename into place: {e}")))?;
+        std::fs::rename(&self.tmp, &self.dest)
+            .map_err(|e| Error::file(&self.dest, format!("cannot rename into place: {e}")))?;
         Ok(self.dest.clone())
     }
 }
@@ -213,7 +215,12 @@ impl Drop for AtomicParquet {
 }
 
 /// Write `batches` to `dest` atomically.
-pub fn write_parquet(dest: &Path, schema: SchemaRef, batches: &[RecordBatch], metadata: &HashMap<String, String>) -> Result<PathBuf> {
+pub fn write_parquet(
+    dest: &Path,
+    schema: SchemaRef,
+    batches: &[RecordBatch],
+    metadata: &HashMap<String, String>,
+) -> Result<PathBuf> {
     let mut w = AtomicParquet::create(dest, schema, writer_properties(metadata, 1 << 17))?;
     for b in batches {
         w.write(b)?;

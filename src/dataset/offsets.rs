@@ -126,7 +126,8 @@ pub fn read_r_after(ds: &Dataset) -> Result<HashMap<String, f64>> {
     }
     for path in dataset::table_files(&dir).map_err(|e| Error::file(&dir, e))? {
         let file = std::fs::File::open(&path).map_err(|e| Error::file(&path, e))?;
-        let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| Error::table(&path, e))?;
+        let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+            .map_err(|e| Error::table(&path, e))?;
         let mask = parquet::arrow::ProjectionMask::columns(builder.parquet_schema(), ["segment_id", "r_after"]);
         for b in builder.with_projection(mask).build().map_err(|e| Error::table(&path, e))? {
             let b = b.map_err(|e| Error::table(&path, e))?;
@@ -149,18 +150,32 @@ fn read_file(path: &Path, out: &mut HashMap<u64, AppliedOffset>) -> Result<()> {
         .map_err(|e| Error::table(path, e))?;
     for b in reader {
         let b = b.map_err(|e| Error::table(path, e))?;
-        let col = |n: &str| b.column_by_name(n).ok_or_else(|| Error::field(path, n, "column missing from the offsets table"));
+        let col =
+            |n: &str| b.column_by_name(n).ok_or_else(|| Error::field(path, n, "column missing from the offsets table"));
         let f64s = |n: &str| -> Result<Float64Array> {
             col(n)?.as_primitive_opt::<Float64Type>().cloned().ok_or_else(|| Error::field(path, n, "not float64"))
         };
-        let ids = col("segment_id")?.as_string_opt::<i32>().cloned().ok_or_else(|| Error::field(path, "segment_id", "not a string"))?;
-        let shots = col("shot_numbers")?.as_list_opt::<i32>().cloned().ok_or_else(|| Error::field(path, "shot_numbers", "not a list"))?;
+        let ids = col("segment_id")?
+            .as_string_opt::<i32>()
+            .cloned()
+            .ok_or_else(|| Error::field(path, "segment_id", "not a string"))?;
+        let shots = col("shot_numbers")?
+            .as_list_opt::<i32>()
+            .cloned()
+            .ok_or_else(|| Error::field(path, "shot_numbers", "not a list"))?;
         let (dx, dy, dz) = (f64s("dx")?, f64s("dy")?, f64s("dz")?);
         for i in 0..b.num_rows() {
             let list = shots.value(i);
-            let list = list.as_primitive_opt::<UInt64Type>().ok_or_else(|| Error::field(path, "shot_numbers", "not a list of uint64"))?;
+            let list = list
+                .as_primitive_opt::<UInt64Type>()
+                .ok_or_else(|| Error::field(path, "shot_numbers", "not a list of uint64"))?;
             for s in list.iter().flatten() {
-                let applied = AppliedOffset { segment_id: ids.value(i).to_string(), dx: dx.value(i), dy: dy.value(i), dz: dz.value(i) };
+                let applied = AppliedOffset {
+                    segment_id: ids.value(i).to_string(),
+                    dx: dx.value(i),
+                    dy: dy.value(i),
+                    dz: dz.value(i),
+                };
                 if !(applied.dx.is_finite() && applied.dy.is_finite()) {
                     return Err(Error::field(path, "dx", format!("segment {}: not finite", applied.segment_id)));
                 }
@@ -200,13 +215,20 @@ mod tests {
             dz_halfwidth: 0.1,
         };
         let dest = ds.table_file(tables::OFFSETS, "offsets").unwrap();
-        dataset::write_parquet(&dest, offsets_schema(), &[offsets_batch(std::slice::from_ref(&row)).unwrap()], &Default::default()).unwrap();
+        dataset::write_parquet(
+            &dest,
+            offsets_schema(),
+            &[offsets_batch(std::slice::from_ref(&row)).unwrap()],
+            &Default::default(),
+        )
+        .unwrap();
         let got = read_offsets(&ds).unwrap();
         assert_eq!(got.len(), 3);
         assert_eq!(got[&u64::MAX], AppliedOffset { segment_id: row.segment_id.clone(), dx: 4.0, dy: -3.0, dz: 47.5 });
         assert_eq!(read_r_after(&ds).unwrap()[&row.segment_id], 0.99);
         let twice = [row.clone(), row];
-        dataset::write_parquet(&dest, offsets_schema(), &[offsets_batch(&twice).unwrap()], &Default::default()).unwrap();
+        dataset::write_parquet(&dest, offsets_schema(), &[offsets_batch(&twice).unwrap()], &Default::default())
+            .unwrap();
         let err = read_offsets(&ds).unwrap_err().to_string();
         assert!(err.contains("shot_numbers") && err.contains("offsets.parquet"), "{err}");
     }

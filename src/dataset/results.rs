@@ -14,8 +14,8 @@ use super::list_f32;
 use crate::error::{Error, Result};
 use crate::kernels::gedi::RH_LEN;
 use crate::kernels::study::align::align_rh;
-use crate::kernels::study::select::{ResultInput, StudyAlgorithm};
 use crate::kernels::study::classes;
+use crate::kernels::study::select::{ResultInput, StudyAlgorithm};
 
 /// Schema of the results table (docs/schemas.md, `results/`).
 pub fn results_schema() -> SchemaRef {

@@ -8,9 +8,9 @@ use arrow::array::{ArrayRef, Float32Array, Float64Array, StringArray, UInt32Arra
 use arrow::datatypes::{DataType, Field, Schema, SchemaRef};
 use arrow::record_batch::RecordBatch;
 
+use super::offsets::AppliedOffset;
 use super::{list_f32, list_f32_builder};
 use crate::error::{Error, Result};
-use super::offsets::AppliedOffset;
 use crate::kernels::sim::{Footprint, Profile, SimulatedFootprint, SkipReason, Weighting};
 
 /// Schema of the simulated-waveform table.

@@ -9,10 +9,14 @@ use crate::kernels::sim::Footprint;
 pub fn read_footprints_csv(path: &Path) -> Result<Vec<Footprint>> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
     let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty() && !l.starts_with('#'));
-    let (_, header) = lines.next().ok_or_else(|| Error::field(path, "header", "empty file: expected a header `id,x,y`"))?;
+    let (_, header) =
+        lines.next().ok_or_else(|| Error::field(path, "header", "empty file: expected a header `id,x,y`"))?;
     let names: Vec<String> = header.split(',').map(|s| s.trim().to_ascii_lowercase()).collect();
     let col = |name: &str| {
-        names.iter().position(|n| n == name).ok_or_else(|| Error::field(path, name, format!("no `{name}` column in the header `{header}`")))
+        names
+            .iter()
+            .position(|n| n == name)
+            .ok_or_else(|| Error::field(path, name, format!("no `{name}` column in the header `{header}`")))
     };
     let (ci, cx, cy) = (col("id")?, col("x")?, col("y")?);
     let mut out = Vec::new();
@@ -20,11 +24,16 @@ pub fn read_footprints_csv(path: &Path) -> Result<Vec<Footprint>> {
     for (lineno, line) in lines {
         let fields: Vec<&str> = line.split(',').map(str::trim).collect();
         let get = |c: usize, name: &str| {
-            fields.get(c).copied().ok_or_else(|| Error::field(path, name, format!("line {}: missing value", lineno + 1)))
+            fields
+                .get(c)
+                .copied()
+                .ok_or_else(|| Error::field(path, name, format!("line {}: missing value", lineno + 1)))
         };
         let num = |c: usize, name: &str| -> Result<f64> {
             let s = get(c, name)?;
-            let v: f64 = s.parse().map_err(|_| Error::field(path, name, format!("line {}: `{s}` is not a number", lineno + 1)))?;
+            let v: f64 = s
+                .parse()
+                .map_err(|_| Error::field(path, name, format!("line {}: `{s}` is not a number", lineno + 1)))?;
             if !v.is_finite() {
                 return Err(Error::field(path, name, format!("line {}: non-finite value `{s}`", lineno + 1)));
             }

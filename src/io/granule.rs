@@ -12,8 +12,8 @@ use std::str::FromStr;
 use hdf5::types::{H5Type, VarLenUnicode};
 use hdf5::{File, Group, Location};
 
-use crate::kernels::gedi::{beam_number, BeamType, L1bShot, L2aAlgorithm, L2aShot, LandCover, N_ALGORITHMS, RH_LEN};
 use crate::error::{Error, Result};
+use crate::kernels::gedi::{beam_number, BeamType, L1bShot, L2aAlgorithm, L2aShot, LandCover, N_ALGORITHMS, RH_LEN};
 
 /// GPS seconds of the GEDI epoch 2018-01-01T00:00:00 UTC (L1B `ancillary/master_time_epoch`).
 pub const MASTER_TIME_EPOCH: f64 = 1_198_800_018.0;

@@ -51,14 +51,16 @@ impl TileReader {
         let file = std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
         let laz_parallelism = if parallel { las::LazParallelism::Yes } else { las::LazParallelism::No };
         let options = las::ReaderOptions::default().with_laz_parallelism(laz_parallelism);
-        let reader = Reader::with_options(std::io::BufReader::with_capacity(1 << 20, file), options)
-            .map_err(|e| {
-                Error::field(
-                    path,
-                    "header",
-                    format!("cannot read the header, VLRs or LAZ chunk table (truncated or not LAS/LAZ?): {}", crate::error::one_line(&e.to_string())),
-                )
-            })?;
+        let reader = Reader::with_options(std::io::BufReader::with_capacity(1 << 20, file), options).map_err(|e| {
+            Error::field(
+                path,
+                "header",
+                format!(
+                    "cannot read the header, VLRs or LAZ chunk table (truncated or not LAS/LAZ?): {}",
+                    crate::error::one_line(&e.to_string())
+                ),
+            )
+        })?;
         let header = tile_header(path, reader.header())?;
         let buffer = PointDataBuilder::new().for_header(reader.header()).build();
         Ok(TileReader { header, reader, buffer, read_so_far: 0 })
@@ -97,7 +99,11 @@ impl TileReader {
             return Err(Error::field(
                 &path,
                 "number_of_points",
-                format!("header announces {} points but the file holds {}", self.header.number_of_points, self.read_so_far + got),
+                format!(
+                    "header announces {} points but the file holds {}",
+                    self.header.number_of_points,
+                    self.read_so_far + got
+                ),
             ));
         }
         self.read_so_far += got;
@@ -179,9 +185,7 @@ fn tile_header(path: &Path, h: &las::Header) -> Result<TileHeader> {
 
 /// Names of the extra-bytes dimensions in a LASF_Spec/4 record (192 bytes per dimension).
 fn extra_bytes_names(data: &[u8]) -> Vec<String> {
-    data.chunks_exact(192)
-        .map(|d| String::from_utf8_lossy(&d[4..36]).trim_end_matches('\0').to_string())
-        .collect()
+    data.chunks_exact(192).map(|d| String::from_utf8_lossy(&d[4..36]).trim_end_matches('\0').to_string()).collect()
 }
 
 /// The EPSG code of the outermost CRS of a WKT string (WKT1 `AUTHORITY["EPSG","n"]` or WKT2

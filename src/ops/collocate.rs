@@ -18,13 +18,13 @@ use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use parquet::arrow::ProjectionMask;
 
 use crate::dataset::als::{AlsTable, BBox};
+use crate::dataset::offsets::{offsets_batch, offsets_schema, OffsetRow};
+use crate::dataset::{self, tables, Dataset};
+use crate::error::{Error, Result};
 use crate::kernels::collocate::profile::{real_profile, ProfileError};
 use crate::kernels::collocate::segments::{plan, Level, SegmentPlan, Slot, MIN_SEGMENT};
 use crate::kernels::collocate::{collocate_unit, CollocateConfig, PointCloud, ShotInput};
-use crate::dataset::{self, tables, Dataset};
 use crate::ops::progress::{Progress, Step};
-use crate::error::{Error, Result};
-use crate::dataset::offsets::{offsets_batch, offsets_schema, OffsetRow};
 
 /// Options of `gedisim collocate`.
 #[derive(Debug, Clone, PartialEq)]
@@ -136,10 +136,12 @@ impl<'a> Collocation<'a> {
             Some(f) => f,
             None => {
                 let dir = ds.root().join(tables::SHOTS);
-                dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi`")))?
+                dataset::table_files(&dir)
+                    .map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi`")))?
             }
         };
-        let mut report = CollocateReport { table: ds.root().join(tables::OFFSETS).join("offsets.parquet"), ..Default::default() };
+        let mut report =
+            CollocateReport { table: ds.root().join(tables::OFFSETS).join("offsets.parquet"), ..Default::default() };
         let mut granules = Vec::new();
         for path in files {
             let (granule, mut shots) = read_shot_records(&path)?;
@@ -247,7 +249,10 @@ impl<'a> Collocation<'a> {
         let half = self.cfg.support_half_width();
         let als = &self.als;
         let mut points_for = |idx: &[usize]| -> Result<PointCloud> {
-            let boxes: Vec<BBox> = idx.iter().map(|&k| [shots[k].x - half, shots[k].y - half, shots[k].x + half, shots[k].y + half]).collect();
+            let boxes: Vec<BBox> = idx
+                .iter()
+                .map(|&k| [shots[k].x - half, shots[k].y - half, shots[k].x + half, shots[k].y + half])
+                .collect();
             let (cloud, stats) = als.xyz_in_boxes(&boxes)?;
             read.0 += cloud.len() as u64;
             read.1 += stats.row_groups_read as u64;
@@ -315,12 +320,18 @@ fn plan_units(granule: &str, shots: &[ShotRecord], opts: &CollocateOptions, shor
     for v in beams.values_mut() {
         v.sort_by_key(|&i| shots[i].shot_number);
     }
-    let slot = |i: usize, step: i64| Slot { step, covered: shots[i].covered, usable: shots[i].covered && shots[i].skip.is_none() };
+    let slot = |i: usize, step: i64| Slot {
+        step,
+        covered: shots[i].covered,
+        usable: shots[i].covered && shots[i].skip.is_none(),
+    };
     // (beam label, shots in slot order, slots)
     let groups: Vec<(String, Vec<usize>, Vec<Slot>)> = match opts.level {
         Level::Beam | Level::Shot => beams
             .iter()
-            .map(|(b, idx)| (b.to_string(), idx.clone(), idx.iter().enumerate().map(|(k, &i)| slot(i, k as i64)).collect()))
+            .map(|(b, idx)| {
+                (b.to_string(), idx.clone(), idx.iter().enumerate().map(|(k, &i)| slot(i, k as i64)).collect())
+            })
             .collect(),
         Level::Granule => {
             let steps = along_track_steps(shots, &beams);
@@ -339,7 +350,10 @@ fn plan_units(granule: &str, shots: &[ShotRecord], opts: &CollocateOptions, shor
         }
         let plans: Vec<SegmentPlan> = plans
             .into_iter()
-            .map(|p| SegmentPlan { support: p.support.iter().map(|&k| idx[k]).collect(), applies_to: p.applies_to.iter().map(|&k| idx[k]).collect() })
+            .map(|p| SegmentPlan {
+                support: p.support.iter().map(|&k| idx[k]).collect(),
+                applies_to: p.applies_to.iter().map(|&k| idx[k]).collect(),
+            })
             .collect();
         match opts.level {
             Level::Shot => {
@@ -387,15 +401,32 @@ fn read_shot_records(path: &Path) -> Result<(String, Vec<ShotRecord>)> {
     let file = std::fs::File::open(path).map_err(|e| Error::file(path, e))?;
     let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| Error::table(path, e))?;
     let schema = builder.schema().clone();
-    for required in ["shot_number", "x", "y", "rx_waveform", "elevation_bin0", "elevation_lastbin", "geoid_offset_used"] {
+    for required in ["shot_number", "x", "y", "rx_waveform", "elevation_bin0", "elevation_lastbin", "geoid_offset_used"]
+    {
         if schema.field_with_name(required).is_err() {
-            return Err(Error::field(path, required, "column missing from the shots table (collocate needs ingested L1B waveforms)"));
+            return Err(Error::field(
+                path,
+                required,
+                "column missing from the shots table (collocate needs ingested L1B waveforms)",
+            ));
         }
     }
-    let wanted: Vec<&str> = ["shot_number", "x", "y", "granule", "beam", "delta_time", "elevation_bin0", "elevation_lastbin", "geoid_offset_used", "rx_sample_count", "stale_return_flag"]
-        .into_iter()
-        .filter(|c| schema.field_with_name(c).is_ok())
-        .collect();
+    let wanted: Vec<&str> = [
+        "shot_number",
+        "x",
+        "y",
+        "granule",
+        "beam",
+        "delta_time",
+        "elevation_bin0",
+        "elevation_lastbin",
+        "geoid_offset_used",
+        "rx_sample_count",
+        "stale_return_flag",
+    ]
+    .into_iter()
+    .filter(|c| schema.field_with_name(c).is_ok())
+    .collect();
     let mask = ProjectionMask::columns(builder.parquet_schema(), wanted.iter().copied());
     let reader = builder.with_projection(mask).build().map_err(|e| Error::table(path, e))?;
     let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
@@ -406,19 +437,30 @@ fn read_shot_records(path: &Path) -> Result<(String, Vec<ShotRecord>)> {
         let f64s = |n: &str| -> Result<Option<arrow::array::Float64Array>> {
             match b.column_by_name(n) {
                 None => Ok(None),
-                Some(c) => c.as_primitive_opt::<Float64Type>().cloned().map(Some).ok_or_else(|| Error::field(path, n, "not float64")),
+                Some(c) => c
+                    .as_primitive_opt::<Float64Type>()
+                    .cloned()
+                    .map(Some)
+                    .ok_or_else(|| Error::field(path, n, "not float64")),
             }
         };
-        let sn = b.column_by_name("shot_number").and_then(|c| c.as_primitive_opt::<UInt64Type>().cloned()).ok_or_else(|| Error::field(path, "shot_number", "not uint64"))?;
+        let sn = b
+            .column_by_name("shot_number")
+            .and_then(|c| c.as_primitive_opt::<UInt64Type>().cloned())
+            .ok_or_else(|| Error::field(path, "shot_number", "not uint64"))?;
         let (x, y, dt) = (f64s("x")?, f64s("y")?, f64s("delta_time")?);
         let (e0, e1, geoid) = (f64s("elevation_bin0")?, f64s("elevation_lastbin")?, f64s("geoid_offset_used")?);
         let count = b.column_by_name("rx_sample_count").and_then(|c| c.as_primitive_opt::<UInt32Type>().cloned());
         let stale = b.column_by_name("stale_return_flag").and_then(|c| c.as_primitive_opt::<UInt8Type>().cloned());
         let beams = b.column_by_name("beam").and_then(|c| c.as_string_opt::<i32>().cloned());
         if granule.is_none() {
-            granule = b.column_by_name("granule").and_then(|c| c.as_string_opt::<i32>().filter(|a| !a.is_empty() && a.is_valid(0)).map(|a| a.value(0).to_string()));
+            granule = b.column_by_name("granule").and_then(|c| {
+                c.as_string_opt::<i32>().filter(|a| !a.is_empty() && a.is_valid(0)).map(|a| a.value(0).to_string())
+            });
         }
-        let get = |a: &Option<arrow::array::Float64Array>, i: usize| a.as_ref().filter(|a| a.is_valid(i)).map(|a| a.value(i)).filter(|v| v.is_finite());
+        let get = |a: &Option<arrow::array::Float64Array>, i: usize| {
+            a.as_ref().filter(|a| a.is_valid(i)).map(|a| a.value(i)).filter(|v| v.is_finite())
+        };
         for i in 0..b.num_rows() {
             let (px, py) = (get(&x, i), get(&y, i));
             let (z_top, z_bottom, n) = (get(&e0, i), get(&e1, i), get(&geoid, i));
@@ -437,7 +479,10 @@ fn read_shot_records(path: &Path) -> Result<(String, Vec<ShotRecord>)> {
             out.push(ShotRecord {
                 row: out.len(),
                 shot_number: sn.value(i),
-                beam: beams.as_ref().filter(|a| a.is_valid(i)).map_or_else(|| "ALL".to_string(), |a| a.value(i).to_string()),
+                beam: beams
+                    .as_ref()
+                    .filter(|a| a.is_valid(i))
+                    .map_or_else(|| "ALL".to_string(), |a| a.value(i).to_string()),
                 delta_time: get(&dt, i),
                 x: px.unwrap_or(f64::NAN),
                 y: py.unwrap_or(f64::NAN),
@@ -463,11 +508,18 @@ fn read_waveforms(path: &Path, rows: impl Iterator<Item = usize>) -> Result<Vec<
     let total = builder.metadata().file_metadata().num_rows() as usize;
     let selection = crate::dataset::row_selection(&rows, total);
     let mask = ProjectionMask::columns(builder.parquet_schema(), ["rx_waveform"]);
-    let reader = builder.with_projection(mask).with_row_selection(selection).with_batch_size(1024).build().map_err(|e| Error::table(path, e))?;
+    let reader = builder
+        .with_projection(mask)
+        .with_row_selection(selection)
+        .with_batch_size(1024)
+        .build()
+        .map_err(|e| Error::table(path, e))?;
     let mut out = Vec::with_capacity(rows.len());
     for b in reader {
         let b = b.map_err(|e| Error::table(path, e))?;
-        let col = b.column_by_name("rx_waveform").ok_or_else(|| Error::field(path, "rx_waveform", "column missing from the shots table"))?;
+        let col = b
+            .column_by_name("rx_waveform")
+            .ok_or_else(|| Error::field(path, "rx_waveform", "column missing from the shots table"))?;
         let list = col.as_list_opt::<i32>().ok_or_else(|| Error::field(path, "rx_waveform", "not a list"))?;
         for i in 0..list.len() {
             if list.is_null(i) {
@@ -475,7 +527,9 @@ fn read_waveforms(path: &Path, rows: impl Iterator<Item = usize>) -> Result<Vec<
                 continue;
             }
             let v = list.value(i);
-            let v = v.as_primitive_opt::<arrow::datatypes::Float32Type>().ok_or_else(|| Error::field(path, "rx_waveform", "not a list of float32"))?;
+            let v = v
+                .as_primitive_opt::<arrow::datatypes::Float32Type>()
+                .ok_or_else(|| Error::field(path, "rx_waveform", "not a list of float32"))?;
             out.push(Some(v.values().to_vec()));
         }
     }

@@ -6,16 +6,16 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::kernels::collocate::segments::Level;
-use crate::ops::collocate::CollocateOptions;
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
-use crate::ops::report::headline::Headline;
-use crate::ops::report::ReportSummary;
-use crate::ops::progress::{Progress, Step};
-use crate::ops::run::{run_study, RunOptions, RunReport};
+use crate::kernels::collocate::segments::Level;
 use crate::kernels::scenario::truth::Truth;
 use crate::kernels::scenario::EffectSet;
+use crate::ops::collocate::CollocateOptions;
+use crate::ops::progress::{Progress, Step};
+use crate::ops::report::headline::Headline;
+use crate::ops::report::ReportSummary;
+use crate::ops::run::{run_study, RunOptions, RunReport};
 use crate::ops::scenario::{make_scenario, ScenarioOptions, ScenarioReport, DEFAULT_GEOID_M};
 
 /// The tiles bundled with the source (`tests/data/als`).
@@ -39,7 +39,13 @@ pub struct DemoOptions {
 
 impl Default for DemoOptions {
     fn default() -> Self {
-        DemoOptions { out: PathBuf::from("gedisim-demo"), effect: "ground_detection".into(), seed: 1, passes: 8, force: false }
+        DemoOptions {
+            out: PathBuf::from("gedisim-demo"),
+            effect: "ground_detection".into(),
+            seed: 1,
+            passes: 8,
+            force: false,
+        }
     }
 }
 
@@ -79,19 +85,24 @@ pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoRepor
             .ok()
             .and_then(|s| serde_json::from_str(&s).ok())
             .ok_or_else(|| Error::file(&truth, "not a scenario truth file"))?;
-        let same = t.effect_spec == opts.effect && t.seed == opts.seed && t.granules.len() == t.tiles.len() * opts.passes;
+        let same =
+            t.effect_spec == opts.effect && t.seed == opts.seed && t.granules.len() == t.tiles.len() * opts.passes;
         if same {
             reuse = true;
         } else if opts.force {
             for d in [&world_dir, &ds_dir] {
                 if d.exists() {
-                    std::fs::remove_dir_all(d).map_err(|e| Error::file(d, format!("cannot remove the previous demo: {e}")))?;
+                    std::fs::remove_dir_all(d)
+                        .map_err(|e| Error::file(d, format!("cannot remove the previous demo: {e}")))?;
                 }
             }
         } else {
             return Err(Error::file(
                 &opts.out,
-                format!("holds a demo of effect {}, seed {}; use --force to replace it, or another --out", t.effect_spec, t.seed),
+                format!(
+                    "holds a demo of effect {}, seed {}; use --force to replace it, or another --out",
+                    t.effect_spec, t.seed
+                ),
             ));
         }
     }

@@ -12,24 +12,24 @@ use serde_json::{json, Value};
 
 use crate::dataset::als::AlsTable;
 use crate::dataset::{self, tables, Dataset};
+use crate::error::{Error, Result};
+use crate::kernels::collocate::segments::Level;
 use crate::kernels::diagnose::case::{
-    configs, nominal_noise_stddev, site_grid, site_of, RealAlgorithm, RealShot, SimShot, Site, Strata, FSIGMA_GRID, NOMINAL_WIDTH, RECOLLOCATE_SHIFT_M, RECOLLOCATE_STEP_M,
-    SHORT_SEGMENT_SHOTS,
+    configs, nominal_noise_stddev, site_grid, site_of, RealAlgorithm, RealShot, SimShot, Site, Strata, FSIGMA_GRID,
+    NOMINAL_WIDTH, RECOLLOCATE_SHIFT_M, RECOLLOCATE_STEP_M, SHORT_SEGMENT_SHOTS,
 };
 use crate::kernels::diagnose::gap::{GapMetrics, N_PCT};
 use crate::kernels::diagnose::rank::Trial;
 use crate::kernels::diagnose::{self, Diagnosis, ShotCase};
-use crate::error::{Error, Result};
-use crate::kernels::collocate::segments::Level;
-use crate::ops::collocate::{CollocateOptions, CollocateReport};
-use crate::ops::progress::{Progress, Step};
-use crate::ops::run::{RunOptions, RunReport};
 use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
-use crate::kernels::waveform::l2a::Noise;
-use crate::ops::report::figures::{self, LinePanels};
 use crate::kernels::scenario::effects::{Effect, ParamValue};
 use crate::kernels::sim::{self, Footprint, Weighting};
 use crate::kernels::study::classes;
+use crate::kernels::waveform::l2a::Noise;
+use crate::ops::collocate::{CollocateOptions, CollocateReport};
+use crate::ops::progress::{Progress, Step};
+use crate::ops::report::figures::{self, LinePanels};
+use crate::ops::run::{RunOptions, RunReport};
 
 /// What [`read_cases`] kept and dropped.
 #[derive(Debug, Clone, Default)]
@@ -64,7 +64,8 @@ pub fn read_cases(ds: &Dataset, progress: &dyn Progress) -> Result<(Vec<ShotCase
     let offsets = crate::dataset::offsets::read_offsets(ds)?;
     let forest = read_forest_types(ds)?;
     let dir = ds.root().join(tables::SHOTS);
-    let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi`")))?;
+    let files = dataset::table_files(&dir)
+        .map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi`")))?;
     let mut pending = Vec::new();
     for_each_batch(files, |f, b| read_shots(f, b, &offsets, &forest, &mut pending, &mut report))?;
     let mut segment_shots: HashMap<&str, usize> = HashMap::new();
@@ -88,8 +89,14 @@ fn read_forest_types(ds: &Dataset) -> Result<HashMap<u64, String>> {
     let dir = ds.root().join(tables::STRATA);
     let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, e))?;
     for_each_batch(files, |f, b| {
-        let sn = column(f, b, "shot_number")?.as_primitive_opt::<UInt64Type>().cloned().ok_or_else(|| Error::field(f, "shot_number", "not uint64"))?;
-        let ft = column(f, b, "forest_type")?.as_string_opt::<i32>().cloned().ok_or_else(|| Error::field(f, "forest_type", "not a string"))?;
+        let sn = column(f, b, "shot_number")?
+            .as_primitive_opt::<UInt64Type>()
+            .cloned()
+            .ok_or_else(|| Error::field(f, "shot_number", "not uint64"))?;
+        let ft = column(f, b, "forest_type")?
+            .as_string_opt::<i32>()
+            .cloned()
+            .ok_or_else(|| Error::field(f, "forest_type", "not a string"))?;
         for i in 0..b.num_rows() {
             out.insert(sn.value(i), ft.value(i).to_string());
         }
@@ -117,7 +124,10 @@ fn column<'a>(path: &Path, b: &'a RecordBatch, name: &str) -> Result<&'a Arc<dyn
 }
 
 fn f64s(path: &Path, b: &RecordBatch, name: &str) -> Result<Float64Array> {
-    column(path, b, name)?.as_primitive_opt::<Float64Type>().cloned().ok_or_else(|| Error::field(path, name, "not float64"))
+    column(path, b, name)?
+        .as_primitive_opt::<Float64Type>()
+        .cloned()
+        .ok_or_else(|| Error::field(path, name, "not float64"))
 }
 
 fn u8s(path: &Path, b: &RecordBatch, name: &str) -> Result<arrow::array::UInt8Array> {
@@ -153,7 +163,10 @@ fn read_shots(
         column(path, b, n)?.as_string_opt::<i32>().cloned().ok_or_else(|| Error::field(path, n, "not a string"))
     };
     let (granule, beam, beam_type) = (s("granule")?, s("beam")?, s("beam_type")?);
-    let sn: UInt64Array = column(path, b, "shot_number")?.as_primitive_opt::<UInt64Type>().cloned().ok_or_else(|| Error::field(path, "shot_number", "not uint64"))?;
+    let sn: UInt64Array = column(path, b, "shot_number")?
+        .as_primitive_opt::<UInt64Type>()
+        .cloned()
+        .ok_or_else(|| Error::field(path, "shot_number", "not uint64"))?;
     let (x, y) = (f64s(path, b, "x")?, f64s(path, b, "y")?);
     let (bin0, lastbin) = (f64s(path, b, "elevation_bin0")?, f64s(path, b, "elevation_lastbin")?);
     let (nmean, nsd) = (f64s(path, b, "noise_mean_corrected")?, f64s(path, b, "noise_stddev_corrected")?);
@@ -181,7 +194,9 @@ fn read_shots(
             count_dropped(report, "no L1B waveform");
             continue;
         };
-        let (Some(e0), Some(e1), Some(mean), Some(sd)) = (opt(&bin0, i), opt(&lastbin, i), opt(&nmean, i), opt(&nsd, i)) else {
+        let (Some(e0), Some(e1), Some(mean), Some(sd)) =
+            (opt(&bin0, i), opt(&lastbin, i), opt(&nmean, i), opt(&nsd, i))
+        else {
             count_dropped(report, "no record geolocation or noise");
             continue;
         };
@@ -240,7 +255,12 @@ fn read_shots(
                 ..Default::default()
             },
         };
-        out.push(Pending { real, footprint: Footprint { id: shot.to_string(), x: px + dx, y: py + dy }, reported: (px, py), short_segment: false });
+        out.push(Pending {
+            real,
+            footprint: Footprint { id: shot.to_string(), x: px + dx, y: py + dy },
+            reported: (px, py),
+            short_segment: false,
+        });
     }
     Ok(())
 }
@@ -248,21 +268,31 @@ fn read_shots(
 /// The vertical reference of the re-collocation: the median of the collocation segments'
 /// vertical offsets (GEDI − N − ALS, m), one value for all (0 without offsets).
 fn reference_dz(offsets: &HashMap<u64, crate::dataset::offsets::AppliedOffset>) -> f64 {
-    let by_segment: HashMap<&str, f64> = offsets.values().filter(|o| o.dz.is_finite()).map(|o| (o.segment_id.as_str(), o.dz)).collect();
+    let by_segment: HashMap<&str, f64> =
+        offsets.values().filter(|o| o.dz.is_finite()).map(|o| (o.segment_id.as_str(), o.dz)).collect();
     let mut dz: Vec<f64> = by_segment.into_values().collect();
     dz.sort_by(|a, b| a.total_cmp(b));
-    if dz.is_empty() { 0.0 } else { dz[dz.len() / 2] }
+    if dz.is_empty() {
+        0.0
+    } else {
+        dz[dz.len() / 2]
+    }
 }
 
 /// The centre of the [`site_grid`] of each short segment's shots: the segment's horizontal
 /// collocation redone with the vertical offset fixed at `dz`
 /// ([`crate::kernels::collocate::horizontal_offset_at`]), as an absolute position per shot.
 fn recollocate(als: &AlsTable, pending: &[Pending], dz: f64) -> Result<HashMap<u64, (f64, f64)>> {
-    use crate::kernels::collocate::{horizontal_offset_at, profile::real_profile, CollocateConfig, ShotInput, SUB_BATCH};
+    use crate::kernels::collocate::{
+        horizontal_offset_at, profile::real_profile, CollocateConfig, ShotInput, SUB_BATCH,
+    };
     let cfg = CollocateConfig::new(RECOLLOCATE_SHIFT_M, RECOLLOCATE_STEP_M)?;
     let half = cfg.support_half_width();
     let mut segments: std::collections::BTreeMap<&str, Vec<&Pending>> = Default::default();
-    pending.iter().filter(|p| p.short_segment).for_each(|p| segments.entry(p.real.segment.as_str()).or_default().push(p));
+    pending
+        .iter()
+        .filter(|p| p.short_segment)
+        .for_each(|p| segments.entry(p.real.segment.as_str()).or_default().push(p));
     let inputs: Vec<(&[&Pending], Vec<ShotInput>)> = segments
         .values()
         .map(|shots| {
@@ -391,7 +421,11 @@ fn simulate_cases(
                 // its widths and a ground of its own, or is kept empty (never chosen) so that
                 // site k is the same offset for every shot of the segment.
                 let nominal_width = if is_light { vs.first() } else { vs.get(NOMINAL_WIDTH) };
-                let site_ground = if k == 0 { Some(ground) } else { nominal_width.and_then(|v| v.get(Weighting::Count).truth.als_ground) };
+                let site_ground = if k == 0 {
+                    Some(ground)
+                } else {
+                    nominal_width.and_then(|v| v.get(Weighting::Count).truth.als_ground)
+                };
                 let offset = (positions[k].0 - x0, positions[k].1 - y0);
                 match site_ground {
                     Some(g) if complete => {
@@ -409,7 +443,11 @@ fn simulate_cases(
             real.strata.slope_class = classes::slope_class(count.truth.slope_deg.map(f64::from)).to_string();
             let cover = f64::from(count.truth.als_cover);
             real.strata.cover_class = classes::cover_class((cover >= 0.0).then_some(cover)).to_string();
-            cases.push(ShotCase { real, sim: Arc::new(SimShot { dz, sites, short_segment: short, rh_nominal: rh.to_vec() }), mismatch: [false; N_ALGORITHMS] });
+            cases.push(ShotCase {
+                real,
+                sim: Arc::new(SimShot { dz, sites, short_segment: short, rh_nominal: rh.to_vec() }),
+                mismatch: [false; N_ALGORITHMS],
+            });
         }
     }
     Ok(cases)
@@ -426,7 +464,8 @@ pub struct DiagnosisOutput {
 
 /// Collocation of a dataset the diagnosis makes: per beam (the baseline's horizontal collocation),
 /// every run solved however short.
-pub const DIAGNOSIS_COLLOCATION: CollocateOptions = CollocateOptions { level: Level::Beam, segment: 40, max_shift: 10.0, step: 1.0, min_segment: 1 };
+pub const DIAGNOSIS_COLLOCATION: CollocateOptions =
+    CollocateOptions { level: Level::Beam, segment: 40, max_shift: 10.0, step: 1.0, min_segment: 1 };
 
 /// What `gedisim diagnose` reads.
 #[derive(Debug, Clone)]
@@ -451,7 +490,12 @@ pub struct DiagnoseReport {
 
 /// `gedisim diagnose`: the dataset (made or collocated first when needed) diagnosed into `out`;
 /// `effects` as in [`diagnose_dataset`].
-pub fn diagnose(input: DiagnoseInput, out: &Path, effects: &[String], progress: &dyn Progress) -> Result<DiagnoseReport> {
+pub fn diagnose(
+    input: DiagnoseInput,
+    out: &Path,
+    effects: &[String],
+    progress: &dyn Progress,
+) -> Result<DiagnoseReport> {
     let (root, chain) = match input {
         DiagnoseInput::Dataset(root) => (root, None),
         DiagnoseInput::Chain(opts) => {
@@ -461,7 +505,11 @@ pub fn diagnose(input: DiagnoseInput, out: &Path, effects: &[String], progress: 
         }
     };
     let ds = Dataset::open(&root)?;
-    let collocated = if ds.has_table(tables::OFFSETS) { None } else { Some(crate::ops::collocate::collocate(&ds, &DIAGNOSIS_COLLOCATION, progress)?) };
+    let collocated = if ds.has_table(tables::OFFSETS) {
+        None
+    } else {
+        Some(crate::ops::collocate::collocate(&ds, &DIAGNOSIS_COLLOCATION, progress)?)
+    };
     let output = diagnose_dataset(&ds, out, effects, progress)?;
     Ok(DiagnoseReport { chain, collocated, output })
 }
@@ -469,7 +517,12 @@ pub fn diagnose(input: DiagnoseInput, out: &Path, effects: &[String], progress: 
 /// Diagnose the dataset into `out`: its cases read and simulated, then each effect fitted and
 /// scored as one [`Step::DiagnoseFit`] (each effect a note).
 /// `effects`: the effects tried (names of `diagnose::fit::FITTED_EFFECTS`; empty = all).
-pub fn diagnose_dataset(ds: &Dataset, out: &Path, effects: &[String], progress: &dyn Progress) -> Result<DiagnosisOutput> {
+pub fn diagnose_dataset(
+    ds: &Dataset,
+    out: &Path,
+    effects: &[String],
+    progress: &dyn Progress,
+) -> Result<DiagnosisOutput> {
     let names: Vec<&str> = if effects.is_empty() {
         diagnose::fit::FITTED_EFFECTS.to_vec()
     } else {
@@ -477,7 +530,10 @@ pub fn diagnose_dataset(ds: &Dataset, out: &Path, effects: &[String], progress: 
             .iter()
             .map(|e| {
                 diagnose::fit::FITTED_EFFECTS.iter().copied().find(|n| n == e).ok_or_else(|| {
-                    Error::Usage(format!("--effects: '{e}' is not an effect the diagnosis fits (known: {})", diagnose::fit::FITTED_EFFECTS.join(", ")))
+                    Error::Usage(format!(
+                        "--effects: '{e}' is not an effect the diagnosis fits (known: {})",
+                        diagnose::fit::FITTED_EFFECTS.join(", ")
+                    ))
                 })
             })
             .collect::<Result<_>>()?
@@ -524,7 +580,11 @@ pub fn params_json(e: &Effect) -> Value {
 }
 
 fn finite(x: f64) -> Value {
-    if x.is_finite() { json!(x) } else { Value::Null }
+    if x.is_finite() {
+        json!(x)
+    } else {
+        Value::Null
+    }
 }
 
 fn gap_json(m: &GapMetrics) -> Value {
@@ -599,8 +659,10 @@ fn to_json(d: &Diagnosis, r: &CaseReport) -> Value {
 }
 
 fn batch(fields: Vec<(&str, Arc<dyn Array>)>) -> Result<RecordBatch> {
-    let schema = Schema::new(fields.iter().map(|(n, a)| Field::new(*n, a.data_type().clone(), true)).collect::<Vec<_>>());
-    RecordBatch::try_new(Arc::new(schema), fields.into_iter().map(|(_, a)| a).collect()).map_err(|e| Error::table("diagnosis", e))
+    let schema =
+        Schema::new(fields.iter().map(|(n, a)| Field::new(*n, a.data_type().clone(), true)).collect::<Vec<_>>());
+    RecordBatch::try_new(Arc::new(schema), fields.into_iter().map(|(_, a)| a).collect())
+        .map_err(|e| Error::table("diagnosis", e))
 }
 
 fn floats(v: impl IntoIterator<Item = f64>) -> Arc<dyn Array> {
@@ -615,59 +677,86 @@ fn write_tables(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
     let w = &d.where_;
     let mut files = Vec::new();
     let p = &w.percentiles;
-    files.extend(crate::ops::report::write_named_table(out, "where_percentiles", &batch(vec![
-        ("rh", floats(p.iter().map(|p| p.k as f64))),
-        ("bias", floats(p.iter().map(|p| p.bias))),
-        ("bias_als_frame", floats(p.iter().map(|p| p.bias_als_frame))),
-        ("rmse", floats(p.iter().map(|p| p.rmse))),
-        ("sb", floats(p.iter().map(|p| p.sb))),
-        ("sdsd", floats(p.iter().map(|p| p.sdsd))),
-        ("lcs", floats(p.iter().map(|p| p.lcs))),
-    ])?)?);
+    files.extend(crate::ops::report::write_named_table(
+        out,
+        "where_percentiles",
+        &batch(vec![
+            ("rh", floats(p.iter().map(|p| p.k as f64))),
+            ("bias", floats(p.iter().map(|p| p.bias))),
+            ("bias_als_frame", floats(p.iter().map(|p| p.bias_als_frame))),
+            ("rmse", floats(p.iter().map(|p| p.rmse))),
+            ("sb", floats(p.iter().map(|p| p.sb))),
+            ("sdsd", floats(p.iter().map(|p| p.sdsd))),
+            ("lcs", floats(p.iter().map(|p| p.lcs))),
+        ])?,
+    )?);
     let s = &w.strata;
-    files.extend(crate::ops::report::write_named_table(out, "where_strata", &batch(vec![
-        ("kind", texts(s.iter().map(|s| s.kind.as_str()))),
-        ("label", texts(s.iter().map(|s| s.label.as_str()))),
-        ("n_shots", floats(s.iter().map(|s| s.n_shots as f64))),
-        ("mean_abs_bias_rh1_99", floats(s.iter().map(|s| s.metrics.mean_abs_bias_rh))),
-        ("msd", floats(s.iter().map(|s| s.metrics.msd))),
-        ("sb", floats(s.iter().map(|s| s.metrics.sb))),
-        ("sdsd", floats(s.iter().map(|s| s.metrics.sdsd))),
-        ("lcs", floats(s.iter().map(|s| s.metrics.lcs))),
-        ("ground_bias_m", floats(s.iter().map(|s| s.metrics.ground_bias))),
-        ("share_of_squared_error", floats(s.iter().map(|s| s.share_of_squared_error))),
-    ])?)?);
+    files.extend(crate::ops::report::write_named_table(
+        out,
+        "where_strata",
+        &batch(vec![
+            ("kind", texts(s.iter().map(|s| s.kind.as_str()))),
+            ("label", texts(s.iter().map(|s| s.label.as_str()))),
+            ("n_shots", floats(s.iter().map(|s| s.n_shots as f64))),
+            ("mean_abs_bias_rh1_99", floats(s.iter().map(|s| s.metrics.mean_abs_bias_rh))),
+            ("msd", floats(s.iter().map(|s| s.metrics.msd))),
+            ("sb", floats(s.iter().map(|s| s.metrics.sb))),
+            ("sdsd", floats(s.iter().map(|s| s.metrics.sdsd))),
+            ("lcs", floats(s.iter().map(|s| s.metrics.lcs))),
+            ("ground_bias_m", floats(s.iter().map(|s| s.metrics.ground_bias))),
+            ("share_of_squared_error", floats(s.iter().map(|s| s.share_of_squared_error))),
+        ])?,
+    )?);
     let r = &w.waveform;
-    files.extend(crate::ops::report::write_named_table(out, "waveform_residual", &batch(vec![
-        ("height_m", floats(r.height.iter().copied())),
-        ("real", floats(r.real.iter().copied())),
-        ("simulated", floats(r.simulated.iter().copied())),
-        ("residual", floats(r.residual.iter().copied())),
-    ])?)?);
+    files.extend(crate::ops::report::write_named_table(
+        out,
+        "waveform_residual",
+        &batch(vec![
+            ("height_m", floats(r.height.iter().copied())),
+            ("real", floats(r.real.iter().copied())),
+            ("simulated", floats(r.simulated.iter().copied())),
+            ("residual", floats(r.residual.iter().copied())),
+        ])?,
+    )?);
     for (name, trials) in [("effects", &d.ranking.effects), ("ladder", &d.ranking.ladder)] {
-        files.extend(crate::ops::report::write_named_table(out, name, &batch(vec![
-            ("step", floats((0..trials.len()).map(|i| i as f64 + 1.0))),
-            ("effect", texts(trials.iter().map(|t| t.effect.name()))),
-            ("params", texts(trials.iter().map(|t| params_json(&t.effect).to_string()))),
-            ("mean_abs_bias_before", floats(trials.iter().map(|t| t.held_out.before.mean_abs_bias))),
-            ("mean_abs_bias_after", floats(trials.iter().map(|t| t.held_out.after.mean_abs_bias))),
-            ("shrink", floats(trials.iter().map(|t| t.held_out.shrink))),
-            ("shrink_ci95_lo", floats(trials.iter().map(|t| t.held_out.ci95[0]))),
-            ("shrink_ci95_hi", floats(trials.iter().map(|t| t.held_out.ci95[1]))),
-            ("msd_before", floats(trials.iter().map(|t| t.held_out.before.msd))),
-            ("msd_after", floats(trials.iter().map(|t| t.held_out.after.msd))),
-            ("waveform_shrink", Arc::new(Float64Array::from(trials.iter().map(|t| t.held_out.profile_shrink()).collect::<Vec<_>>()))),
-            ("score", floats(trials.iter().map(|t| t.held_out.score()))),
-        ])?)?);
+        files.extend(crate::ops::report::write_named_table(
+            out,
+            name,
+            &batch(vec![
+                ("step", floats((0..trials.len()).map(|i| i as f64 + 1.0))),
+                ("effect", texts(trials.iter().map(|t| t.effect.name()))),
+                ("params", texts(trials.iter().map(|t| params_json(&t.effect).to_string()))),
+                ("mean_abs_bias_before", floats(trials.iter().map(|t| t.held_out.before.mean_abs_bias))),
+                ("mean_abs_bias_after", floats(trials.iter().map(|t| t.held_out.after.mean_abs_bias))),
+                ("shrink", floats(trials.iter().map(|t| t.held_out.shrink))),
+                ("shrink_ci95_lo", floats(trials.iter().map(|t| t.held_out.ci95[0]))),
+                ("shrink_ci95_hi", floats(trials.iter().map(|t| t.held_out.ci95[1]))),
+                ("msd_before", floats(trials.iter().map(|t| t.held_out.before.msd))),
+                ("msd_after", floats(trials.iter().map(|t| t.held_out.after.msd))),
+                (
+                    "waveform_shrink",
+                    Arc::new(Float64Array::from(
+                        trials.iter().map(|t| t.held_out.profile_shrink()).collect::<Vec<_>>(),
+                    )),
+                ),
+                ("score", floats(trials.iter().map(|t| t.held_out.score()))),
+            ])?,
+        )?);
     }
     Ok(files)
 }
 
 fn write_figures(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
     let mut files = Vec::new();
-    let profile = |label: &str, b: &[f64; N_PCT]| (label.to_string(), (0..N_PCT).map(|k| ((k + 1) as f64, b[k])).collect::<Vec<_>>());
-    let mut rh = vec![profile("baseline (noise-free)", &d.where_.overall.bias_rh), profile("nominal chain", &d.nominal.bias_rh)];
-    let mut als = vec![profile("baseline (noise-free)", &d.where_.overall.bias_als), profile("nominal chain", &d.nominal.bias_als)];
+    let profile = |label: &str, b: &[f64; N_PCT]| {
+        (label.to_string(), (0..N_PCT).map(|k| ((k + 1) as f64, b[k])).collect::<Vec<_>>())
+    };
+    let mut rh =
+        vec![profile("baseline (noise-free)", &d.where_.overall.bias_rh), profile("nominal chain", &d.nominal.bias_rh)];
+    let mut als = vec![
+        profile("baseline (noise-free)", &d.where_.overall.bias_als),
+        profile("nominal chain", &d.nominal.bias_als),
+    ];
     let mut names = Vec::new();
     for t in &d.ranking.ladder {
         names.push(t.effect.name());
@@ -694,7 +783,9 @@ fn write_figures(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
     files.extend(figures::render(&fig, out, "bias_profile_before_after")?);
     let r = &d.where_.waveform;
     // In % of the waveform energy, so that the residual's ticks stay readable.
-    let series = |label: &str, v: &[f64]| (label.to_string(), r.height.iter().zip(v).map(|(&h, &y)| (h, 100.0 * y)).collect::<Vec<_>>());
+    let series = |label: &str, v: &[f64]| {
+        (label.to_string(), r.height.iter().zip(v).map(|(&h, &y)| (h, 100.0 * y)).collect::<Vec<_>>())
+    };
     let fig = LinePanels {
         title: format!("Mean normalised waveform by height above the ALS ground ({} shots)", r.n_shots),
         x_desc: "height above ALS ground (m)".into(),
@@ -719,16 +810,20 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
         "{} shots on {} tracks. Baseline gap: mean |bias| over RH1–RH99 {:.2} m, ground bias (GEDI − ALS) {:+.2} m.",
         d.n_shots, d.n_tracks, w.overall.mean_abs_bias_rh, w.overall.ground_bias
     ));
-    let (k, b) = w.overall.bias_rh.iter().enumerate().max_by(|a, b| a.1.abs().total_cmp(&b.1.abs())).map_or((0, 0.0), |(k, b)| (k + 1, *b));
+    let (k, b) = w
+        .overall
+        .bias_rh
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+        .map_or((0, 0.0), |(k, b)| (k + 1, *b));
     let mut place = format!("Where: the largest bias is at RH{k} ({b:+.2} m)");
     // Among strata of kinds with at least two labels: the one holding most of the squared error
     // relative to its share of the shots.
     let labels = |kind: &str| w.strata.iter().filter(|s| s.kind == kind).count();
-    let worst = w
-        .strata
-        .iter()
-        .filter(|s| labels(&s.kind) >= 2 && s.n_shots >= 5)
-        .max_by(|a, b| (a.share_of_squared_error / a.n_shots as f64).total_cmp(&(b.share_of_squared_error / b.n_shots as f64)));
+    let worst = w.strata.iter().filter(|s| labels(&s.kind) >= 2 && s.n_shots >= 5).max_by(|a, b| {
+        (a.share_of_squared_error / a.n_shots as f64).total_cmp(&(b.share_of_squared_error / b.n_shots as f64))
+    });
     if let Some(s) = worst {
         place += &format!(
             "; {} = {} holds {:.0} % of the squared error with {:.0} % of the shots",
@@ -766,7 +861,10 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
                 .collect();
             let gap = match &t.held_out.spread {
                 Some(s) => format!("held-out MSD above the noise floor {:.2} → {:.2} m²", s.excess()[0], s.excess()[1]),
-                None => format!("held-out gap {:.2} → {:.2} m", t.held_out.before.mean_abs_bias, t.held_out.after.mean_abs_bias),
+                None => format!(
+                    "held-out gap {:.2} → {:.2} m",
+                    t.held_out.before.mean_abs_bias, t.held_out.after.mean_abs_bias
+                ),
             };
             lines.push(format!(
                 "{} {} ({}): {gap}, shrink {:.0} % (95 % CI {:.0}–{:.0} %).",

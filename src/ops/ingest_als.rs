@@ -14,16 +14,18 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use arrow::array::{
-    ArrayRef, BooleanArray, Float64Array, StringArray, TimestampMicrosecondArray, UInt16Array,
-    UInt32Array, UInt64Array, UInt8Array,
+    ArrayRef, BooleanArray, Float64Array, StringArray, TimestampMicrosecondArray, UInt16Array, UInt32Array,
+    UInt64Array, UInt8Array,
 };
 use arrow::record_batch::RecordBatch;
 use rayon::prelude::*;
 
+use crate::dataset::als::{
+    als_batch, als_schema, cell_key, dataset_epsg, meta, tiles_schema, CELL_SIZE_M, DROPPED_CLASSES, MAX_ROW_GROUP_ROWS,
+};
 use crate::dataset::{self, tables, AtomicParquet, Dataset};
 use crate::error::{Error, Result};
 use crate::io::las::{TileHeader, TileReader, CHUNK_POINTS};
-use crate::dataset::als::{als_batch, als_schema, cell_key, dataset_epsg, meta, tiles_schema, CELL_SIZE_M, DROPPED_CLASSES, MAX_ROW_GROUP_ROWS};
 use crate::kernels::sim::AlsPoints;
 use crate::ops::progress::{Progress, Step};
 
@@ -52,7 +54,12 @@ pub fn expand_inputs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
 
 /// `gedisim ingest als`: the LAS/LAZ files of `inputs` (folders expanded) into `dataset`, as one
 /// [`Step::IngestAls`] counted in points.
-pub fn ingest(dataset: &Dataset, inputs: &[PathBuf], opts: &AlsOptions, progress: &dyn Progress) -> Result<Vec<TileOutcome>> {
+pub fn ingest(
+    dataset: &Dataset,
+    inputs: &[PathBuf],
+    opts: &AlsOptions,
+    progress: &dyn Progress,
+) -> Result<Vec<TileOutcome>> {
     let files = expand_inputs(inputs)?;
     if files.is_empty() {
         return Err(Error::Usage("no LAS/LAZ file found in the inputs".into()));
@@ -117,7 +124,14 @@ impl TileStats {
     fn new() -> Self {
         TileStats {
             intensity_hist: vec![0; 1 << 16],
-            bounds: [f64::INFINITY, f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY],
+            bounds: [
+                f64::INFINITY,
+                f64::INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::NEG_INFINITY,
+                f64::NEG_INFINITY,
+            ],
             gps: [f64::INFINITY, f64::NEG_INFINITY],
             kept: 0,
             dropped: 0,
@@ -214,7 +228,11 @@ fn ingest_tile(
                 }
                 for (name, v) in [("x", chunk.x[i]), ("y", chunk.y[i]), ("z", chunk.z[i])] {
                     if !v.is_finite() {
-                        return Err(Error::field(path, name, format!("non-finite coordinate {v} at point {}", stats.kept + stats.dropped)));
+                        return Err(Error::field(
+                            path,
+                            name,
+                            format!("non-finite coordinate {v} at point {}", stats.kept + stats.dropped),
+                        ));
                     }
                 }
                 stats.add(&chunk, i);
@@ -269,7 +287,9 @@ fn ingest_tile(
 
 /// The `als/` table's writer properties: the clustering declared so that readers may rely on it,
 /// and no dictionary for the columns whose values are nearly all distinct.
-fn als_writer_properties(props: parquet::file::properties::WriterProperties) -> parquet::file::properties::WriterProperties {
+fn als_writer_properties(
+    props: parquet::file::properties::WriterProperties,
+) -> parquet::file::properties::WriterProperties {
     use parquet::schema::types::ColumnPath;
     let cell_col = als_schema().index_of("cell").expect("cell column");
     let mut builder = props.into_builder().set_sorting_columns(Some(vec![parquet::file::metadata::SortingColumn {
@@ -344,12 +364,22 @@ struct SpillFile {
 impl SpillFile {
     fn create(path: &Path) -> Result<Self> {
         let f = File::create(path).map_err(|e| Error::file(path, format!("cannot create spill file: {e}")))?;
-        Ok(SpillFile { path: path.to_path_buf(), out: BufWriter::with_capacity(1 << 20, f), offset: 0, buf: Vec::new() })
+        Ok(SpillFile {
+            path: path.to_path_buf(),
+            out: BufWriter::with_capacity(1 << 20, f),
+            offset: 0,
+            buf: Vec::new(),
+        })
     }
 
     /// Append the points `order` (sorted by cell) of `chunk`, one run per cell, column by column.
     fn write_runs(&mut self, chunk: &AlsPoints, order: &[(u64, u32)], runs: &mut Vec<Run>) -> Result<()> {
-        fn put<T: Copy, const N: usize>(buf: &mut Vec<u8>, col: &[T], idx: &[(u64, u32)], bytes: impl Fn(T) -> [u8; N]) {
+        fn put<T: Copy, const N: usize>(
+            buf: &mut Vec<u8>,
+            col: &[T],
+            idx: &[(u64, u32)],
+            bytes: impl Fn(T) -> [u8; N],
+        ) {
             for &(_, i) in idx {
                 buf.extend_from_slice(&bytes(col[i as usize]));
             }
@@ -399,7 +429,13 @@ impl SpillReader {
     }
 
     fn read_runs(&mut self, runs: &[Run]) -> Result<AlsPoints> {
-        fn take<T, const N: usize>(col: &mut Vec<T>, bytes: &[u8], at: &mut usize, n: usize, from: impl Fn([u8; N]) -> T) {
+        fn take<T, const N: usize>(
+            col: &mut Vec<T>,
+            bytes: &[u8],
+            at: &mut usize,
+            n: usize,
+            from: impl Fn([u8; N]) -> T,
+        ) {
             let part = &bytes[*at..*at + n * N];
             col.extend(part.chunks_exact(N).map(|c| from(c.try_into().expect("N bytes"))));
             *at += n * N;

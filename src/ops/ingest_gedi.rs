@@ -23,10 +23,10 @@ use hdf5::types::{FixedAscii, FixedUnicode, H5Type, TypeDescriptor, VarLenAscii,
 use hdf5::{Dataset, File, Group, Location};
 use rayon::prelude::*;
 
-use crate::ops::progress::{Progress, Step};
 use crate::error::{one_line, Error, Result};
 use crate::kernels::gedi::{is_beam_group, BeamType, N_ALGORITHMS, RH_LEN};
 use crate::kernels::geo::projection::Projector;
+use crate::ops::progress::{Progress, Step};
 
 /// Maximum rows per emitted batch (a beam larger than this is split).
 pub const BATCH_ROWS: usize = 8192;
@@ -297,7 +297,8 @@ pub fn granule_key(path: &Path) -> String {
 /// `product` (GEDI's naming: `GEDI01_B…` for L1B, `GEDI02_A…` for L2A).
 pub fn expand_granule_inputs(inputs: &[PathBuf], product: &str) -> Result<Vec<PathBuf>> {
     crate::io::expand_inputs(inputs, |f| {
-        crate::io::has_extension(f, "h5") && f.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with(product))
+        crate::io::has_extension(f, "h5")
+            && f.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with(product))
     })
 }
 

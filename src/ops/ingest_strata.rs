@@ -21,10 +21,10 @@ use tiff::decoder::{Decoder, DecodingResult};
 use tiff::tags::Tag;
 
 use crate::dataset::{self, tables, Dataset};
-use crate::ops::progress::{Progress, Step};
 use crate::error::{Error, Result};
 use crate::kernels::geo::projection::Projector;
 use crate::kernels::study::classes::{self, UNKNOWN};
+use crate::ops::progress::{Progress, Step};
 
 /// The CRS a land-cover raster must be in.
 pub const LANDCOVER_EPSG: u16 = 3035;

@@ -20,7 +20,10 @@ pub struct L2aReport {
 pub fn l2a(l1b: &Path, algorithms: &[u8], out: &Path) -> Result<L2aReport> {
     let settings = algorithms
         .iter()
-        .map(|&n| AlgorithmSettings::gedi(n).ok_or_else(|| Error::Usage(format!("--algorithms: {n} is not a GEDI algorithm (1..6)"))))
+        .map(|&n| {
+            AlgorithmSettings::gedi(n)
+                .ok_or_else(|| Error::Usage(format!("--algorithms: {n} is not a GEDI algorithm (1..6)")))
+        })
         .collect::<Result<Vec<_>>>()?;
     let mut writer = AtomicParquet::create(out, l2a_schema(), writer_properties(&Default::default(), 1 << 16))?;
     let mut rows = 0;

@@ -29,20 +29,20 @@ use parquet::file::reader::FileReader;
 use sha2::{Digest, Sha256};
 
 use crate::dataset::als::AlsTable;
-use crate::ops::collocate::{CollocateOptions, CollocateReport, Collocation};
+use crate::dataset::offsets::{offsets_batch, offsets_schema, read_offsets, read_r_after, AppliedOffset};
+use crate::dataset::results::{results_batch, results_metadata, results_schema};
 use crate::dataset::{self, tables, Dataset};
 use crate::error::{Error, Result};
-use crate::ops::ingest_als::{self as als, AlsOptions, TileOutcome};
-use crate::ops::ingest_gedi::{self as gedi, GranuleOutcome};
-use crate::ops::progress::{Progress, Step};
-use crate::ops::ingest_strata::StrataReport;
 use crate::kernels::sim::{Footprint, Profile, SimConfig};
 use crate::kernels::study::select::{
     als_window, select_rows, AlgorithmFacts, Filter, FilterCounts, SegmentFacts, ShotContext, ShotFacts, SimFacts,
     StudyRules, TileWindow, WEIGHTINGS,
 };
-use crate::dataset::offsets::{offsets_batch, offsets_schema, read_offsets, read_r_after, AppliedOffset};
-use crate::dataset::results::{results_batch, results_metadata, results_schema};
+use crate::ops::collocate::{CollocateOptions, CollocateReport, Collocation};
+use crate::ops::ingest_als::{self as als, AlsOptions, TileOutcome};
+use crate::ops::ingest_gedi::{self as gedi, GranuleOutcome};
+use crate::ops::ingest_strata::StrataReport;
+use crate::ops::progress::{Progress, Step};
 
 /// Version of what `run` writes: a change of the selection or the simulation logic bumps it, so
 /// that every granule is redone.
@@ -172,7 +172,8 @@ pub fn run_study(opts: &RunOptions, progress: &dyn Progress) -> Result<RunReport
     }
     let (ds, mut report, granules) = ingest_and_collocate_granules(opts, progress)?;
     let inputs = StudyInputs::read(&ds)?;
-    let mut plans = granules.into_iter().map(|g| plan_granule(&ds, g, &inputs, &opts.rules)).collect::<Result<Vec<_>>>()?;
+    let mut plans =
+        granules.into_iter().map(|g| plan_granule(&ds, g, &inputs, &opts.rules)).collect::<Result<Vec<_>>>()?;
     let foreign = ds.root().join(tables::SIM).join("shots.parquet");
     if foreign.exists() {
         report.warnings.push(format!(
@@ -196,7 +197,10 @@ pub fn ingest_and_collocate(opts: &RunOptions, progress: &dyn Progress) -> Resul
     ingest_and_collocate_granules(opts, progress).map(|(_, report, _)| report)
 }
 
-fn ingest_and_collocate_granules(opts: &RunOptions, progress: &dyn Progress) -> Result<(Dataset, RunReport, Vec<GranuleFile>)> {
+fn ingest_and_collocate_granules(
+    opts: &RunOptions,
+    progress: &dyn Progress,
+) -> Result<(Dataset, RunReport, Vec<GranuleFile>)> {
     let ds = Dataset::create(&opts.out)?;
     let mut report = RunReport { dataset: opts.out.clone(), rules: opts.rules, ..Default::default() };
     ingest_als(&ds, opts, progress, &mut report)?;
@@ -212,7 +216,10 @@ fn ingest_and_collocate_granules(opts: &RunOptions, progress: &dyn Progress) -> 
 fn ingest_als(ds: &Dataset, opts: &RunOptions, progress: &dyn Progress, report: &mut RunReport) -> Result<()> {
     if opts.als.is_empty() {
         if !ds.has_table(tables::ALS) {
-            return Err(Error::Usage(format!("--als: {} has no ALS table yet; give the LAS/LAZ tiles", opts.out.display())));
+            return Err(Error::Usage(format!(
+                "--als: {} has no ALS table yet; give the LAS/LAZ tiles",
+                opts.out.display()
+            )));
         }
         return Ok(());
     }
@@ -223,7 +230,10 @@ fn ingest_als(ds: &Dataset, opts: &RunOptions, progress: &dyn Progress, report: 
 fn ingest_gedi(ds: &Dataset, opts: &RunOptions, progress: &dyn Progress, report: &mut RunReport) -> Result<()> {
     if opts.l1b.is_empty() && opts.l2a.is_empty() {
         if !ds.has_table(tables::SHOTS) {
-            return Err(Error::Usage(format!("--l1b/--l2a: {} has no shots table yet; give the GEDI granules", opts.out.display())));
+            return Err(Error::Usage(format!(
+                "--l1b/--l2a: {} has no shots table yet; give the GEDI granules",
+                opts.out.display()
+            )));
         }
         return Ok(());
     }
@@ -246,7 +256,8 @@ struct GranuleFile {
 
 fn list_granules(ds: &Dataset) -> Result<Vec<GranuleFile>> {
     let dir = ds.root().join(tables::SHOTS);
-    let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): give --l1b/--l2a")))?;
+    let files =
+        dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): give --l1b/--l2a")))?;
     let mut out = Vec::new();
     for path in files {
         let key = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
@@ -255,7 +266,11 @@ fn list_granules(ds: &Dataset) -> Result<Vec<GranuleFile>> {
             Some((a, b)) => format!("l1b={} l2a={}", a.unwrap_or_default(), b.unwrap_or_default()),
             None => {
                 let m = std::fs::metadata(&path).map_err(|e| Error::file(&path, e))?;
-                let t = m.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).map_or(0, |d| d.as_nanos());
+                let t = m
+                    .modified()
+                    .ok()
+                    .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+                    .map_or(0, |d| d.as_nanos());
                 format!("size={} mtime={t}", m.len())
             }
         };
@@ -269,7 +284,8 @@ fn list_granules(ds: &Dataset) -> Result<Vec<GranuleFile>> {
 fn first_string(path: &Path, column: &str) -> Result<Option<String>> {
     let builder = reader_builder(path)?;
     let mask = ProjectionMask::columns(builder.parquet_schema(), [column]);
-    let reader = builder.with_projection(mask).with_batch_size(1).with_limit(1).build().map_err(|e| Error::table(path, e))?;
+    let reader =
+        builder.with_projection(mask).with_batch_size(1).with_limit(1).build().map_err(|e| Error::table(path, e))?;
     for b in reader {
         let b = b.map_err(|e| Error::table(path, e))?;
         if let Some(c) = b.column_by_name(column).and_then(|c| c.as_string_opt::<i32>().cloned()) {
@@ -296,7 +312,13 @@ fn file_metadata(path: &Path) -> Option<HashMap<String, String>> {
 
 /// Collocate the granules never collocated (or re-ingested since), merging their segments into
 /// `offsets/offsets.parquet`.
-fn collocate(ds: &Dataset, opts: &RunOptions, granules: &[GranuleFile], progress: &dyn Progress, report: &mut RunReport) -> Result<()> {
+fn collocate(
+    ds: &Dataset,
+    opts: &RunOptions,
+    granules: &[GranuleFile],
+    progress: &dyn Progress,
+    report: &mut RunReport,
+) -> Result<()> {
     let dest = ds.table_file(tables::OFFSETS, "offsets")?;
     let mut existing: Vec<RecordBatch> = Vec::new();
     let mut meta = HashMap::new();
@@ -304,7 +326,9 @@ fn collocate(ds: &Dataset, opts: &RunOptions, granules: &[GranuleFile], progress
         meta = file_metadata(&dest).unwrap_or_default();
         for b in reader_builder(&dest)?.build().map_err(|e| Error::table(&dest, e))? {
             let b = b.map_err(|e| Error::table(&dest, e))?;
-            existing.push(RecordBatch::try_new(offsets_schema(), b.columns().to_vec()).map_err(|e| Error::table(&dest, e))?);
+            existing.push(
+                RecordBatch::try_new(offsets_schema(), b.columns().to_vec()).map_err(|e| Error::table(&dest, e))?,
+            );
         }
     }
     let granule_col = |b: &RecordBatch| b.column_by_name("granule").and_then(|c| c.as_string_opt::<i32>().cloned());
@@ -338,7 +362,8 @@ fn collocate(ds: &Dataset, opts: &RunOptions, granules: &[GranuleFile], progress
     let mut kept_levels = HashSet::new();
     for b in existing {
         let g = granule_col(&b).ok_or_else(|| Error::field(&dest, "granule", "missing or not a string"))?;
-        let keep: BooleanArray = g.iter().map(|v| Some(v.is_some_and(|v| current.contains(v) && !replaced.contains(v)))).collect();
+        let keep: BooleanArray =
+            g.iter().map(|v| Some(v.is_some_and(|v| current.contains(v) && !replaced.contains(v)))).collect();
         let b = arrow::compute::filter_record_batch(&b, &keep).map_err(|e| Error::table(&dest, e))?;
         if let Some(l) = b.column_by_name("level").and_then(|c| c.as_string_opt::<i32>().cloned()) {
             kept_levels.extend(l.iter().flatten().map(str::to_string));
@@ -346,14 +371,19 @@ fn collocate(ds: &Dataset, opts: &RunOptions, granules: &[GranuleFile], progress
         batches.push(b);
     }
     batches.push(offsets_batch(&rows)?);
-    let mut map = recorded.unwrap_or_else(|| granules.iter().filter(|g| present.contains(&g.name)).map(|g| (g.key.clone(), g.inputs.clone())).collect());
+    let mut map = recorded.unwrap_or_else(|| {
+        granules.iter().filter(|g| present.contains(&g.name)).map(|g| (g.key.clone(), g.inputs.clone())).collect()
+    });
     for g in &needed {
         map.insert(g.key.clone(), g.inputs.clone());
     }
     let level = opts.collocate.level.name();
     kept_levels.insert(level.to_string());
     let mut out_meta = HashMap::new();
-    out_meta.insert("gedisim:collocate_level".to_string(), if kept_levels.len() > 1 { "mixed".to_string() } else { level.to_string() });
+    out_meta.insert(
+        "gedisim:collocate_level".to_string(),
+        if kept_levels.len() > 1 { "mixed".to_string() } else { level.to_string() },
+    );
     out_meta.insert("gedisim:max_shift_m".to_string(), opts.collocate.max_shift.to_string());
     out_meta.insert("gedisim:step_m".to_string(), opts.collocate.step.to_string());
     out_meta.insert(META_GRANULES.to_string(), serde_json::to_string(&map).map_err(|e| Error::table(&dest, e))?);
@@ -386,7 +416,9 @@ impl StudyInputs {
         Ok(StudyInputs {
             als: AlsTable::open(ds)?,
             cover_radius: 2.0 * cfg.fsigma as f64,
-            read_radius: crate::kernels::sim::footprint::gauss_sep(cfg.fsigma, crate::kernels::sim::footprint::I_THRESH) as f64 + 1.0,
+            read_radius: crate::kernels::sim::footprint::gauss_sep(cfg.fsigma, crate::kernels::sim::footprint::I_THRESH)
+                as f64
+                + 1.0,
             cfg,
             offsets: read_offsets(ds)?,
             r_after: read_r_after(ds)?,
@@ -476,7 +508,10 @@ impl Columns<'_> {
     }
 
     fn timestamp(&self, name: &str, i: usize) -> Result<Option<i64>> {
-        let c = self.col(name)?.as_primitive_opt::<TimestampMicrosecondType>().ok_or_else(|| self.wrong(name, "timestamp[µs]"))?;
+        let c = self
+            .col(name)?
+            .as_primitive_opt::<TimestampMicrosecondType>()
+            .ok_or_else(|| self.wrong(name, "timestamp[µs]"))?;
         Ok(c.is_valid(i).then(|| c.value(i)))
     }
 
@@ -553,7 +588,14 @@ fn plan_granule(ds: &Dataset, file: GranuleFile, inputs: &StudyInputs, rules: &S
         .tiles
         .iter()
         .zip(&inputs.tile_hashes)
-        .filter(|(t, _)| covered.iter().any(|c| c.footprint.x + r >= t.xmin && c.footprint.x - r <= t.xmax && c.footprint.y + r >= t.ymin && c.footprint.y - r <= t.ymax))
+        .filter(|(t, _)| {
+            covered.iter().any(|c| {
+                c.footprint.x + r >= t.xmin
+                    && c.footprint.x - r <= t.xmax
+                    && c.footprint.y + r >= t.ymin
+                    && c.footprint.y - r <= t.ymax
+            })
+        })
         .map(|(_, hash)| hash.as_str())
         .collect();
     tiles.sort_unstable();
@@ -580,7 +622,8 @@ fn plan_granule(ds: &Dataset, file: GranuleFile, inputs: &StudyInputs, rules: &S
     let needs_sim = !covered.is_empty() && sim_meta.as_ref().and_then(|m| m.get(META_INPUT)) != Some(&sim_input);
     if covered.is_empty() && sim_meta.is_some_and(|m| m.contains_key(META_INPUT)) {
         // This run's own simulation of shots no longer covered: stale.
-        std::fs::remove_file(&sim_path).map_err(|e| Error::file(&sim_path, format!("cannot remove a stale simulation: {e}")))?;
+        std::fs::remove_file(&sim_path)
+            .map_err(|e| Error::file(&sim_path, format!("cannot remove a stale simulation: {e}")))?;
     }
     let results_meta = file_metadata(&results_path);
     let previous = results_meta
@@ -609,7 +652,15 @@ fn simulate(ds: &Dataset, plans: &mut [GranulePlan], inputs: &StudyInputs, progr
     for p in plans.iter_mut().filter(|p| p.needs_sim) {
         let footprints = p.covered.iter().map(|c| (c.footprint.clone(), c.offset.clone())).collect();
         let extra = HashMap::from([(META_INPUT.to_string(), p.sim_input.clone())]);
-        let r = crate::ops::simulate::simulate_on_dataset_with(ds, footprints, &inputs.cfg, Profile::Default, &p.sim_path, &extra, progress);
+        let r = crate::ops::simulate::simulate_on_dataset_with(
+            ds,
+            footprints,
+            &inputs.cfg,
+            Profile::Default,
+            &p.sim_path,
+            &extra,
+            progress,
+        );
         if r.is_err() {
             progress.finish();
         }
@@ -642,7 +693,8 @@ fn granule_results(p: &mut GranulePlan, inputs: &StudyInputs, rules: &StudyRules
     counts.remove_shots((p.run.shots - p.covered.len()) as u64, Filter::AlsCoverage);
     let mut rows = Vec::new();
     for (c, shot) in p.covered.iter().zip(&shots) {
-        let segment = c.offset.as_ref().map(|o| SegmentFacts { dz: o.dz, r_after: inputs.r_after.get(&o.segment_id).copied() });
+        let segment =
+            c.offset.as_ref().map(|o| SegmentFacts { dz: o.dz, r_after: inputs.r_after.get(&o.segment_id).copied() });
         let ctx = ShotContext {
             sim: sims.get(&shot.shot_number),
             window: als_window(&inputs.tiles, c.footprint.x, c.footprint.y),
@@ -687,7 +739,12 @@ fn read_shot_facts(path: &Path, rows: impl Iterator<Item = usize>) -> Result<Vec
     .map(String::from)
     .to_vec();
     for n in 1..=6 {
-        names.extend([format!("quality_flag_a{n}"), format!("sensitivity_a{n}"), format!("elev_lowestmode_a{n}"), format!("rh_a{n}")]);
+        names.extend([
+            format!("quality_flag_a{n}"),
+            format!("sensitivity_a{n}"),
+            format!("elev_lowestmode_a{n}"),
+            format!("rh_a{n}"),
+        ]);
     }
     let schema = builder.schema().clone();
     if let Some(missing) = names.iter().find(|n| schema.field_with_name(n).is_err()) {
@@ -695,7 +752,8 @@ fn read_shot_facts(path: &Path, rows: impl Iterator<Item = usize>) -> Result<Vec
     }
     let mask = ProjectionMask::columns(builder.parquet_schema(), names.iter().map(String::as_str));
     let selection = crate::dataset::row_selection(&rows, total);
-    let reader = builder.with_projection(mask).with_row_selection(selection).build().map_err(|e| Error::table(path, e))?;
+    let reader =
+        builder.with_projection(mask).with_row_selection(selection).build().map_err(|e| Error::table(path, e))?;
     let mut out = Vec::with_capacity(rows.len());
     for b in reader {
         let b = b.map_err(|e| Error::table(path, e))?;
@@ -743,7 +801,8 @@ fn read_sim_facts(path: &Path) -> Result<HashMap<u64, [SimFacts; 3]>> {
         let c = Columns { b: &b, path };
         for i in 0..b.num_rows() {
             let id = c.string("footprint_id", i)?.unwrap_or_default();
-            let sn: u64 = id.parse().map_err(|_| Error::field(path, "footprint_id", format!("`{id}` is not a shot number")))?;
+            let sn: u64 =
+                id.parse().map_err(|_| Error::field(path, "footprint_id", format!("`{id}` is not a shot number")))?;
             let w = c.string("weighting", i)?.unwrap_or_default();
             let Some(k) = WEIGHTINGS.iter().position(|x| *x == w) else {
                 return Err(Error::field(path, "weighting", format!("`{w}` is not count, frac or int")));

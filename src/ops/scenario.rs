@@ -9,22 +9,22 @@ use chrono::{DateTime, Datelike, Duration, TimeZone, Timelike, Utc};
 
 use crate::error::{Error, Result};
 use crate::io::granule::{v2_file_name, write_l1b_v2, write_l2a_v2, Beam, GranuleMeta};
-use crate::kernels::gedi::{L1bShot, L2aShot, LandCover};
-use crate::kernels::gedi::{beam_number, BeamType, BEAM_NAMES};
-use crate::kernels::geo::projection::Projector;
 use crate::io::las::TileReader;
-use crate::kernels::waveform::forward::L2aRunner;
-use crate::kernels::waveform::l2a::Noise;
+use crate::kernels::gedi::{beam_number, BeamType, BEAM_NAMES};
+use crate::kernels::gedi::{L1bShot, L2aShot, LandCover};
+use crate::kernels::geo::projection::Projector;
 use crate::kernels::scenario::effects::{EffectSet, Physics, NOMINAL_FSIGMA_M};
 use crate::kernels::scenario::plan::{plan, Extent, PlanSettings};
 use crate::kernels::scenario::real::{self, ENERGY_LOG_SPREAD, NOISE_MEAN_SPREAD, NOISE_STDDEV_LOG_SPREAD};
 use crate::kernels::scenario::rng::Stream;
-use crate::kernels::scenario::truth::{
-    finite, DroppedShot, GeoidTruth, GeolocationTruth, GranuleTruth, NoiseTruth, PlantedEffect, ShotTruthRecord, TileTruth, TrackTruth,
-    TruePhysics, Truth, TRUTH_FORMAT,
-};
 use crate::kernels::scenario::shot::{make_shot, ShotSpec};
+use crate::kernels::scenario::truth::{
+    finite, DroppedShot, GeoidTruth, GeolocationTruth, GranuleTruth, NoiseTruth, PlantedEffect, ShotTruthRecord,
+    TileTruth, TrackTruth, TruePhysics, Truth, TRUTH_FORMAT,
+};
 use crate::kernels::sim::{self, Footprint};
+use crate::kernels::waveform::forward::L2aRunner;
+use crate::kernels::waveform::l2a::Noise;
 
 /// Default nominal geoid height N (m): EGM2008/RAF20 N over metropolitan France spans about
 /// 44–55 m; 49 m is typical of the Massif Central and Alpine foothills.
@@ -103,7 +103,13 @@ fn read_tile(path: &Path, default_epsg: u32) -> Result<Tile> {
     if !(xmax > xmin && ymax > ymin) {
         return Err(Error::field(path, "header bounds", format!("empty extent {xmin}..{xmax} x {ymin}..{ymax}")));
     }
-    Ok(Tile { path: path.to_path_buf(), points, extent: Extent { xmin, ymin, xmax, ymax }, epsg: h.epsg.unwrap_or(default_epsg), acquired })
+    Ok(Tile {
+        path: path.to_path_buf(),
+        points,
+        extent: Extent { xmin, ymin, xmax, ymax },
+        epsg: h.epsg.unwrap_or(default_epsg),
+        acquired,
+    })
 }
 
 /// `YYYYDDDHHMMSS` of a time.
@@ -167,7 +173,8 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
         for pass in 0..opts.passes_per_tile {
             let mut g = Stream::new(opts.seed, &["granule", &t.to_string(), &pass.to_string()]);
             let day = tile.acquired.unwrap_or(fallback).date_naive().and_hms_opt(0, 0, 0).expect("midnight").and_utc();
-            let start = day + Duration::days(7 * pass as i64) + Duration::seconds(3600 * 6 + (g.uniform() * 43_200.0) as i64);
+            let start =
+                day + Duration::days(7 * pass as i64) + Duration::seconds(3600 * 6 + (g.uniform() * 43_200.0) as i64);
             let orbit = (1964.0 + ((delta_time(start) - ORBIT_1964_DELTA_TIME) / ORBIT_S).floor()).max(1.0) as u32;
             let sub_orbit = 1 + (g.next_u64() % 4) as u8;
             let track = 1 + (g.next_u64() % 4470) as u32;
@@ -188,7 +195,8 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
     // Simulate every tile's shots at their true positions with the true physics.
     let mut sims = vec![None; layout.shots.len()];
     for (t, tile) in tiles.iter().enumerate() {
-        let idx: Vec<usize> = (0..layout.shots.len()).filter(|&i| layout.tracks[layout.shots[i].track].tile == t).collect();
+        let idx: Vec<usize> =
+            (0..layout.shots.len()).filter(|&i| layout.tracks[layout.shots[i].track].tile == t).collect();
         let fps: Vec<Footprint> = idx
             .iter()
             .map(|&i| {
@@ -219,9 +227,8 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
         let beam_type = BeamType::from_name(track.beam).unwrap_or(BeamType::Coverage);
         let rec = real::record(beam_type);
         let mut r = Stream::new(opts.seed, &["shot", &track.id, &ps.along_index.to_string()]);
-        let (lon, lat) = projectors[track.tile]
-            .unproject(ps.x, ps.y)
-            .map_err(|e| Error::field(&tile.path, "extent", e))?;
+        let (lon, lat) =
+            projectors[track.tile].unproject(ps.x, ps.y).map_err(|e| Error::field(&tile.path, "extent", e))?;
         let leaf_off = is_leaf_off(Some(gr.start).filter(|_| tile.acquired.is_some()));
         let along_s = ps.along_m / GROUND_SPEED_M_S;
         let dt = delta_time(gr.start) + along_s;
@@ -300,14 +307,24 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
     if opts.force {
         for d in [&gedi_dir, &als_dir] {
             if d.exists() {
-                std::fs::remove_dir_all(d).map_err(|e| Error::file(d, format!("cannot remove the previous world: {e}")))?;
+                std::fs::remove_dir_all(d)
+                    .map_err(|e| Error::file(d, format!("cannot remove the previous world: {e}")))?;
             }
         }
     }
     mk(&tmp)?;
     mk(&gedi_dir)?;
     mk(&als_dir)?;
-    let result = write_outputs(opts, &tmp, &gedi_dir, &als_dir, &tiles, &granules.iter().map(|g| (g.l1b.clone(), g.l2a.clone())).collect::<Vec<_>>(), &l1b, &l2a);
+    let result = write_outputs(
+        opts,
+        &tmp,
+        &gedi_dir,
+        &als_dir,
+        &tiles,
+        &granules.iter().map(|g| (g.l1b.clone(), g.l2a.clone())).collect::<Vec<_>>(),
+        &l1b,
+        &l2a,
+    );
     let _ = std::fs::remove_dir_all(&tmp);
     result?;
 
@@ -334,10 +351,13 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
         datum_dz_m: opts.effects.vertical_offset_m(),
         noise: NoiseTruth {
             noise_sigma_factor: factor,
-            median_noise_stddev_corrected: [("coverage", real::COVERAGE.noise_stddev), ("full_power", real::FULL_POWER.noise_stddev)]
-                .into_iter()
-                .map(|(k, v)| (k.to_string(), v))
-                .collect(),
+            median_noise_stddev_corrected: [
+                ("coverage", real::COVERAGE.noise_stddev),
+                ("full_power", real::FULL_POWER.noise_stddev),
+            ]
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), v))
+            .collect(),
             shape: "GEDI_V1 (per-sample 0.52 sigma, Gaussian correlation 1.63 samples)".to_string(),
         },
         geolocation: GeolocationTruth {
@@ -352,7 +372,10 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
         tiles: tiles
             .iter()
             .map(|t| TileTruth {
-                file: format!("als/{}", t.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()),
+                file: format!(
+                    "als/{}",
+                    t.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()
+                ),
                 source: t.path.display().to_string(),
                 epsg: t.epsg,
                 extent: [t.extent.xmin, t.extent.ymin, t.extent.xmax, t.extent.ymax],
@@ -446,10 +469,9 @@ fn write_outputs(
         let name = t.path.file_name().ok_or_else(|| Error::file(&t.path, "not a file name"))?;
         let dest = als_dir.join(name);
         let staged = tmp.join(name);
-        std::fs::copy(&t.path, &staged).map_err(|e| Error::file(&t.path, format!("cannot copy to {}: {e}", staged.display())))?;
+        std::fs::copy(&t.path, &staged)
+            .map_err(|e| Error::file(&t.path, format!("cannot copy to {}: {e}", staged.display())))?;
         std::fs::rename(&staged, &dest).map_err(|e| Error::file(&dest, format!("cannot move into place: {e}")))?;
     }
     Ok(())
 }
-
-

@@ -112,13 +112,20 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
 /// Keep only the points whose class the ingest keeps (so that direct mode with the `default`
 /// profile sees the same points as the dataset path).
 pub fn drop_ingest_classes(p: &AlsPoints) -> AlsPoints {
-    let keep: Vec<u32> = (0..p.len() as u32).filter(|&i| !DROPPED_CLASSES.contains(&p.classification[i as usize])).collect();
+    let keep: Vec<u32> =
+        (0..p.len() as u32).filter(|&i| !DROPPED_CLASSES.contains(&p.classification[i as usize])).collect();
     p.permuted(&keep)
 }
 
 /// Direct mode: simulate `footprints` on `points` and write the `sim` rows to `out` (atomically).
 /// Returns the number of footprints simulated and skipped.
-pub fn simulate_direct(points: &AlsPoints, footprints: &[Footprint], cfg: &SimConfig, profile: Profile, out: &Path) -> Result<(usize, usize)> {
+pub fn simulate_direct(
+    points: &AlsPoints,
+    footprints: &[Footprint],
+    cfg: &SimConfig,
+    profile: Profile,
+    out: &Path,
+) -> Result<(usize, usize)> {
     let results = sim::simulate(points, footprints, cfg)?;
     let ok = results.iter().filter(|r| r.is_ok()).count();
     let batch = sim_batch(footprints, &results, &Weighting::ALL, &[])?;

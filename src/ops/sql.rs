@@ -16,7 +16,8 @@ pub fn sql(dataset: &Path, query: &str, out: Option<&Path>) -> Result<Option<Str
         let batches = df.collect().await.map_err(|e| Error::Usage(format!("SQL: {e}")))?;
         match out {
             None => {
-                let table = arrow::util::pretty::pretty_format_batches(&batches).map_err(|e| Error::Usage(e.to_string()))?;
+                let table =
+                    arrow::util::pretty::pretty_format_batches(&batches).map_err(|e| Error::Usage(e.to_string()))?;
                 Ok(Some(table.to_string()))
             }
             Some(out) => crate::dataset::write_result(out, &batches).map(|_| None),

@@ -20,22 +20,11 @@ pub fn coerce_waveform(name: &str, t: &DataType) -> DfResult<DataType> {
 }
 
 /// The type a numeric argument is cast to (`target`), or a planning error naming the argument.
-pub fn coerce_number(
-    name: &str,
-    arg: &str,
-    t: &DataType,
-    target: DataType,
-) -> DfResult<DataType> {
-    let ok = t.is_null()
-        || if target == DataType::Int64 {
-            t.is_integer()
-        } else {
-            t.is_numeric()
-        };
+pub fn coerce_number(name: &str, arg: &str, t: &DataType, target: DataType) -> DfResult<DataType> {
+    let ok = t.is_null() || if target == DataType::Int64 { t.is_integer() } else { t.is_numeric() };
     if ok {
         Ok(target)
     } else {
         plan_err!("{name}: {arg} must be a number, got {t}")
     }
 }
-

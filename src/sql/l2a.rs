@@ -13,15 +13,14 @@ use arrow::array::{Array, AsArray};
 use arrow::datatypes::{DataType, Float32Type, Float64Type, Int64Type};
 use datafusion::common::{exec_err, plan_err, Result as DfResult};
 use datafusion::logical_expr::{
-    Documentation,
-    ColumnarValue, ScalarFunctionArgs, ScalarUDFImpl, Signature, Volatility,
+    ColumnarValue, Documentation, ScalarFunctionArgs, ScalarUDFImpl, Signature, Volatility,
 };
 
-use crate::kernels::waveform::l2a::{AlgorithmSettings, L2aProcessor, NoResult, Noise, WaveformGeolocation};
-use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
-use crate::dataset::l2a::{l2a_struct_fields, L2aColumns};
 use super::args::{coerce_number, coerce_waveform};
 use super::DOC_SECTION;
+use crate::dataset::l2a::{l2a_struct_fields, L2aColumns};
+use crate::kernels::waveform::l2a::{AlgorithmSettings, L2aProcessor, NoResult, Noise, WaveformGeolocation};
+use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
 
 /// The `gedi_l2a` scalar function.
 #[derive(Debug, PartialEq, Eq, Hash)]
@@ -33,9 +32,7 @@ impl GediL2a {
     /// Takes 4 or 6 arguments; numbers are cast (waveform to list<float32>, algorithm to int64,
     /// the others to float64).
     pub fn new() -> Self {
-        GediL2a {
-            signature: Signature::user_defined(Volatility::Immutable),
-        }
+        GediL2a { signature: Signature::user_defined(Volatility::Immutable) }
     }
 }
 
@@ -45,14 +42,8 @@ impl Default for GediL2a {
     }
 }
 
-const ARGS: [&str; 6] = [
-    "rxwaveform",
-    "noise_mean",
-    "noise_stddev",
-    "algorithm",
-    "elevation_bin0",
-    "elevation_lastbin",
-];
+const ARGS: [&str; 6] =
+    ["rxwaveform", "noise_mean", "noise_stddev", "algorithm", "elevation_bin0", "elevation_lastbin"];
 
 static DOCUMENTATION: LazyLock<Documentation> = LazyLock::new(|| {
     Documentation::builder(
@@ -108,31 +99,19 @@ impl ScalarUDFImpl for GediL2a {
         let mean = arrays[1].as_primitive::<Float64Type>();
         let sd = arrays[2].as_primitive::<Float64Type>();
         let alg = arrays[3].as_primitive::<Int64Type>();
-        let elevations = (arrays.len() == 6).then(|| {
-            (
-                arrays[4].as_primitive::<Float64Type>(),
-                arrays[5].as_primitive::<Float64Type>(),
-            )
-        });
+        let elevations = (arrays.len() == 6)
+            .then(|| (arrays[4].as_primitive::<Float64Type>(), arrays[5].as_primitive::<Float64Type>()));
         let settings = AlgorithmSettings::all_gedi();
         let mut processor = L2aProcessor::new();
         let mut out = L2aColumns::with_capacity(n);
         for i in 0..n {
             let null_elevation = elevations.is_some_and(|(z0, zn)| z0.is_null(i) || zn.is_null(i));
-            if waves.is_null(i)
-                || mean.is_null(i)
-                || sd.is_null(i)
-                || alg.is_null(i)
-                || null_elevation
-            {
+            if waves.is_null(i) || mean.is_null(i) || sd.is_null(i) || alg.is_null(i) || null_elevation {
                 out.append_null();
                 continue;
             }
             let a = alg.value(i);
-            let Some(s) = usize::try_from(a)
-                .ok()
-                .and_then(|a| settings.get(a.wrapping_sub(1)))
-            else {
+            let Some(s) = usize::try_from(a).ok().and_then(|a| settings.get(a.wrapping_sub(1))) else {
                 return exec_err!("gedi_l2a: algorithm must be 1..6, got {a}");
             };
             let wave = waves.value(i);
@@ -142,10 +121,7 @@ impl ScalarUDFImpl for GediL2a {
                 Some((z0, zn)) => WaveformGeolocation::vertical(len, z0.value(i), zn.value(i)),
                 None => WaveformGeolocation::from_spacing(len, 0.0, GEDI_BIN_M),
             };
-            let noise = Noise {
-                mean: mean.value(i),
-                stddev: sd.value(i),
-            };
+            let noise = Noise { mean: mean.value(i), stddev: sd.value(i) };
             // A null sample is a missing value: reported like a NaN, never read as its slot.
             let outcome = match (0..len).find(|&k| wave.is_null(k)) {
                 Some(index) => Err(NoResult::NonFiniteSample { index }),

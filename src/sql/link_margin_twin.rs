@@ -46,4 +46,3 @@ fn link_margin_twin(sim: &[f64], z0: f64, dz: f64, c: &[Column], i: usize) -> Ma
     let (bin0, last) = record_elevations(z0, twin.pre_samples as isize, made.wave.len());
     Ok((made, bin0, last))
 }
-

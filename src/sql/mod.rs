@@ -29,7 +29,10 @@ pub async fn session(ds: &Dataset) -> Result<SessionContext> {
         let dir = entry.map_err(|e| Error::file(ds.root(), e))?.path();
         let Some(name) = dir.file_name().and_then(|n| n.to_str()).map(str::to_string) else { continue };
         // `report/` holds the report's outputs (many schemas), not a table.
-        if name == dataset::tables::REPORT || !dir.is_dir() || dataset::table_files(&dir).map(|f| f.is_empty()).unwrap_or(true) {
+        if name == dataset::tables::REPORT
+            || !dir.is_dir()
+            || dataset::table_files(&dir).map(|f| f.is_empty()).unwrap_or(true)
+        {
             continue;
         }
         register_table(&ctx, &name, &dir).await?;
@@ -38,7 +41,8 @@ pub async fn session(ds: &Dataset) -> Result<SessionContext> {
 }
 
 /// The section gedisim's functions are documented under (`documentation()`, `information_schema`).
-pub const DOC_SECTION: DocSection = DocSection { include: true, label: "gedisim", description: Some("GEDI waveform functions") };
+pub const DOC_SECTION: DocSection =
+    DocSection { include: true, label: "gedisim", description: Some("GEDI waveform functions") };
 
 /// gedisim's scalar functions, one file each: `gedi_rh` ([`rh`]), `gedi_l2a` ([`l2a`]),
 /// `gedi_noise_twin` ([`noise_twin`]), `gedi_link_margin_twin` ([`link_margin_twin`]).
@@ -64,7 +68,5 @@ pub fn register_functions(ctx: &SessionContext, ds: &Dataset) {
 pub async fn register_table(ctx: &SessionContext, name: &str, dir: &Path) -> Result<()> {
     let options = ListingOptions::new(Arc::new(ParquetFormat::default())).with_file_extension(".parquet");
     let url = format!("{}/", dir.canonicalize().map_err(|e| Error::file(dir, e))?.display());
-    ctx.register_listing_table(name, &url, options, None, None)
-        .await
-        .map_err(|e| Error::table(dir, e))
+    ctx.register_listing_table(name, &url, options, None, None).await.map_err(|e| Error::table(dir, e))
 }

@@ -56,24 +56,16 @@ fn shot_twin(sim: &[f64], z0: f64, dz: f64, c: &[Column], i: usize) -> Made {
     }
     let twin = ShotTwin {
         energy_total: c[0].f64(i),
-        noise: Noise {
-            mean: c[1].f64(i),
-            stddev: c[2].f64(i),
-        },
+        noise: Noise { mean: c[1].f64(i), stddev: c[2].f64(i) },
         sample_count: count,
         tx_pulse: None,
         quantum: c.get(6).map_or(0.0, |q| q.f64(i)),
         noise_shape: NoiseShape {
-            correlation: c
-                .get(7)
-                .map_or(NoiseShape::GEDI_V1.correlation, |v| v.f64(i)),
-            per_sample_ratio: c
-                .get(8)
-                .map_or(NoiseShape::GEDI_V1.per_sample_ratio, |v| v.f64(i)),
+            correlation: c.get(7).map_or(NoiseShape::GEDI_V1.correlation, |v| v.f64(i)),
+            per_sample_ratio: c.get(8).map_or(NoiseShape::GEDI_V1.per_sample_ratio, |v| v.f64(i)),
         },
     };
     let made = twin.apply(sim, dz, start, c[5].seed(i))?;
     let (bin0, last) = record_elevations(z0, start, made.wave.len());
     Ok((made, bin0, last))
 }
-

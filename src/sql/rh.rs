@@ -6,12 +6,14 @@ use std::sync::{Arc, LazyLock};
 use arrow::array::{Array, AsArray};
 use arrow::datatypes::{DataType, Float32Type, Float64Type};
 use datafusion::common::{exec_err, Result as DfResult};
-use datafusion::logical_expr::{ColumnarValue, Documentation, ScalarFunctionArgs, ScalarUDFImpl, Signature, Volatility};
+use datafusion::logical_expr::{
+    ColumnarValue, Documentation, ScalarFunctionArgs, ScalarUDFImpl, Signature, Volatility,
+};
 
 use super::DOC_SECTION;
 
-use crate::kernels::waveform::rh::rh_profile;
 use crate::dataset::{list_f32, list_f32_builder};
+use crate::kernels::waveform::rh::rh_profile;
 
 /// The `gedi_rh` scalar function.
 #[derive(Debug, PartialEq, Eq, Hash)]

@@ -17,11 +17,11 @@ use datafusion::physical_plan::stream::RecordBatchStreamAdapter;
 use datafusion::physical_plan::streaming::{PartitionStream, StreamingTableExec};
 use datafusion::physical_plan::{ExecutionPlan, SendableRecordBatchStream};
 
-use crate::dataset::Dataset;
-use crate::kernels::sim::{Profile, SimConfig};
 use crate::dataset::blocks::BlockSimulation;
 use crate::dataset::shots::shot_footprints;
 use crate::dataset::sim::sim_schema;
+use crate::dataset::Dataset;
+use crate::kernels::sim::{Profile, SimConfig};
 
 /// The `gedi_simulate` table function of one dataset.
 #[derive(Debug)]
@@ -89,13 +89,12 @@ impl PartitionStream for SimulatedShots {
 
     fn execute(&self, _ctx: Arc<TaskContext>) -> SendableRecordBatchStream {
         let this = self.clone();
-        let batches = move || -> crate::Result<Box<dyn Iterator<Item = DfResult<arrow::record_batch::RecordBatch>> + Send>> {
-            let shots = shot_footprints(&this.dataset)?;
-            let blocks = BlockSimulation::new(&this.dataset, shots, SimConfig::new(this.profile))?;
-            Ok(Box::new(blocks.map(|block| {
-                block.map_err(to_df)?.batch().map_err(to_df)
-            })))
-        };
+        let batches =
+            move || -> crate::Result<Box<dyn Iterator<Item = DfResult<arrow::record_batch::RecordBatch>> + Send>> {
+                let shots = shot_footprints(&this.dataset)?;
+                let blocks = BlockSimulation::new(&this.dataset, shots, SimConfig::new(this.profile))?;
+                Ok(Box::new(blocks.map(|block| block.map_err(to_df)?.batch().map_err(to_df))))
+            };
         let iter: Box<dyn Iterator<Item = DfResult<arrow::record_batch::RecordBatch>> + Send> = match batches() {
             Ok(it) => it,
             Err(e) => Box::new(std::iter::once(Err(to_df(e)))),

@@ -14,7 +14,9 @@ use std::sync::Arc;
 use arrow::array::{Array, ArrayRef, AsArray, Float64Array, PrimitiveArray, StringArray, StructArray};
 use arrow::datatypes::{DataType, Field, Fields, Float32Type, Float64Type, Int64Type, UInt64Type};
 use datafusion::common::{plan_err, Result as DfResult};
-use datafusion::logical_expr::{ColumnarValue, Documentation, ScalarFunctionArgs, ScalarUDFImpl, Signature, Volatility};
+use datafusion::logical_expr::{
+    ColumnarValue, Documentation, ScalarFunctionArgs, ScalarUDFImpl, Signature, Volatility,
+};
 
 use super::args::{coerce_number, coerce_waveform};
 use crate::dataset::{list_f32, list_f32_builder};
@@ -58,7 +60,11 @@ pub struct GediTwin {
 
 impl GediTwin {
     pub fn new(function: &'static TwinFunction) -> Self {
-        Self { function, signature: Signature::user_defined(Volatility::Immutable), documentation: (function.documentation)() }
+        Self {
+            function,
+            signature: Signature::user_defined(Volatility::Immutable),
+            documentation: (function.documentation)(),
+        }
     }
 }
 
@@ -152,12 +158,7 @@ impl ScalarUDFImpl for GediTwin {
             .iter()
             .enumerate()
             .map(|(i, t)| {
-                let arg = required
-                    .iter()
-                    .chain(optional)
-                    .nth(i)
-                    .copied()
-                    .unwrap_or_default();
+                let arg = required.iter().chain(optional).nth(i).copied().unwrap_or_default();
                 if i == 0 {
                     coerce_waveform(name, t)
                 } else if is_integer(arg) && *t == DataType::UInt64 {
@@ -192,13 +193,7 @@ impl ScalarUDFImpl for GediTwin {
             let w = w.as_primitive::<Float32Type>();
             // Null samples become NaN, which the kernel reports as an invalid waveform.
             sim.clear();
-            sim.extend((0..w.len()).map(|k| {
-                if w.is_null(k) {
-                    f64::NAN
-                } else {
-                    f64::from(w.value(k))
-                }
-            }));
+            sim.extend((0..w.len()).map(|k| if w.is_null(k) { f64::NAN } else { f64::from(w.value(k)) }));
             let (z0, dz) = (cols[0].f64(i), cols[1].f64(i));
             let made = (self.function.make)(&sim, z0, dz, &cols[2..], i);
             out.append(made);
@@ -267,12 +262,7 @@ impl TwinColumns {
 
     fn push_nulls(&mut self) {
         self.wave.append_null();
-        for v in [
-            &mut self.bin0,
-            &mut self.last,
-            &mut self.mean,
-            &mut self.stddev,
-        ] {
+        for v in [&mut self.bin0, &mut self.last, &mut self.mean, &mut self.stddev] {
             v.push(None);
         }
     }

@@ -6,24 +6,15 @@ use std::process::Command;
 
 /// Path of a file under tests/data.
 pub fn data(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(rel)
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(rel)
 }
 
 /// The three real LiDAR HD tiles bundled in tests/data/als.
-pub const TILES: [&str; 3] = [
-    "lidarforfuel_1_42",
-    "lidarforfuel_2_bas_lig",
-    "pdal-ign-plugin_mnx_input_crop_2",
-];
+pub const TILES: [&str; 3] = ["lidarforfuel_1_42", "lidarforfuel_2_bas_lig", "pdal-ign-plugin_mnx_input_crop_2"];
 
 /// Run the gedisim binary; returns (success, stdout, stderr).
 pub fn gedisim(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_gedisim"))
-        .args(args)
-        .output()
-        .expect("run gedisim");
+    let out = Command::new(env!("CARGO_BIN_EXE_gedisim")).args(args).output().expect("run gedisim");
     (
         out.status.success(),
         String::from_utf8_lossy(&out.stdout).into_owned(),

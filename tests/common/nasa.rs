@@ -49,16 +49,11 @@ impl RealShot {
 }
 
 fn data_path(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data/gedi")
-        .join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/gedi").join(name)
 }
 
 fn read<T: hdf5::H5Type>(group: &hdf5::Group, name: &str) -> Vec<T> {
-    group
-        .dataset(name)
-        .and_then(|d| d.read_raw::<T>())
-        .unwrap_or_else(|e| panic!("{}: {name}: {e}", group.name()))
+    group.dataset(name).and_then(|d| d.read_raw::<T>()).unwrap_or_else(|e| panic!("{}: {name}: {e}", group.name()))
 }
 
 /// Every shot of the pair that joins on `shot_number`, in file order.
@@ -98,10 +93,7 @@ pub fn load_real_shots() -> Vec<RealShot> {
                 shot_number: sn,
                 wave: wave[s0..s0 + n].to_vec(),
                 tx: tx[t0..t0 + usize::from(tx_count[i])].to_vec(),
-                noise: Noise {
-                    mean: mean[i],
-                    stddev: sd[i],
-                },
+                noise: Noise { mean: mean[i], stddev: sd[i] },
                 geo: WaveformGeolocation {
                     sample_count: n,
                     elevation_bin0: z0[i],
@@ -136,9 +128,7 @@ struct AlgArrays {
 
 impl AlgArrays {
     fn read(beam: &hdf5::Group, alg: usize) -> Self {
-        let g = beam
-            .group(&format!("rx_processing_a{alg}"))
-            .expect("rx_processing group");
+        let g = beam.group(&format!("rx_processing_a{alg}")).expect("rx_processing group");
         let geo = beam.group("geolocation").expect("geolocation group");
         let modelocs: Vec<f64> = read(&g, "rx_modelocs");
         let n = read::<f64>(&g, "toploc").len();

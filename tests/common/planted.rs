@@ -9,9 +9,9 @@ use gedisim::dataset::Dataset;
 use gedisim::io::granule::{write_l1b_v2, Beam, GranuleMeta};
 use gedisim::kernels::gedi::L1bShot;
 use gedisim::kernels::geo::projection::Projector;
+use gedisim::kernels::sim::{self, Footprint, Profile, SimConfig, Weighting};
 use gedisim::kernels::waveform::l2a::Noise;
 use gedisim::kernels::waveform::noise_twin::{NoiseShape, ShotTwin, GEDI_BIN_M};
-use gedisim::kernels::sim::{self, Footprint, Profile, SimConfig, Weighting};
 
 /// One planted beam: shots evenly spaced on a segment, reported positions.
 #[derive(Debug, Clone)]

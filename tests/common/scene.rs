@@ -7,7 +7,8 @@ use std::path::Path;
 /// (LAZ, written under a temporary name and renamed); returns the number of points written.
 pub fn replicated_tile(src: &Path, nx: usize, ny: usize, step: f64, dest: &Path) -> u64 {
     let mut reader = las::Reader::from_path(src).expect("read the source tile");
-    let points: Vec<las::Point> = reader.read_all().expect("decode the source tile").points().map(|p| p.expect("a point")).collect();
+    let points: Vec<las::Point> =
+        reader.read_all().expect("decode the source tile").points().map(|p| p.expect("a point")).collect();
     let mut builder = las::Builder::from(reader.header().clone());
     builder.point_format.is_compressed = true;
     builder.evlrs.clear();

@@ -194,7 +194,8 @@ mod tests {
     #[test]
     fn lagged_r_is_the_pearson_r_on_the_union_window() {
         // One offset; simulated bump at bins 100..110, real bump at bins 103..115.
-        let sim: Vec<f32> = (0..40).map(|r| if (10..20).contains(&r) { 1.0 + (r as f32 - 14.0).abs() } else { 0.0 }).collect();
+        let sim: Vec<f32> =
+            (0..40).map(|r| if (10..20).contains(&r) { 1.0 + (r as f32 - 14.0).abs() } else { 0.0 }).collect();
         let waves = OffsetWaves { first_bin: 90, dz: 0.15, n_offsets: 1, values: sim.clone() };
         let p = SimulatedProfiles::new(waves);
         let real_vals: Vec<f64> = (0..12).map(|k| 1.0 + ((k * 7) % 5) as f64).collect();
@@ -209,10 +210,15 @@ mod tests {
             let a: Vec<f64> = (lo..=hi)
                 .map(|m| {
                     let k = m + lag - 103;
-                    if (0..12).contains(&k) { real.values[k as usize] as f64 } else { 0.0 }
+                    if (0..12).contains(&k) {
+                        real.values[k as usize] as f64
+                    } else {
+                        0.0
+                    }
                 })
                 .collect();
-            let b: Vec<f64> = (lo..=hi).map(|m| if (90..130).contains(&m) { sim[(m - 90) as usize] as f64 } else { 0.0 }).collect();
+            let b: Vec<f64> =
+                (lo..=hi).map(|m| if (90..130).contains(&m) { sim[(m - 90) as usize] as f64 } else { 0.0 }).collect();
             let want = pearson(&a, &b);
             assert!((r[li] as f64 - want).abs() < 1e-5, "lag {lag}: {} vs {want}", r[li]);
             assert!((p.correlate_one(&real, 0, lag) - want).abs() < 1e-9);

@@ -47,11 +47,15 @@ impl OffsetGrid {
     /// 101 offsets per axis (a shot's raster holds every offset: 101² × its bins).
     pub fn new(max_shift: f64, step: f64) -> Result<OffsetGrid> {
         if !(step > 0.0) || !step.is_finite() || !(max_shift >= 0.0) || !max_shift.is_finite() {
-            return Err(Error::Usage(format!("--max-shift {max_shift} / --step {step}: need a shift ≥ 0 and a step > 0")));
+            return Err(Error::Usage(format!(
+                "--max-shift {max_shift} / --step {step}: need a shift ≥ 0 and a step > 0"
+            )));
         }
         let half = (max_shift / step + 1e-9).floor() as usize;
         if half > 50 {
-            return Err(Error::Usage(format!("--max-shift {max_shift} / --step {step}: more than 101 offsets per axis")));
+            return Err(Error::Usage(format!(
+                "--max-shift {max_shift} / --step {step}: more than 101 offsets per axis"
+            )));
         }
         Ok(OffsetGrid { step, half })
     }
@@ -141,13 +145,20 @@ impl CollocateConfig {
     pub fn validate(&self) -> Result<()> {
         let m = &self.model;
         let q = m.quirks;
-        if m.normalise_density || m.clean_outliers || m.pulse_timing != crate::kernels::sim::PulseTiming::AfterBinning || q.batch_grid || q.divide_by_taps {
+        if m.normalise_density
+            || m.clean_outliers
+            || m.pulse_timing != crate::kernels::sim::PulseTiming::AfterBinning
+            || q.batch_grid
+            || q.divide_by_taps
+        {
             return Err(Error::Usage(
                 "collocation model: density normalisation, cleaning, pulse-before-binning, batch grids and tap division are not supported".into(),
             ));
         }
         if !(m.fsigma > 0.0) || !(m.res > 0.0) || !(self.vertical_half_window >= 0.0) || !(self.tolerance > 0.0) {
-            return Err(Error::Usage("collocation model: σ_f, bin size, vertical window and tolerance must be positive".into()));
+            return Err(Error::Usage(
+                "collocation model: σ_f, bin size, vertical window and tolerance must be positive".into(),
+            ));
         }
         Ok(())
     }
@@ -287,15 +298,11 @@ pub fn collocate_unit<E>(
         }
     }
 
-    let skips: Vec<Option<ShotSkip>> = states.iter().map(|st| st.as_ref().and_then(|o| o.as_ref().err().copied())).collect();
+    let skips: Vec<Option<ShotSkip>> =
+        states.iter().map(|st| st.as_ref().and_then(|o| o.as_ref().err().copied())).collect();
     let mut solutions = Vec::with_capacity(plans.len());
     for plan in plans {
-        let used: Vec<usize> = plan
-            .support
-            .iter()
-            .copied()
-            .filter(|&s| matches!(&states[s], Some(Ok(_))))
-            .collect();
+        let used: Vec<usize> = plan.support.iter().copied().filter(|&s| matches!(&states[s], Some(Ok(_)))).collect();
         let Some(mut w) = window.filter(|_| !used.is_empty()) else {
             solutions.push(None);
             continue;
@@ -323,7 +330,8 @@ pub fn collocate_unit<E>(
             for chunk in used.chunks(SUB_BATCH) {
                 let cloud = points_for(chunk)?;
                 let index = CellGrid::from_xy(&cloud.x, &cloud.y, INDEX_CELL);
-                let rs: Vec<Option<Vec<f32>>> = chunk.par_iter().map(|&s| shot_surface(&shots[s], &cloud, &index, w, cfg)).collect();
+                let rs: Vec<Option<Vec<f32>>> =
+                    chunk.par_iter().map(|&s| shot_surface(&shots[s], &cloud, &index, w, cfg)).collect();
                 for r in rs.into_iter().flatten() {
                     surface.add(&r);
                 }
@@ -347,13 +355,22 @@ const INDEX_CELL: f64 = 5.0;
 /// of every shot. On a segment of one or two shots a free vertical offset trades off against the
 /// horizontal one on slopes; a vertical reference shared by all segments pins it. `None` when no
 /// shot can be rasterised.
-pub fn horizontal_offset_at(shots: &[ShotInput], cloud: &PointCloud, cfg: &CollocateConfig, dz: f64) -> Option<(f64, f64)> {
+pub fn horizontal_offset_at(
+    shots: &[ShotInput],
+    cloud: &PointCloud,
+    cfg: &CollocateConfig,
+    dz: f64,
+) -> Option<(f64, f64)> {
     let index = CellGrid::from_xy(&cloud.x, &cloud.y, INDEX_CELL);
     let lag = (dz / cfg.model.res).round() as i64;
     let n = cfg.grid.n();
     let rs: Vec<Vec<f64>> = shots
         .par_iter()
-        .filter_map(|s| rasterise(s, cloud, &index, cfg).ok().map(|p| (0..n * n).map(|c| p.correlate_one(&s.real, c, lag)).collect()))
+        .filter_map(|s| {
+            rasterise(s, cloud, &index, cfg)
+                .ok()
+                .map(|p| (0..n * n).map(|c| p.correlate_one(&s.real, c, lag)).collect())
+        })
         .collect();
     let first = rs.first()?;
     let sum: Vec<f64> = (0..first.len()).map(|c| rs.iter().map(|r| r[c]).sum()).collect();
@@ -376,7 +393,12 @@ fn candidates(cloud: &PointCloud, index: &CellGrid, (x0, y0): (f64, f64), half: 
 }
 
 /// Coverage check and the raster of every offset of one shot, cut to the signal extents.
-fn rasterise(shot: &ShotInput, cloud: &PointCloud, index: &CellGrid, cfg: &CollocateConfig) -> std::result::Result<SimulatedProfiles, ShotSkip> {
+fn rasterise(
+    shot: &ShotInput,
+    cloud: &PointCloud,
+    index: &CellGrid,
+    cfg: &CollocateConfig,
+) -> std::result::Result<SimulatedProfiles, ShotSkip> {
     let centre = (shot.x, shot.y);
     let radius = cfg.model.fsigma as f64;
     let near = candidates(cloud, index, centre, radius);
@@ -385,10 +407,11 @@ fn rasterise(shot: &ShotInput, cloud: &PointCloud, index: &CellGrid, cfg: &Collo
         return Err(ShotSkip::PartlyCovered { covered_fraction });
     }
     let cand = candidates(cloud, index, centre, cfg.support_half_width());
-    let waves = offset_waves(&cloud.x, &cloud.y, &cloud.z, &cand, centre, &cfg.grid, &cfg.model).map_err(|e| match e {
-        RasterError::NoReturns => ShotSkip::NoPoints,
-        RasterError::HeightRange => ShotSkip::HeightRange,
-    })?;
+    let waves =
+        offset_waves(&cloud.x, &cloud.y, &cloud.z, &cand, centre, &cfg.grid, &cfg.model).map_err(|e| match e {
+            RasterError::NoReturns => ShotSkip::NoPoints,
+            RasterError::HeightRange => ShotSkip::HeightRange,
+        })?;
     let profiles = SimulatedProfiles::new(waves);
     if profiles.extent(cfg.grid.zero_column()).is_none() {
         return Err(ShotSkip::NoPoints);
@@ -397,7 +420,13 @@ fn rasterise(shot: &ShotInput, cloud: &PointCloud, index: &CellGrid, cfg: &Collo
 }
 
 /// r over every offset × lag of `window` for one shot (`None` when nothing contributes).
-fn shot_surface(shot: &ShotInput, cloud: &PointCloud, index: &CellGrid, window: LagWindow, cfg: &CollocateConfig) -> Option<Vec<f32>> {
+fn shot_surface(
+    shot: &ShotInput,
+    cloud: &PointCloud,
+    index: &CellGrid,
+    window: LagWindow,
+    cfg: &CollocateConfig,
+) -> Option<Vec<f32>> {
     let centre = (shot.x, shot.y);
     let cand = candidates(cloud, index, centre, cfg.support_half_width());
     let waves = offset_waves(&cloud.x, &cloud.y, &cloud.z, &cand, centre, &cfg.grid, &cfg.model).ok()?;
@@ -411,7 +440,8 @@ fn covered_fraction(cloud: &PointCloud, near: &[u32], centre: (f64, f64), radius
     let origin = (centre.0 - n as f64 * CELL / 2.0, centre.1 - n as f64 * CELL / 2.0);
     let mut hit = vec![false; n * n];
     for &i in near {
-        let (cx, cy) = (((cloud.x[i as usize] - origin.0) / CELL).floor(), ((cloud.y[i as usize] - origin.1) / CELL).floor());
+        let (cx, cy) =
+            (((cloud.x[i as usize] - origin.0) / CELL).floor(), ((cloud.y[i as usize] - origin.1) / CELL).floor());
         if cx >= 0.0 && cy >= 0.0 && (cx as usize) < n && (cy as usize) < n {
             hit[cy as usize * n + cx as usize] = true;
         }
@@ -419,14 +449,19 @@ fn covered_fraction(cloud: &PointCloud, near: &[u32], centre: (f64, f64), radius
     let (mut within, mut covered) = (0u32, 0u32);
     for j in 0..n {
         for i in 0..n {
-            let (dx, dy) = (origin.0 + (i as f64 + 0.5) * CELL - centre.0, origin.1 + (j as f64 + 0.5) * CELL - centre.1);
+            let (dx, dy) =
+                (origin.0 + (i as f64 + 0.5) * CELL - centre.0, origin.1 + (j as f64 + 0.5) * CELL - centre.1);
             if dx * dx + dy * dy < radius * radius {
                 within += 1;
                 covered += u32::from(hit[j * n + i]);
             }
         }
     }
-    if within == 0 { 1.0 } else { covered as f32 / within as f32 }
+    if within == 0 {
+        1.0
+    } else {
+        covered as f32 / within as f32
+    }
 }
 
 /// Largest vertical offset (m) the coarse search considers, either way: far beyond any datum gap

@@ -271,7 +271,10 @@ mod tests {
         // The corner offsets (distance √2 m) weigh less than the centre.
         let corner = w.column(0);
         assert!(corner[peak] < centre[peak] && corner[peak] > 0.0);
-        assert_eq!(offset_waves(&[100.0], &[0.0], &[10.0], &[0], (0.0, 0.0), &grid, &model), Err(RasterError::NoReturns));
+        assert_eq!(
+            offset_waves(&[100.0], &[0.0], &[10.0], &[0], (0.0, 0.0), &grid, &model),
+            Err(RasterError::NoReturns)
+        );
         let far = offset_waves(&[0.0, 0.0], &[0.0, 0.0], &[10.0, 5000.0], &[0, 1], (0.0, 0.0), &grid, &model);
         assert_eq!(far, Err(RasterError::HeightRange));
     }

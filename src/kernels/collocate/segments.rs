@@ -116,7 +116,14 @@ pub fn plan(slots: &[Slot], level: Level, segment: usize, min_segment: usize) ->
 
 /// Cuts `len` items into ranges of at most `segment`, a remainder under `min_len` joining the
 /// previous range; a total under `min_len` is a short run.
-fn cut(len: usize, segment: usize, min_len: usize, short: &mut Vec<ShortRun>, shots: &[usize], mut emit: impl FnMut(std::ops::Range<usize>)) {
+fn cut(
+    len: usize,
+    segment: usize,
+    min_len: usize,
+    short: &mut Vec<ShortRun>,
+    shots: &[usize],
+    mut emit: impl FnMut(std::ops::Range<usize>),
+) {
     if len == 0 {
         return;
     }

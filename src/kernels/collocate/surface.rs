@@ -123,7 +123,11 @@ impl Surface {
                                 continue;
                             }
                             let f = crossing(step(-1), v, w, thr);
-                            if dir < 0 { lo = at - f } else { hi = at + f }
+                            if dir < 0 {
+                                lo = at - f
+                            } else {
+                                hi = at + f
+                            }
                         }
                         ext[axis].0 = ext[axis].0.min(lo);
                         ext[axis].1 = ext[axis].1.max(hi);
@@ -160,7 +164,11 @@ fn crossing(before: Option<f64>, v: f64, w: f64, thr: f64) -> f64 {
         return linear;
     }
     let q = disc.sqrt();
-    [(-b + q) / (2.0 * a), (-b - q) / (2.0 * a)].into_iter().filter(|t| (0.0..=1.0).contains(t)).fold(None, |m: Option<f64>, t| Some(m.map_or(t, |m| m.min(t)))).unwrap_or(linear)
+    [(-b + q) / (2.0 * a), (-b - q) / (2.0 * a)]
+        .into_iter()
+        .filter(|t| (0.0..=1.0).contains(t))
+        .fold(None, |m: Option<f64>, t| Some(m.map_or(t, |m| m.min(t))))
+        .unwrap_or(linear)
 }
 
 /// Index of the largest value (first on ties; NaN never wins).

@@ -4,8 +4,8 @@
 //! the collocated position and, for short segments, at nearby positions).
 
 use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
-use crate::kernels::waveform::l2a::Noise;
 use crate::kernels::sim::{self, Profile, SimConfig, Weighting, N_WEIGHTINGS};
+use crate::kernels::waveform::l2a::Noise;
 
 /// Footprint σ (m) at which every shot is simulated; other widths are interpolated between them.
 pub const FSIGMA_GRID: [f64; 6] = [3.5, 4.5, 5.5, 7.0, 8.5, 10.0];
@@ -185,7 +185,12 @@ pub fn nominal_noise_stddev(beam_type: BeamType) -> f64 {
 /// `noise` effect's to explain. Without usable reported σ a shot gets the nominal σ.
 pub fn set_nominal_noise(cases: &mut [ShotCase]) {
     for bt in [BeamType::Coverage, BeamType::FullPower] {
-        let mut sd: Vec<f64> = cases.iter().filter(|c| c.real.beam_type == bt).map(|c| c.real.noise.stddev).filter(|v| v.is_finite() && *v > 0.0).collect();
+        let mut sd: Vec<f64> = cases
+            .iter()
+            .filter(|c| c.real.beam_type == bt)
+            .map(|c| c.real.noise.stddev)
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .collect();
         sd.sort_by(|a, b| a.total_cmp(b));
         let nominal = nominal_noise_stddev(bt);
         let scale = if sd.is_empty() { f64::NAN } else { nominal / sd[sd.len() / 2] };
@@ -212,7 +217,12 @@ pub fn configs() -> (SimConfig, Vec<SimConfig>) {
     let nominal = SimConfig::new(Profile::Default);
     let variants = FSIGMA_GRID
         .iter()
-        .map(|&f| SimConfig { fsigma: f as f32, pulse: sim::Pulse::dirac(), min_covered_fraction: None, ..nominal.clone() })
+        .map(|&f| SimConfig {
+            fsigma: f as f32,
+            pulse: sim::Pulse::dirac(),
+            min_covered_fraction: None,
+            ..nominal.clone()
+        })
         .collect();
     (nominal, variants)
 }

@@ -16,12 +16,14 @@ use rayon::prelude::*;
 
 use super::case::{RealAlgorithm, ShotCase, Site, FSIGMA_GRID, SITE_STEP_M};
 use crate::kernels::gedi::{N_ALGORITHMS, RH_LEN};
-use crate::kernels::waveform::l2a::Noise;
-use crate::kernels::waveform::forward::{forward, signal_span, L2aRunner, RecordWindow};
-use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
-use crate::kernels::scenario::effects::{Effect, GeoLevel, WaveParts, WeightMethod, NOMINAL_FSIGMA_M, NOMINAL_PULSE_SIGMA_M};
+use crate::kernels::scenario::effects::{
+    Effect, GeoLevel, WaveParts, WeightMethod, NOMINAL_FSIGMA_M, NOMINAL_PULSE_SIGMA_M,
+};
 use crate::kernels::scenario::EffectSet;
 use crate::kernels::sim::Weighting;
+use crate::kernels::waveform::forward::{forward, signal_span, L2aRunner, RecordWindow};
+use crate::kernels::waveform::l2a::Noise;
+use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
 
 /// A hypothesis: the effects added to the nominal chain (empty = the nominal chain), and where
 /// it places the shots of short collocation segments ([`reposition`]).
@@ -67,12 +69,20 @@ impl Model {
 
     /// Footprint σ (m).
     pub fn fsigma(&self) -> f64 {
-        self.effects.iter().rev().find_map(|e| if let Effect::Footprint { fsigma_m } = e { Some(*fsigma_m) } else { None }).unwrap_or(NOMINAL_FSIGMA_M)
+        self.effects
+            .iter()
+            .rev()
+            .find_map(|e| if let Effect::Footprint { fsigma_m } = e { Some(*fsigma_m) } else { None })
+            .unwrap_or(NOMINAL_FSIGMA_M)
     }
 
     /// Effective pulse σ (m, range).
     pub fn pulse_sigma(&self) -> f64 {
-        self.effects.iter().rev().find_map(|e| if let Effect::Pulse { pulse_sigma_m } = e { Some(*pulse_sigma_m) } else { None }).unwrap_or(NOMINAL_PULSE_SIGMA_M)
+        self.effects
+            .iter()
+            .rev()
+            .find_map(|e| if let Effect::Pulse { pulse_sigma_m } = e { Some(*pulse_sigma_m) } else { None })
+            .unwrap_or(NOMINAL_PULSE_SIGMA_M)
     }
 
     /// Weighting and ρg/ρv.
@@ -132,7 +142,9 @@ fn parts_at(site: &Site, w: Weighting, fsigma: f64) -> (Vec<f64>, Vec<f64>) {
     let i = grid.windows(2).position(|p| f <= p[1]).unwrap_or(grid.len() - 2);
     let t = (f - grid[i]) / (grid[i + 1] - grid[i]);
     let (a, b) = (&site.variants[i].weightings[w as usize], &site.variants[i + 1].weightings[w as usize]);
-    let mix = |x: &[f32], y: &[f32]| -> Vec<f64> { x.iter().zip(y).map(|(&p, &q)| (1.0 - t) * f64::from(p) + t * f64::from(q)).collect() };
+    let mix = |x: &[f32], y: &[f32]| -> Vec<f64> {
+        x.iter().zip(y).map(|(&p, &q)| (1.0 - t) * f64::from(p) + t * f64::from(q)).collect()
+    };
     (mix(&a.ground, &b.ground), mix(&a.canopy, &b.canopy))
 }
 
@@ -210,7 +222,11 @@ fn correlation(case: &ShotCase, model: &Model, wave: &[f64], z0: f64, dz: f64) -
     }
     let cov = sxy - sx * sy / n;
     let var = (sxx - sx * sx / n) * (syy - sy * sy / n);
-    if n > 1.0 && var > 0.0 { cov / var.sqrt() } else { f64::NAN }
+    if n > 1.0 && var > 0.0 {
+        cov / var.sqrt()
+    } else {
+        f64::NAN
+    }
 }
 
 /// Re-place the shots for `model`, each to the site (`SimShot::sites`) where the model's waveform
@@ -234,9 +250,16 @@ pub fn reposition(cases: &[&ShotCase], model: &Model) -> Model {
             if !movable(c) {
                 return Vec::new();
             }
-            c.sim.sites
+            c.sim
+                .sites
                 .iter()
-                .map(|s| if s.variants.is_empty() { f64::NAN } else { correlation(c, model, &simulated_wave_at(c.sim.dz, s, model), s.z0, c.sim.dz) })
+                .map(|s| {
+                    if s.variants.is_empty() {
+                        f64::NAN
+                    } else {
+                        correlation(c, model, &simulated_wave_at(c.sim.dz, s, model), s.z0, c.sim.dz)
+                    }
+                })
                 .collect()
         })
         .collect();
@@ -259,7 +282,13 @@ pub fn reposition(cases: &[&ShotCase], model: &Model) -> Model {
     }
     let mut placement = (*model.placement).clone();
     for (sum, shots) in units.into_values() {
-        let best = (0..sum.len()).filter(|&k| sum[k].is_finite()).fold(0, |b, k| if !sum[b].is_finite() || sum[k] > sum[b] { k } else { b });
+        let best = (0..sum.len()).filter(|&k| sum[k].is_finite()).fold(0, |b, k| {
+            if !sum[b].is_finite() || sum[k] > sum[b] {
+                k
+            } else {
+                b
+            }
+        });
         for s in shots {
             placement.insert(s, best);
         }
@@ -281,7 +310,14 @@ pub fn predict(case: &ShotCase, model: &Model, scratch: &mut Scratch) -> [Option
 /// under `model` with the noise draw `seed`, in the real shot's record window: the received
 /// waveform (DN), its noise, and its L2A products.
 #[allow(clippy::type_complexity)]
-fn twin(case: &ShotCase, model: &Model, wave: &[f64], z0: f64, seed: u64, scratch: &mut Scratch) -> Option<(Vec<f32>, Noise, [Option<Products>; N_ALGORITHMS])> {
+fn twin(
+    case: &ShotCase,
+    model: &Model,
+    wave: &[f64],
+    z0: f64,
+    seed: u64,
+    scratch: &mut Scratch,
+) -> Option<(Vec<f32>, Noise, [Option<Products>; N_ALGORITHMS])> {
     let (first, signal) = signal_span(wave)?;
     let real = &case.real;
     let z_first = z0 - first as f64 * case.sim.dz;
@@ -290,10 +326,9 @@ fn twin(case: &ShotCase, model: &Model, wave: &[f64], z0: f64, seed: u64, scratc
     let noise = Noise { mean: real.noise.mean, stddev: real.nominal_noise_stddev * model.set().noise_sigma_factor() };
     let twin = forward(signal, case.sim.dz, &window, real.energy, noise, seed, &mut scratch.l2a).ok()?;
     let products = std::array::from_fn(|a| match scratch.l2a.outcomes.get(a) {
-        Some(Ok(r)) if r.elev_lowestmode.is_finite() => Some(Products {
-            ground: r.elev_lowestmode,
-            rh: std::array::from_fn(|k| r.rh_cm[k] as f32 / 100.0),
-        }),
+        Some(Ok(r)) if r.elev_lowestmode.is_finite() => {
+            Some(Products { ground: r.elev_lowestmode, rh: std::array::from_fn(|k| r.rh_cm[k] as f32 / 100.0) })
+        }
         _ => None,
     });
     Some((twin.wave, twin.noise, products))
@@ -338,11 +373,14 @@ pub fn null_case(case: &ShotCase, model: &Model, scratch: &mut Scratch) -> Optio
 /// the elevation of its first bin; `None` when no site is near.
 fn wave_between(case: &ShotCase, model: &Model, target: (f64, f64)) -> Option<(Vec<f64>, f64)> {
     let dz = case.sim.dz;
-    let near: Vec<(f64, &Site)> = case.sim.sites
+    let near: Vec<(f64, &Site)> = case
+        .sim
+        .sites
         .iter()
         .filter(|s| !s.variants.is_empty())
         .filter_map(|s| {
-            let w = (1.0 - (s.offset.0 - target.0).abs() / SITE_STEP_M) * (1.0 - (s.offset.1 - target.1).abs() / SITE_STEP_M);
+            let w = (1.0 - (s.offset.0 - target.0).abs() / SITE_STEP_M)
+                * (1.0 - (s.offset.1 - target.1).abs() / SITE_STEP_M);
             (w > 0.0 && (s.offset.0 - target.0).abs() < SITE_STEP_M).then_some((w, s))
         })
         .collect();
@@ -350,7 +388,8 @@ fn wave_between(case: &ShotCase, model: &Model, target: (f64, f64)) -> Option<(V
     if !(total > 0.0) {
         return None;
     }
-    let waves: Vec<(f64, f64, Vec<f64>)> = near.iter().map(|(w, s)| (w / total, s.z0, simulated_wave_at(dz, s, model))).collect();
+    let waves: Vec<(f64, f64, Vec<f64>)> =
+        near.iter().map(|(w, s)| (w / total, s.z0, simulated_wave_at(dz, s, model))).collect();
     let top = waves.iter().map(|(_, z0, _)| *z0).fold(f64::NEG_INFINITY, f64::max);
     let len = waves.iter().map(|(_, z0, v)| ((top - z0) / dz).round() as usize + v.len()).max()?;
     let mut out = vec![0.0; len];
@@ -364,7 +403,12 @@ fn wave_between(case: &ShotCase, model: &Model, target: (f64, f64)) -> Option<(V
 /// The noise-twin nulls of `cases` under `model` (parallel), with the index of the case each
 /// comes from.
 pub fn null_cases(cases: &[&ShotCase], model: &Model) -> Vec<(usize, ShotCase)> {
-    cases.par_iter().enumerate().map_init(Scratch::new, |scratch, (i, c)| null_case(c, model, scratch).map(|n| (i, n))).flatten().collect()
+    cases
+        .par_iter()
+        .enumerate()
+        .map_init(Scratch::new, |scratch, (i, c)| null_case(c, model, scratch).map(|n| (i, n)))
+        .flatten()
+        .collect()
 }
 
 /// Mixed into a shot's noise seed for its null twin (independent of the simulated side's draw).
@@ -412,7 +456,12 @@ mod tests {
         let ground = (0..n).map(|k| (-0.5 * ((z(k) - 100.0) / 0.3).powi(2)).exp() as f32).collect();
         let canopy = (0..n).map(|k| (0.3 * (-0.5 * ((z(k) - 100.0 - top) / 1.5).powi(2)).exp()) as f32).collect();
         let parts = Parts { ground, canopy };
-        Site { z0, variants: vec![SimVariant { weightings: std::array::from_fn(|_| parts.clone()) }], als_ground: 100.0, offset }
+        Site {
+            z0,
+            variants: vec![SimVariant { weightings: std::array::from_fn(|_| parts.clone()) }],
+            als_ground: 100.0,
+            offset,
+        }
     }
 
     /// A shot of a long segment whose real waveform is the nominal one at `truth`.
@@ -420,7 +469,8 @@ mod tests {
         let mut sites = vec![site((0.0, 0.0))];
         sites.extend(site_grid().into_iter().map(site));
         let sim = Arc::new(SimShot { dz: GEDI_BIN_M, sites, short_segment: false, rh_nominal: vec![0.0; RH_LEN] });
-        let wave: Vec<f32> = simulated_wave_at(GEDI_BIN_M, &site(truth), &Model::default()).iter().map(|&v| v as f32).collect();
+        let wave: Vec<f32> =
+            simulated_wave_at(GEDI_BIN_M, &site(truth), &Model::default()).iter().map(|&v| v as f32).collect();
         let real = RealShot {
             shot_number: shot,
             track: "g/BEAM0000".into(),
@@ -479,7 +529,9 @@ mod tests {
 
     #[test]
     fn model_reads_its_effects() {
-        let m = Model::default().with(Effect::Footprint { fsigma_m: 7.0 }).with(Effect::Weighting { method: WeightMethod::Int, rho_ground_over_veg: 0.5 });
+        let m = Model::default()
+            .with(Effect::Footprint { fsigma_m: 7.0 })
+            .with(Effect::Weighting { method: WeightMethod::Int, rho_ground_over_veg: 0.5 });
         assert_eq!(m.fsigma(), 7.0);
         assert_eq!(m.weighting(), (Weighting::Int, 0.5));
         assert_eq!(m.pulse_sigma(), NOMINAL_PULSE_SIGMA_M);

@@ -14,8 +14,17 @@ use crate::kernels::gedi::N_ALGORITHMS;
 use crate::kernels::scenario::effects::{Effect, GeoLevel, WeightMethod, NOMINAL_PULSE_SIGMA_M};
 
 /// The effects the diagnosis fits, in registry order.
-pub const FITTED_EFFECTS: [&str; 9] =
-    ["geolocation", "datum", "weighting", "pulse", "footprint", "noise", "canopy_change", "occlusion", "ground_detection"];
+pub const FITTED_EFFECTS: [&str; 9] = [
+    "geolocation",
+    "datum",
+    "weighting",
+    "pulse",
+    "footprint",
+    "noise",
+    "canopy_change",
+    "occlusion",
+    "ground_detection",
+];
 
 /// The `geolocation` hypotheses: every segment re-placed as one (`beam`: the reference a per-shot
 /// error is judged against, since the per-track collocation leaves an error of its own) and every
@@ -90,7 +99,8 @@ fn median(mut v: Vec<f64>) -> Option<f64> {
 /// point's neighbours. Returns (argmin, min).
 pub fn minimise(f: &mut dyn FnMut(f64) -> f64, grid: &[f64], iterations: usize) -> (f64, f64) {
     let values: Vec<f64> = grid.iter().map(|&x| f(x)).collect();
-    let (i, _) = values.iter().enumerate().fold((0, f64::INFINITY), |(bi, bv), (i, &v)| if v < bv { (i, v) } else { (bi, bv) });
+    let (i, _) =
+        values.iter().enumerate().fold((0, f64::INFINITY), |(bi, bv), (i, &v)| if v < bv { (i, v) } else { (bi, bv) });
     let (mut best_x, mut best_v) = (grid[i], values[i]);
     let (mut a, mut b) = (grid[i.saturating_sub(1)], grid[(i + 1).min(grid.len() - 1)]);
     let phi = (5f64.sqrt() - 1.0) / 2.0;
@@ -203,7 +213,11 @@ fn fit_placed(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
             let per: Vec<Option<f64>> = (0..N_ALGORITHMS)
                 .map(|a| {
                     let v: Vec<f64> = gaps.iter().filter_map(|g| g.ground[a]).collect();
-                    if v.len() >= 5 { trimmed_mean(v) } else { None }
+                    if v.len() >= 5 {
+                        trimmed_mean(v)
+                    } else {
+                        None
+                    }
                 })
                 .collect();
             let pooled = trimmed_mean(gaps.iter().flat_map(|g| g.ground.iter().flatten().copied()).collect())?;
@@ -213,7 +227,8 @@ fn fit_placed(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
                 .enumerate()
                 .filter_map(|(a, o)| o.map(|o| (a as u8 + 1, o)))
                 .max_by(|x, y| (x.1 - pooled).abs().total_cmp(&(y.1 - pooled).abs()))?;
-            let others = median(per.iter().enumerate().filter(|(a, _)| *a as u8 + 1 != alg).filter_map(|(_, o)| *o).collect());
+            let others =
+                median(per.iter().enumerate().filter(|(a, _)| *a as u8 + 1 != alg).filter_map(|(_, o)| *o).collect());
             let stands_out = others.is_some_and(|m| (off - m).abs() > 0.15_f64.max(0.5 * m.abs()));
             Some(if stands_out {
                 Effect::GroundDetection { algorithm: alg, offset_m: off - others.unwrap_or(0.0) }
@@ -235,11 +250,13 @@ fn fit_placed(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
             Some(Effect::Footprint { fsigma_m: x })
         }
         "weighting" => {
-            let grid: Vec<f64> = [0.25, 0.4, 0.6, 0.8, 1.0, 1.25, 1.6, 2.2, 3.0, 4.0].iter().map(|r: &f64| r.ln()).collect();
+            let grid: Vec<f64> =
+                [0.25, 0.4, 0.6, 0.8, 1.0, 1.25, 1.6, 2.2, 3.0, 4.0].iter().map(|r: &f64| r.ln()).collect();
             [WeightMethod::Ratio, WeightMethod::Frac, WeightMethod::Int]
                 .into_iter()
                 .map(|method| {
-                    let (x, v) = minimise(&mut |lr| obj(Effect::Weighting { method, rho_ground_over_veg: lr.exp() }), &grid, 8);
+                    let (x, v) =
+                        minimise(&mut |lr| obj(Effect::Weighting { method, rho_ground_over_veg: lr.exp() }), &grid, 8);
                     (Effect::Weighting { method, rho_ground_over_veg: x.exp() }, v)
                 })
                 .min_by(|a, b| a.1.total_cmp(&b.1))
@@ -265,10 +282,13 @@ fn fit_placed(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
 /// golden section); then the height refined between its neighbours with the strength re-fitted.
 fn two_parameter(heights: &[f64], strengths: &[f64], f: &dyn Fn(f64, f64) -> f64) -> Option<(f64, f64)> {
     let best_strength = |h: f64| minimise(&mut |s| f(h, s), strengths, 5);
-    let per: Vec<(f64, f64, f64)> = heights.iter().map(|&h| {
-        let (s, v) = best_strength(h);
-        (h, s, v)
-    }).collect();
+    let per: Vec<(f64, f64, f64)> = heights
+        .iter()
+        .map(|&h| {
+            let (s, v) = best_strength(h);
+            (h, s, v)
+        })
+        .collect();
     let i = per.iter().enumerate().min_by(|a, b| a.1 .2.total_cmp(&b.1 .2))?.0;
     let mut best = per[i];
     let (lo, hi) = (heights[i.saturating_sub(1)], heights[(i + 1).min(heights.len() - 1)]);
@@ -301,7 +321,10 @@ mod tests {
 
     #[test]
     fn two_parameter_search_finds_both() {
-        let (h, s) = two_parameter(&[2.0, 4.0, 8.0, 16.0], &[-1.0, 0.0, 0.5, 1.0], &|h, s| (h - 6.0).powi(2) * 0.01 + (s - 0.3).powi(2)).unwrap();
+        let (h, s) = two_parameter(&[2.0, 4.0, 8.0, 16.0], &[-1.0, 0.0, 0.5, 1.0], &|h, s| {
+            (h - 6.0).powi(2) * 0.01 + (s - 0.3).powi(2)
+        })
+        .unwrap();
         assert!((h - 6.0).abs() < 0.3, "{h}");
         assert!((s - 0.3).abs() < 0.05, "{s}");
     }

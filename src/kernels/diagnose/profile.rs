@@ -100,7 +100,11 @@ pub struct ProfileSums {
 
 impl Default for ProfileSums {
     fn default() -> Self {
-        ProfileSums { n: [0.0; PROFILE_GROUPS], sd: vec![0.0; PROFILE_GROUPS * PROFILE_BINS], sdd: vec![0.0; PROFILE_GROUPS * PROFILE_BINS] }
+        ProfileSums {
+            n: [0.0; PROFILE_GROUPS],
+            sd: vec![0.0; PROFILE_GROUPS * PROFILE_BINS],
+            sdd: vec![0.0; PROFILE_GROUPS * PROFILE_BINS],
+        }
     }
 }
 
@@ -178,7 +182,10 @@ mod tests {
         for i in 0..20 {
             let noise = |k: usize| ((i * 7 + k * 13) % 11) as f32 * 1e-4 - 5e-4;
             same.add(&ShotProfile { group: 0, diff: (0..PROFILE_BINS).map(|k| noise(k) * 0.0).collect() });
-            off.add(&ShotProfile { group: 0, diff: (0..PROFILE_BINS).map(|k| noise(k) + if k == 20 { 0.01 } else { 0.0 }).collect() });
+            off.add(&ShotProfile {
+                group: 0,
+                diff: (0..PROFILE_BINS).map(|k| noise(k) + if k == 20 { 0.01 } else { 0.0 }).collect(),
+            });
         }
         assert_eq!(same.chi2(), 0.0);
         let mut merged = ProfileSums::default();

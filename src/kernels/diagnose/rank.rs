@@ -221,7 +221,16 @@ pub fn compare(folds: &Folds, before: &[ShotGap], after: &[ShotGap], seed_label:
         }
     }
     let profile_chi2 = [profile_sums(before).chi2(), profile_sums(after).chi2()];
-    Comparison { before: b, after: a, shrink, ci95: interval(shrinks), gain_ci95: interval(gains), shrink_mean_abs_bias, profile_chi2, spread: None }
+    Comparison {
+        before: b,
+        after: a,
+        shrink,
+        ci95: interval(shrinks),
+        gain_ci95: interval(gains),
+        shrink_mean_abs_bias,
+        profile_chi2,
+        spread: None,
+    }
 }
 
 /// The held-out comparison of `geolocation` (`models`: the state's fold models with it): the
@@ -307,7 +316,9 @@ impl Trial {
     /// fitted on each calibration fold, at least [`MIN_SHOT_SIGMA_M`].
     pub fn explains(&self) -> bool {
         let resolved = self.held_out.spread.is_none()
-            || self.fold_effects.iter().all(|e| matches!(e, Some(Effect::Geolocation { shot_sigma_m, .. }) if *shot_sigma_m >= MIN_SHOT_SIGMA_M));
+            || self.fold_effects.iter().all(
+                |e| matches!(e, Some(Effect::Geolocation { shot_sigma_m, .. }) if *shot_sigma_m >= MIN_SHOT_SIGMA_M),
+            );
         resolved && self.held_out.ci95[0] >= MIN_SHRINK_LOWER && self.held_out.gain_ci95[0] >= MIN_GAIN_M
     }
 }
@@ -339,7 +350,11 @@ pub fn try_effect(folds: &Folds, state: &State, name: &str) -> Option<Trial> {
         None => state.folds[f].clone(),
     });
     let gaps = folds.held_out(&models);
-    let held_out = if name == "geolocation" { compare_spread(folds, state, &models, &gaps) } else { compare(folds, &state.gaps, &gaps, name) };
+    let held_out = if name == "geolocation" {
+        compare_spread(folds, state, &models, &gaps)
+    } else {
+        compare(folds, &state.gaps, &gaps, name)
+    };
     Some(Trial { effect, fold_effects: fitted, held_out, gaps })
 }
 

@@ -71,11 +71,7 @@ impl WaveParts {
 
     /// The total waveform: canopy + ρ·ground.
     pub fn compose(&self, rho_ground_over_veg: f64) -> Vec<f64> {
-        self.canopy
-            .iter()
-            .zip(&self.ground)
-            .map(|(c, g)| c + rho_ground_over_veg * g)
-            .collect()
+        self.canopy.iter().zip(&self.ground).map(|(c, g)| c + rho_ground_over_veg * g).collect()
     }
 }
 
@@ -219,7 +215,14 @@ impl Effect {
         use ParamValue::{Number as N, Text as T};
         match *self {
             Effect::Geolocation { level, shot_sigma_m } => vec![
-                ("level", T(match level { GeoLevel::Beam => "beam", GeoLevel::Shot => "shot" }.into())),
+                (
+                    "level",
+                    T(match level {
+                        GeoLevel::Beam => "beam",
+                        GeoLevel::Shot => "shot",
+                    }
+                    .into()),
+                ),
                 ("shot_sigma_m", N(shot_sigma_m)),
             ],
             Effect::Datum { dz_m } => vec![("dz_m", N(dz_m))],
@@ -256,7 +259,10 @@ impl Effect {
         for (k, _) in params {
             if !spec.iter().any(|s| s.name == k) {
                 let known: Vec<&str> = spec.iter().map(|s| s.name).collect();
-                return Err(param_err(k, format!("not a parameter of '{name}' (its parameters: {})", known.join(", "))));
+                return Err(param_err(
+                    k,
+                    format!("not a parameter of '{name}' (its parameters: {})", known.join(", ")),
+                ));
             }
         }
         if let Some(m) = magnitude {
@@ -291,7 +297,10 @@ impl Effect {
                     v => return Err(param_err("level", format!("'{v}' is not beam or shot"))),
                 };
                 let s = num("shot_sigma_m")?;
-                Effect::Geolocation { level, shot_sigma_m: check("shot_sigma_m", s, (0.0..=50.0).contains(&s), "0..50 m")? }
+                Effect::Geolocation {
+                    level,
+                    shot_sigma_m: check("shot_sigma_m", s, (0.0..=50.0).contains(&s), "0..50 m")?,
+                }
             }
             "datum" => {
                 let dz = num("dz_m")?;
@@ -326,7 +335,9 @@ impl Effect {
             }
             "noise" => {
                 let f = num("noise_sigma_factor")?;
-                Effect::Noise { noise_sigma_factor: check("noise_sigma_factor", f, f > 0.0 && f <= 100.0, "0..100, > 0")? }
+                Effect::Noise {
+                    noise_sigma_factor: check("noise_sigma_factor", f, f > 0.0 && f <= 100.0, "0..100, > 0")?,
+                }
             }
             "canopy_change" => {
                 let h = num("height_m")?;
@@ -353,7 +364,10 @@ impl Effect {
                     },
                 };
                 let o = num("offset_m")?;
-                Effect::GroundDetection { algorithm, offset_m: check("offset_m", o, o.abs() <= 50.0, "|offset| ≤ 50 m")? }
+                Effect::GroundDetection {
+                    algorithm,
+                    offset_m: check("offset_m", o, o.abs() <= 50.0, "|offset| ≤ 50 m")?,
+                }
             }
             _ => return Err(EffectError::UnknownEffect(name.to_string())),
         };
@@ -465,7 +479,10 @@ impl EffectSet {
         for (k, v) in params {
             let (target, key) = match k.split_once('.') {
                 Some((e, key)) => {
-                    let i = names.iter().position(|n| *n == e).ok_or_else(|| param_err(k, format!("'{e}' is not one of the effects given")))?;
+                    let i = names
+                        .iter()
+                        .position(|n| *n == e)
+                        .ok_or_else(|| param_err(k, format!("'{e}' is not one of the effects given")))?;
                     (i, key.to_string())
                 }
                 None => {
@@ -481,11 +498,8 @@ impl EffectSet {
             };
             per[target].push((key, v.clone()));
         }
-        let effects = names
-            .iter()
-            .zip(&per)
-            .map(|(n, p)| Effect::parse(n, magnitude, p))
-            .collect::<Result<Vec<_>, _>>()?;
+        let effects =
+            names.iter().zip(&per).map(|(n, p)| Effect::parse(n, magnitude, p)).collect::<Result<Vec<_>, _>>()?;
         Ok(EffectSet { effects })
     }
 

@@ -96,7 +96,8 @@ pub fn plan(tiles: &[Extent], s: &PlanSettings, seed: u64) -> Plan {
         for pass in 0..s.passes_per_tile {
             let granule = t * s.passes_per_tile + pass;
             let mut rng = Stream::new(seed, &["plan", &t.to_string(), &pass.to_string()]);
-            let heading = HEADINGS_DEG[pass % 2] + (rng.uniform() - 0.5) * 8.0 + if pass % 4 >= 2 { 180.0 } else { 0.0 };
+            let heading =
+                HEADINGS_DEG[pass % 2] + (rng.uniform() - 0.5) * 8.0 + if pass % 4 >= 2 { 180.0 } else { 0.0 };
             let h = heading.to_radians();
             let (ux, uy) = (h.sin(), h.cos()); // along track
             let (vx, vy) = (h.cos(), -h.sin()); // cross track
@@ -119,7 +120,8 @@ pub fn plan(tiles: &[Extent], s: &PlanSettings, seed: u64) -> Plan {
             for (b, beam) in BEAM_NAMES.iter().enumerate() {
                 let track = out.tracks.len();
                 let mut tr = Stream::new(seed, &["track", &granule.to_string(), beam]);
-                let (mut dx, mut dy) = (clipped_normal(&mut tr, s.track_offset_sigma_m), clipped_normal(&mut tr, s.track_offset_sigma_m));
+                let (mut dx, mut dy) =
+                    (clipped_normal(&mut tr, s.track_offset_sigma_m), clipped_normal(&mut tr, s.track_offset_sigma_m));
                 if let Some((GeoLevel::Beam, sigma)) = s.extra_offset {
                     dx += clipped_normal(&mut tr, sigma);
                     dy += clipped_normal(&mut tr, sigma);

@@ -56,9 +56,24 @@ mod tests {
 
     #[test]
     fn streams_are_reproducible_and_distinct() {
-        let a: Vec<f64> = (0..5).map({ let mut s = Stream::new(1, &["x"]); move |_| s.normal() }).collect();
-        let b: Vec<f64> = (0..5).map({ let mut s = Stream::new(1, &["x"]); move |_| s.normal() }).collect();
-        let c: Vec<f64> = (0..5).map({ let mut s = Stream::new(1, &["y"]); move |_| s.normal() }).collect();
+        let a: Vec<f64> = (0..5)
+            .map({
+                let mut s = Stream::new(1, &["x"]);
+                move |_| s.normal()
+            })
+            .collect();
+        let b: Vec<f64> = (0..5)
+            .map({
+                let mut s = Stream::new(1, &["x"]);
+                move |_| s.normal()
+            })
+            .collect();
+        let c: Vec<f64> = (0..5)
+            .map({
+                let mut s = Stream::new(1, &["y"]);
+                move |_| s.normal()
+            })
+            .collect();
         assert_eq!(a, b);
         assert_ne!(a, c);
         assert_ne!(derive_seed(1, &["ab", "c"]), derive_seed(1, &["a", "bc"]));

@@ -4,12 +4,12 @@
 
 use super::effects::{EffectSet, Physics, WaveParts};
 use super::real;
-use crate::kernels::gedi::{L1bShot, L2aAlgorithm, L2aShot, LandCover};
 use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
+use crate::kernels::gedi::{L1bShot, L2aAlgorithm, L2aShot, LandCover};
+use crate::kernels::sim::{SimulatedFootprint, Weighting};
 use crate::kernels::waveform::forward::{forward, signal_span, L2aRunner, RecordWindow};
 use crate::kernels::waveform::l2a::{L2aOutcome, Noise};
 use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
-use crate::kernels::sim::{SimulatedFootprint, Weighting};
 
 /// NASA's fill value for L2A fields without a result.
 pub const FILL: f64 = -9999.0;
@@ -154,11 +154,8 @@ pub fn make_shot(
         let alg = (i + 1) as u8;
         shot.algorithms[i] = algorithm_products(outcome, effects.ground_offset_m(alg), spec, dem);
     }
-    let selected = SELECTION_ORDER
-        .iter()
-        .copied()
-        .find(|&a| shot.algorithms[usize::from(a) - 1].quality_flag == 1)
-        .unwrap_or(1);
+    let selected =
+        SELECTION_ORDER.iter().copied().find(|&a| shot.algorithms[usize::from(a) - 1].quality_flag == 1).unwrap_or(1);
     shot.select_algorithm(selected);
     let truth = ShotTruth {
         als_ground_m: ground_z,

@@ -52,7 +52,10 @@ pub struct PlantedEffect {
 
 impl PlantedEffect {
     pub fn of(e: &Effect) -> Self {
-        PlantedEffect { name: e.name().to_string(), params: e.params().into_iter().map(|(k, v)| (k.to_string(), v)).collect() }
+        PlantedEffect {
+            name: e.name().to_string(),
+            params: e.params().into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
+        }
     }
 
     /// A numeric parameter.

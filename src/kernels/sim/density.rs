@@ -35,7 +35,11 @@ impl DensityGrid {
     pub fn cell(&self, x: f64, y: f64) -> Option<usize> {
         let idx = |v: f64, o: f64| {
             let t = (v - o) / GRID_RES as f64;
-            if self.truncate { t.trunc() } else { t.floor() }
+            if self.truncate {
+                t.trunc()
+            } else {
+                t.floor()
+            }
         };
         let (i, j) = (idx(x, self.origin.0), idx(y, self.origin.1));
         (i >= 0.0 && j >= 0.0 && (i as usize) < self.n.0 && (j as usize) < self.n.1)
@@ -73,7 +77,11 @@ impl DensityGrid {
                 }
             }
         }
-        if within == 0 { 1.0 } else { covered as f32 / within as f32 }
+        if within == 0 {
+            1.0
+        } else {
+            covered as f32 / within as f32
+        }
     }
 }
 

@@ -47,7 +47,10 @@ impl Cells {
         }
         let span = |a: i64, b: i64| usize::try_from(b.checked_sub(a)?.checked_add(1)?).ok();
         let dense = match (span(lo.0, hi.0), span(lo.1, hi.1)) {
-            (Some(ny), Some(nx)) => nx.checked_mul(ny).filter(|&n| n <= DENSE_CELLS_PER_ITEM * filed.len() + DENSE_CELLS_MIN).map(|n| (nx, ny, n)),
+            (Some(ny), Some(nx)) => nx
+                .checked_mul(ny)
+                .filter(|&n| n <= DENSE_CELLS_PER_ITEM * filed.len() + DENSE_CELLS_MIN)
+                .map(|n| (nx, ny, n)),
             _ => None,
         };
         if let Some((nx, ny, n_cells)) = dense {
@@ -261,7 +264,9 @@ mod tests {
     fn brute(x: &[f64], y: &[f64], size: f64, (x0, y0, half): (f64, f64, f64)) -> Vec<u32> {
         let c = |v: f64| (v / size).floor() as i64;
         let mut hits: Vec<((i64, i64), u32)> = (0..x.len())
-            .filter(|&i| (c(x0 - half)..=c(x0 + half)).contains(&c(x[i])) && (c(y0 - half)..=c(y0 + half)).contains(&c(y[i])))
+            .filter(|&i| {
+                (c(x0 - half)..=c(x0 + half)).contains(&c(x[i])) && (c(y0 - half)..=c(y0 + half)).contains(&c(y[i]))
+            })
             .map(|i| ((c(y[i]), c(x[i])), i as u32))
             .collect();
         hits.sort();
@@ -283,7 +288,8 @@ mod tests {
             state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             (state >> 11) as f64 / (1u64 << 53) as f64
         };
-        let (mut x, mut y): (Vec<f64>, Vec<f64>) = (0..2000).map(|_| (700_000.0 + 80.0 * next(), 6_500_000.0 + 80.0 * next())).unzip();
+        let (mut x, mut y): (Vec<f64>, Vec<f64>) =
+            (0..2000).map(|_| (700_000.0 + 80.0 * next(), 6_500_000.0 + 80.0 * next())).unzip();
         x.extend([700_010.0, 700_015.0, f64::NAN]);
         y.extend([6_500_020.0, 6_500_025.0, 6_500_030.0]);
         for far in [false, true] {
@@ -294,7 +300,13 @@ mod tests {
             let grid = CellGrid::from_xy(&x, &y, 5.0);
             assert_eq!(matches!(grid.cells.layout, Layout::Sparse { .. }), far);
             assert_eq!(grid.order().len(), x.len() - 1, "the non-finite point is not filed");
-            for query in [(700_040.0, 6_500_040.0, 12.5), (700_010.0, 6_500_020.0, 5.0), (699_990.0, 6_500_001.0, 3.0), (800_000.0, 0.0, 10.0), (1_700_001.0, 7_500_001.0, 2.0)] {
+            for query in [
+                (700_040.0, 6_500_040.0, 12.5),
+                (700_010.0, 6_500_020.0, 5.0),
+                (699_990.0, 6_500_001.0, 3.0),
+                (800_000.0, 0.0, 10.0),
+                (1_700_001.0, 7_500_001.0, 2.0),
+            ] {
                 assert_eq!(candidates(&grid, query), brute(&x, &y, 5.0, query), "{query:?} far {far}");
             }
         }

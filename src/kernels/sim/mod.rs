@@ -269,7 +269,8 @@ pub fn simulate(
     let max_sep = gauss_sep(cfg.fsigma, I_THRESH) as f64;
     // The reference bounds its boxes by sqrt(maxSep²).
     let half = (max_sep * max_sep).sqrt();
-    let sim: fn(&Job) -> Outcome = if cfg.quirks.f32_sums { simulate_footprint::<f32> } else { simulate_footprint::<f64> };
+    let sim: fn(&Job) -> Outcome =
+        if cfg.quirks.f32_sums { simulate_footprint::<f32> } else { simulate_footprint::<f64> };
     let run = |fp: &Footprint, pts: &AlsPoints, cand: Vec<u32>| {
         if !(fp.x.is_finite() && fp.y.is_finite()) {
             return Err(SkipReason::NoPoints);
@@ -462,7 +463,11 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
     // Bin labels: the reference's f32 top edges, or centres.
     let z0 = if q.top_edge_labels { top as f32 as f64 } else { top - 0.5 * dz };
     let label = |k: usize| {
-        if q.top_edge_labels { (top as f32 - k as f32 * res32) as f64 } else { z0 - k as f64 * dz }
+        if q.top_edge_labels {
+            (top as f32 - k as f32 * res32) as f64
+        } else {
+            z0 - k as f64 * dz
+        }
     };
     let to_f32 = |a: &[T]| a.iter().map(|v| v.to_f32()).collect::<Vec<f32>>();
     let weightings = Weighting::ALL.map(|k| {
@@ -494,7 +499,13 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
 
 /// Truths and RH of one weighting (RH on the wave with values below 10⁻¹⁴ zeroed, gediMetric's
 /// noise-free denoising).
-fn metrics(wave: &[f32], ground: &[f32], label: impl Fn(usize) -> f64, psigma: f32, fsigma: f32) -> (Truth, Option<[f32; N_RH]>) {
+fn metrics(
+    wave: &[f32],
+    ground: &[f32],
+    label: impl Fn(usize) -> f64,
+    psigma: f32,
+    fsigma: f32,
+) -> (Truth, Option<[f32; N_RH]>) {
     let truth = truth::truths(wave, ground, &label, psigma, fsigma);
     let rh = truth.als_ground.map(|g| {
         let denoised: Vec<f32> = wave.iter().map(|&v| if v >= 1e-14 { v } else { 0.0 }).collect();
@@ -540,7 +551,11 @@ pub fn tap_offsets(pulse: &Pulse, cfg: &SimConfig) -> Vec<i64> {
                 ((c - j) as f32 * pulse.res / cfg.res as f32).floor() as i64
             } else {
                 let t = (c - j) as f64 * pulse.res as f64 / cfg.res;
-                if (t - t.round()).abs() < 1e-4 { t.round() as i64 } else { t.floor() as i64 }
+                if (t - t.round()).abs() < 1e-4 {
+                    t.round() as i64
+                } else {
+                    t.floor() as i64
+                }
             }
         })
         .collect()

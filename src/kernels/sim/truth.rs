@@ -79,7 +79,11 @@ pub fn als_cover(wave: &[f32], ground: &[f32]) -> f32 {
     let n = wave.len().min(ground.len()) as f32;
     tot_c -= min_c * n;
     tot_g -= min_g * n;
-    if tot_g + tot_c > 0.0 { tot_c / (tot_c + tot_g * RHO_RATIO) } else { -1.0 }
+    if tot_g + tot_c > 0.0 {
+        tot_c / (tot_c + tot_g * RHO_RATIO)
+    } else {
+        -1.0
+    }
 }
 
 #[cfg(test)]

@@ -110,7 +110,11 @@ impl<T: Sample> WaveSet<T> {
                 hi = hi.max(a.iter().rposition(|v| *v != T::default()).unwrap_or(f) + 1);
             }
         }
-        if lo == usize::MAX { 0..0 } else { lo..hi }
+        if lo == usize::MAX {
+            0..0
+        } else {
+            lo..hi
+        }
     }
 
     /// Convolves every array with pulse taps (`offsets[j]` bins, weight `y[j]`):

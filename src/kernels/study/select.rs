@@ -299,7 +299,13 @@ pub struct ShotContext<'a> {
 
 /// The rows of one shot that pass every filter, appended to `out`; every candidate is counted
 /// in `counts`.
-pub fn select_rows(shot: &ShotFacts, ctx: &ShotContext, rules: &StudyRules, counts: &mut FilterCounts, out: &mut Vec<ResultInput>) {
+pub fn select_rows(
+    shot: &ShotFacts,
+    ctx: &ShotContext,
+    rules: &StudyRules,
+    counts: &mut FilterCounts,
+    out: &mut Vec<ResultInput>,
+) {
     counts.shots += 1;
     let before = out.len();
     for (w, weighting) in WEIGHTINGS.iter().enumerate() {
@@ -326,7 +332,14 @@ fn finite_rh(rh: &Option<Vec<f32>>) -> Option<&Vec<f32>> {
 }
 
 /// Row (w, a) of the shot, or the first filter it fails.
-fn row(shot: &ShotFacts, ctx: &ShotContext, rules: &StudyRules, w: usize, a: usize, counts: &mut FilterCounts) -> Result<ResultInput, Filter> {
+fn row(
+    shot: &ShotFacts,
+    ctx: &ShotContext,
+    rules: &StudyRules,
+    w: usize,
+    a: usize,
+    counts: &mut FilterCounts,
+) -> Result<ResultInput, Filter> {
     let sim = ctx.sim.map(|s| &s[w]).filter(|s| s.ok).ok_or(Filter::AlsCoverage)?;
     match (ctx.window, shot.delta_time.filter(|t| t.is_finite())) {
         (Some(win), Some(t)) => {
@@ -439,7 +452,12 @@ mod tests {
     }
 
     fn alg() -> AlgorithmFacts {
-        AlgorithmFacts { quality_flag: Some(1), sensitivity: Some(0.97), elev_lowestmode: Some(349.0), rh: Some(rh(21.0)) }
+        AlgorithmFacts {
+            quality_flag: Some(1),
+            sensitivity: Some(0.97),
+            elev_lowestmode: Some(349.0),
+            rh: Some(rh(21.0)),
+        }
     }
 
     /// A shot that passes every filter, dated 2022-06-01 (delta_time of that day).
@@ -543,7 +561,12 @@ mod tests {
         s3.algorithms[5].rh = None;
         let (rows, c) = run(&s3, &full);
         assert_eq!(
-            (c.removed_by(Filter::Quality), c.removed_by(Filter::Sensitivity), c.removed_by(Filter::GediValues), c.kept),
+            (
+                c.removed_by(Filter::Quality),
+                c.removed_by(Filter::Sensitivity),
+                c.removed_by(Filter::GediValues),
+                c.kept
+            ),
             (3, 3, 3, 12)
         );
         assert_eq!(rows.len(), 12);
@@ -618,7 +641,14 @@ mod tests {
 
     #[test]
     fn window_of_the_tiles_holding_the_point() {
-        let t = |x0: f64, s: Option<i64>, e: Option<i64>| TileWindow { xmin: x0, ymin: 0.0, xmax: x0 + 100.0, ymax: 100.0, start_us: s, end_us: e };
+        let t = |x0: f64, s: Option<i64>, e: Option<i64>| TileWindow {
+            xmin: x0,
+            ymin: 0.0,
+            xmax: x0 + 100.0,
+            ymax: 100.0,
+            start_us: s,
+            end_us: e,
+        };
         let tiles = [t(0.0, Some(10), Some(20)), t(50.0, Some(5), Some(15)), t(200.0, None, None)];
         assert_eq!(als_window(&tiles, 10.0, 10.0), Some(AlsWindow { start_us: 10, end_us: 20 }));
         assert_eq!(als_window(&tiles, 60.0, 10.0), Some(AlsWindow { start_us: 5, end_us: 20 }));
@@ -638,7 +668,10 @@ mod tests {
         let mut total = FilterCounts::default();
         total.add(&a);
         total.add(&a);
-        assert_eq!((total.shots, total.candidates, total.kept, total.shots_kept, total.window_unknown), (6, 126, 42, 2, 42));
+        assert_eq!(
+            (total.shots, total.candidates, total.kept, total.shots_kept, total.window_unknown),
+            (6, 126, 42, 2, 42)
+        );
         assert!(balanced(&total));
         assert_eq!(FilterCounts::from_json(&total.to_json()), Some(total));
         assert_eq!(FilterCounts::from_json(&serde_json::json!({"shots": 1})), None);

@@ -25,10 +25,7 @@ pub struct DenoiseSettings {
 impl Default for DenoiseSettings {
     /// 3σ (the L2A front threshold) and the L2A zcross width 3.5.
     fn default() -> Self {
-        Self {
-            threshold_sigmas: 3.0,
-            smoothing_width: 3.5,
-        }
+        Self { threshold_sigmas: 3.0, smoothing_width: 3.5 }
     }
 }
 
@@ -78,7 +75,8 @@ pub struct LeadingNoiseDenoise {
 impl LeadingNoiseDenoise {
     /// collocateWaves' settings for real waveforms: noise over the first 12 m, μ + 4σ, features of
     /// at least 6 samples, noise tracking on.
-    pub const COLLOCATE: LeadingNoiseDenoise = LeadingNoiseDenoise { stats_len_m: 12.0, threshold_sigmas: 4.0, min_width: 6 };
+    pub const COLLOCATE: LeadingNoiseDenoise =
+        LeadingNoiseDenoise { stats_len_m: 12.0, threshold_sigmas: 4.0, min_width: 6 };
 }
 
 /// Why a waveform cannot be denoised from its leading noise.
@@ -169,7 +167,10 @@ mod tests {
         let mut tail = wave.clone();
         tail[290..].iter_mut().for_each(|v| *v = 200.0);
         assert!(denoise_leading_noise(&tail, 0.15, LeadingNoiseDenoise::COLLOCATE).unwrap()[299] > 90.0);
-        assert_eq!(denoise_leading_noise(&wave[..50], 0.15, LeadingNoiseDenoise::COLLOCATE), Err(DenoiseError::TooShort));
+        assert_eq!(
+            denoise_leading_noise(&wave[..50], 0.15, LeadingNoiseDenoise::COLLOCATE),
+            Err(DenoiseError::TooShort)
+        );
         let mut bad = wave.clone();
         bad[3] = f32::NAN;
         assert_eq!(denoise_leading_noise(&bad, 0.15, LeadingNoiseDenoise::COLLOCATE), Err(DenoiseError::NonFinite));
@@ -183,28 +184,13 @@ mod tests {
             *w += 50.0 * (-0.5 * ((i as f32 - 100.0) / 4.0).powi(2)).exp();
         }
         wave[10] = 103.0; // a lone noise spike below 3σ after smoothing
-        let d = denoise(
-            &wave,
-            Noise {
-                mean: 100.0,
-                stddev: 2.0,
-            },
-            DenoiseSettings::default(),
-        );
+        let d = denoise(&wave, Noise { mean: 100.0, stddev: 2.0 }, DenoiseSettings::default());
         assert_eq!(d.len(), 200);
         assert_eq!(d[10], 0.0);
         assert!(d[100] > 30.0);
         // Inside the feature the waveform itself is kept, not its smoothed copy.
         assert_eq!(d[100], f64::from(wave[100]) - 100.0);
         assert!(d.iter().all(|&v| v >= 0.0));
-        assert!(denoise(
-            &[],
-            Noise {
-                mean: 0.0,
-                stddev: 1.0
-            },
-            DenoiseSettings::default()
-        )
-        .is_empty());
+        assert!(denoise(&[], Noise { mean: 0.0, stddev: 1.0 }, DenoiseSettings::default()).is_empty());
     }
 }

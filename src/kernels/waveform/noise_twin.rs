@@ -36,9 +36,7 @@ pub enum TwinError {
     #[error("simulated waveform has no positive energy")]
     NoEnergy,
     /// The waveform placed at `start` has non-zero samples outside the record.
-    #[error(
-        "signal of {signal} samples placed at sample {start} has energy outside a record of {record} samples"
-    )]
+    #[error("signal of {signal} samples placed at sample {start} has energy outside a record of {record} samples")]
     DoesNotFit {
         /// Record sample of the signal's first sample (negative: before the record).
         start: isize,
@@ -90,10 +88,7 @@ pub struct NoiseShape {
 
 impl NoiseShape {
     /// Independent samples of standard deviation σ.
-    pub const WHITE: NoiseShape = NoiseShape {
-        correlation: 0.0,
-        per_sample_ratio: 1.0,
-    };
+    pub const WHITE: NoiseShape = NoiseShape { correlation: 0.0, per_sample_ratio: 1.0 };
 
     /// The noise of real GEDI L1B records, **measured** on the noise-only samples (before the
     /// signal) of the shared V1 granule's calibration half (docs/l2a.md "Noise of the real
@@ -101,10 +96,7 @@ impl NoiseShape {
     /// samples are correlated as Gaussian-filtered white noise with σ 1.63 samples
     /// (autocorrelation 0.91, 0.70, 0.44, 0.22 at lags 1–4). After L2A's smoothing this noise
     /// has the level of the real records' noise; white noise of σ is 20–30 % weaker.
-    pub const GEDI_V1: NoiseShape = NoiseShape {
-        correlation: 1.63,
-        per_sample_ratio: 0.52,
-    };
+    pub const GEDI_V1: NoiseShape = NoiseShape { correlation: 1.63, per_sample_ratio: 0.52 };
 
     fn is_valid(&self) -> bool {
         self.correlation.is_finite()
@@ -120,9 +112,7 @@ impl NoiseShape {
             return vec![1.0];
         }
         let half = (4.0 * self.correlation).ceil() as i64;
-        let taps: Vec<f64> = (-half..=half)
-            .map(|j| (-0.5 * (j as f64 / self.correlation).powi(2)).exp())
-            .collect();
+        let taps: Vec<f64> = (-half..=half).map(|j| (-0.5 * (j as f64 / self.correlation).powi(2)).exp()).collect();
         let norm = taps.iter().map(|t| t * t).sum::<f64>().sqrt();
         taps.into_iter().map(|t| t / norm).collect()
     }
@@ -134,9 +124,7 @@ fn noise_draws(n: usize, shape: &NoiseShape, seed: u64) -> Vec<f64> {
     let taps = shape.taps();
     let mut normal = NormalSource::new(seed);
     let white: Vec<f64> = (0..n + taps.len() - 1).map(|_| normal.sample()).collect();
-    (0..n)
-        .map(|i| taps.iter().zip(&white[i..]).map(|(t, w)| t * w).sum())
-        .collect()
+    (0..n).map(|i| taps.iter().zip(&white[i..]).map(|(t, w)| t * w).sum()).collect()
 }
 
 /// Mode (a): a twin of one real shot.
@@ -163,19 +151,12 @@ impl ShotTwin {
     /// bin at record sample `start`, noise drawn from `seed`. `start` may be negative and the
     /// signal may run past the record's end, as long as what falls outside is zero (a simulation's
     /// empty buffer above the canopy and below the ground).
-    pub fn apply(
-        &self,
-        sim: &[f64],
-        input_bin_m: f64,
-        start: isize,
-        seed: u64,
-    ) -> Result<TwinWaveform, TwinError> {
+    pub fn apply(&self, sim: &[f64], input_bin_m: f64, start: isize, seed: u64) -> Result<TwinWaveform, TwinError> {
         check_signal(sim, input_bin_m)?;
         if !self.energy_total.is_finite() || self.energy_total <= 0.0 {
             return Err(TwinError::Invalid("energy_total"));
         }
-        if !self.noise.mean.is_finite() || !self.noise.stddev.is_finite() || self.noise.stddev < 0.0
-        {
+        if !self.noise.mean.is_finite() || !self.noise.stddev.is_finite() || self.noise.stddev < 0.0 {
             return Err(TwinError::Invalid("noise"));
         }
         if !self.quantum.is_finite() || self.quantum < 0.0 {
@@ -202,23 +183,13 @@ impl ShotTwin {
             .zip(&draws)
             .map(|(&s, &d)| {
                 let x = s + self.noise.mean + sample_sigma * d;
-                (if self.quantum > 0.0 {
-                    (x / self.quantum).round() * self.quantum
-                } else {
-                    x
-                }) as f32
+                (if self.quantum > 0.0 { (x / self.quantum).round() * self.quantum } else { x }) as f32
             })
             .collect();
         // The reported σ is the shot's (what L2A's thresholds use). Rounding adds a uniform
         // error of variance q²/12 and no bias.
         let stddev = (self.noise.stddev.powi(2) + self.quantum.powi(2) / 12.0).sqrt();
-        Ok(TwinWaveform {
-            wave,
-            noise: Noise {
-                mean: self.noise.mean,
-                stddev,
-            },
-        })
+        Ok(TwinWaveform { wave, noise: Noise { mean: self.noise.mean, stddev } })
     }
 }
 
@@ -287,12 +258,10 @@ impl LinkMarginTwin {
     /// Solves `10·log10((A − nS·σ)/(nN·σ)) = link_margin_db` in closed form; the reference finds
     /// the same root by step halving to 0.00015 dB.
     pub fn sigma_link(&self) -> f64 {
-        let sigma_eff = (self.pulse_sigma_m.powi(2)
-            + (self.footprint_sigma_m * LINK_SLOPE_DEG.to_radians().tan()).powi(2))
-        .sqrt();
+        let sigma_eff =
+            (self.pulse_sigma_m.powi(2) + (self.footprint_sigma_m * LINK_SLOPE_DEG.to_radians().tan()).powi(2)).sqrt();
         let g = (1.0 - self.cover) * self.rho_g;
-        let amplitude =
-            (g / (g + self.rho_v * self.cover)) / (sigma_eff * (2.0 * std::f64::consts::PI).sqrt());
+        let amplitude = (g / (g + self.rho_v * self.cover)) / (sigma_eff * (2.0 * std::f64::consts::PI).sqrt());
         let n_noise = gaussian_quantile(1.0 - FALSE_ALARM_PER_BIN);
         let n_signal = gaussian_quantile(1.0 - MISSED_DETECTION);
         let ratio = 10f64.powf(self.link_margin_db / 10.0);
@@ -300,27 +269,10 @@ impl LinkMarginTwin {
     }
 
     /// Make the twin of `sim` (bins of `input_bin_m`, top to bottom) with noise drawn from `seed`.
-    pub fn apply(
-        &self,
-        sim: &[f64],
-        input_bin_m: f64,
-        seed: u64,
-    ) -> Result<TwinWaveform, TwinError> {
+    pub fn apply(&self, sim: &[f64], input_bin_m: f64, seed: u64) -> Result<TwinWaveform, TwinError> {
         check_signal(sim, input_bin_m)?;
-        let params = [
-            self.link_margin_db,
-            self.cover,
-            self.true_sig,
-            self.offset,
-            self.max_dn,
-            self.rho_v,
-            self.rho_g,
-        ];
-        if params.iter().any(|p| !p.is_finite())
-            || self.true_sig <= 0.0
-            || self.max_dn <= 0.0
-            || self.bits == 0
-        {
+        let params = [self.link_margin_db, self.cover, self.true_sig, self.offset, self.max_dn, self.rho_v, self.rho_g];
+        if params.iter().any(|p| !p.is_finite()) || self.true_sig <= 0.0 || self.max_dn <= 0.0 || self.bits == 0 {
             return Err(TwinError::Invalid("link-margin parameters"));
         }
         if !(0.0..1.0).contains(&self.cover) {
@@ -348,10 +300,8 @@ impl LinkMarginTwin {
             })
             .collect();
         // Floor digitisation lowers the mean by half a step and adds step²/12 of variance.
-        let noise = Noise {
-            mean: self.offset - step / 2.0,
-            stddev: (self.true_sig.powi(2) + step.powi(2) / 12.0).sqrt(),
-        };
+        let noise =
+            Noise { mean: self.offset - step / 2.0, stddev: (self.true_sig.powi(2) + step.powi(2) / 12.0).sqrt() };
         Ok(TwinWaveform { wave, noise })
     }
 }
@@ -379,13 +329,7 @@ fn place(signal: &[f64], start: isize, len: usize) -> Result<Vec<f64>, TwinError
         match usize::try_from(r).ok().and_then(|r| record.get_mut(r)) {
             Some(slot) => *slot = v,
             None if v == 0.0 => {}
-            None => {
-                return Err(TwinError::DoesNotFit {
-                    start,
-                    signal: signal.len(),
-                    record: len,
-                })
-            }
+            None => return Err(TwinError::DoesNotFit { start, signal: signal.len(), record: len }),
         }
     }
     Ok(record)
@@ -400,10 +344,7 @@ fn normalised_pulse(pulse: &[f32]) -> Result<Vec<f64>, TwinError> {
     sorted.sort_by(f64::total_cmp);
     // The pulse occupies a small part of the 128-sample record: the median is the baseline.
     let baseline = sorted[sorted.len() / 2];
-    let p: Vec<f64> = pulse
-        .iter()
-        .map(|&v| (f64::from(v) - baseline).max(0.0))
-        .collect();
+    let p: Vec<f64> = pulse.iter().map(|&v| (f64::from(v) - baseline).max(0.0)).collect();
     let sum: f64 = p.iter().sum();
     if sum.is_nan() || sum <= 0.0 {
         return Err(TwinError::Invalid("tx_pulse"));
@@ -413,11 +354,7 @@ fn normalised_pulse(pulse: &[f32]) -> Result<Vec<f64>, TwinError> {
 
 /// Convolution of `signal` with `pulse`, centred on the pulse peak, same length as `signal`.
 fn convolve_with_pulse(signal: &[f64], pulse: &[f64]) -> Vec<f64> {
-    let peak = pulse
-        .iter()
-        .enumerate()
-        .max_by(|a, b| a.1.total_cmp(b.1))
-        .map_or(0, |(i, _)| i);
+    let peak = pulse.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map_or(0, |(i, _)| i);
     let n = signal.len() as isize;
     (0..n)
         .map(|i| {
@@ -454,10 +391,7 @@ struct NormalSource {
 
 impl NormalSource {
     fn new(seed: u64) -> Self {
-        Self {
-            rng: ChaCha8Rng::seed_from_u64(seed),
-            spare: None,
-        }
+        Self { rng: ChaCha8Rng::seed_from_u64(seed), spare: None }
     }
 
     /// Uniform in [−1, 1).
@@ -495,10 +429,7 @@ mod tests {
         let sigma_eff = (0.764_331f64.powi(2) + (5.5 * 2f64.to_radians().tan()).powi(2)).sqrt();
         let g = 0.1 * 0.4;
         let a = (g / (g + 0.57 * 0.9)) / (sigma_eff * (2.0 * std::f64::consts::PI).sqrt());
-        let db = 10.0
-            * ((a - gaussian_quantile(0.9) * s)
-                / (gaussian_quantile(1.0 - FALSE_ALARM_PER_BIN) * s))
-                .log10();
+        let db = 10.0 * ((a - gaussian_quantile(0.9) * s) / (gaussian_quantile(1.0 - FALSE_ALARM_PER_BIN) * s)).log10();
         assert!((db - 3.0).abs() < 1e-9);
     }
 
@@ -513,40 +444,25 @@ mod tests {
         assert_ne!(a, draw(8));
         let mean = a.iter().sum::<f64>() / a.len() as f64;
         let var = a.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / a.len() as f64;
-        assert!(
-            mean.abs() < 0.03 && (var - 1.0).abs() < 0.03,
-            "mean {mean} var {var}"
-        );
+        assert!(mean.abs() < 0.03 && (var - 1.0).abs() < 0.03, "mean {mean} var {var}");
     }
 
     #[test]
     fn resampling_keeps_the_extent_and_shape() {
-        let sim: Vec<f64> = (0..1001)
-            .map(|i| (-0.5 * ((i as f64 - 500.0) / 20.0).powi(2)).exp())
-            .collect();
+        let sim: Vec<f64> = (0..1001).map(|i| (-0.5 * ((i as f64 - 500.0) / 20.0).powi(2)).exp()).collect();
         let r = resample_to_gedi(&sim, SIM_BIN_M);
         assert_eq!(r.len(), (1000.0 * 0.15 / GEDI_BIN_M).floor() as usize + 1);
-        let peak = r
-            .iter()
-            .enumerate()
-            .max_by(|a, b| a.1.total_cmp(b.1))
-            .map(|(i, _)| i)
-            .unwrap_or(0);
+        let peak = r.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map(|(i, _)| i).unwrap_or(0);
         assert!((peak as f64 * GEDI_BIN_M - 75.0).abs() < GEDI_BIN_M);
         assert!(resample_to_gedi(&[], 0.15).is_empty());
     }
 
     #[test]
     fn shot_twin_matches_the_shot_energy_and_noise() {
-        let sim: Vec<f64> = (0..400)
-            .map(|i| (-0.5 * ((i as f64 - 200.0) / 6.0).powi(2)).exp())
-            .collect();
+        let sim: Vec<f64> = (0..400).map(|i| (-0.5 * ((i as f64 - 200.0) / 6.0).powi(2)).exp()).collect();
         let twin = ShotTwin {
             energy_total: 10_000.0,
-            noise: Noise {
-                mean: 220.0,
-                stddev: 3.0,
-            },
+            noise: Noise { mean: 220.0, stddev: 3.0 },
             sample_count: 1000,
             tx_pulse: None,
             quantum: 1.0,
@@ -554,10 +470,7 @@ mod tests {
         };
         let t = twin.apply(&sim, GEDI_BIN_M, 300, 42).expect("twin");
         assert_eq!(t.wave.len(), 1000);
-        assert_eq!(
-            t.wave,
-            twin.apply(&sim, GEDI_BIN_M, 300, 42).expect("twin").wave
-        );
+        assert_eq!(t.wave, twin.apply(&sim, GEDI_BIN_M, 300, 42).expect("twin").wave);
         let energy: f64 = t.wave.iter().map(|&w| f64::from(w) - 220.0).sum();
         assert!((energy - 10_000.0).abs() < 400.0, "energy {energy}");
         let pre = &t.wave[..250];
@@ -566,66 +479,27 @@ mod tests {
         assert!(t.wave.iter().all(|v| v.fract() == 0.0));
         assert_eq!(
             twin.apply(&sim, GEDI_BIN_M, 700, 1),
-            Err(TwinError::DoesNotFit {
-                start: 700,
-                signal: 400,
-                record: 1000
-            })
+            Err(TwinError::DoesNotFit { start: 700, signal: 400, record: 1000 })
         );
         // Zero samples may fall outside the record (a simulation's empty buffers), energy may not.
         let mut padded = vec![0.0; 50];
         padded.extend(&sim);
         padded.extend([0.0; 50]);
         let shifted = twin.apply(&padded, GEDI_BIN_M, 250, 42).expect("twin");
-        assert_eq!(
-            shifted.wave, t.wave,
-            "the same signal at the same record samples"
-        );
-        let inside = twin
-            .apply(&padded, GEDI_BIN_M, -50, 42)
-            .expect("zeros before the record");
-        let peak = inside
-            .wave
-            .iter()
-            .enumerate()
-            .max_by(|a, b| a.1.total_cmp(b.1))
-            .map(|(i, _)| i);
-        assert!(
-            peak.is_some_and(|p| p.abs_diff(200) <= 3),
-            "peak at {peak:?}"
-        );
+        assert_eq!(shifted.wave, t.wave, "the same signal at the same record samples");
+        let inside = twin.apply(&padded, GEDI_BIN_M, -50, 42).expect("zeros before the record");
+        let peak = inside.wave.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map(|(i, _)| i);
+        assert!(peak.is_some_and(|p| p.abs_diff(200) <= 3), "peak at {peak:?}");
         assert_eq!(
             twin.apply(&padded, GEDI_BIN_M, -51, 42),
-            Err(TwinError::DoesNotFit {
-                start: -51,
-                signal: 500,
-                record: 1000
-            })
+            Err(TwinError::DoesNotFit { start: -51, signal: 500, record: 1000 })
         );
         assert_eq!(twin.apply(&[], GEDI_BIN_M, 0, 1), Err(TwinError::Empty));
-        assert_eq!(
-            twin.apply(&[0.0, f64::NAN, 1.0], GEDI_BIN_M, 0, 1),
-            Err(TwinError::Invalid("simulated waveform"))
-        );
-        let no_noise = ShotTwin {
-            noise: Noise {
-                mean: 220.0,
-                stddev: f64::NAN,
-            },
-            ..twin.clone()
-        };
-        assert_eq!(
-            no_noise.apply(&sim, GEDI_BIN_M, 0, 1),
-            Err(TwinError::Invalid("noise"))
-        );
-        assert_eq!(
-            twin.apply(&[0.0; 10], GEDI_BIN_M, 0, 1),
-            Err(TwinError::NoEnergy)
-        );
-        let with_pulse = ShotTwin {
-            tx_pulse: Some(vec![10.0, 10.0, 30.0, 90.0, 30.0, 10.0, 10.0]),
-            ..twin.clone()
-        };
+        assert_eq!(twin.apply(&[0.0, f64::NAN, 1.0], GEDI_BIN_M, 0, 1), Err(TwinError::Invalid("simulated waveform")));
+        let no_noise = ShotTwin { noise: Noise { mean: 220.0, stddev: f64::NAN }, ..twin.clone() };
+        assert_eq!(no_noise.apply(&sim, GEDI_BIN_M, 0, 1), Err(TwinError::Invalid("noise")));
+        assert_eq!(twin.apply(&[0.0; 10], GEDI_BIN_M, 0, 1), Err(TwinError::NoEnergy));
+        let with_pulse = ShotTwin { tx_pulse: Some(vec![10.0, 10.0, 30.0, 90.0, 30.0, 10.0, 10.0]), ..twin.clone() };
         assert!(with_pulse.apply(&sim, GEDI_BIN_M, 300, 42).is_ok());
     }
 
@@ -641,11 +515,7 @@ mod tests {
         for l in 1..=4 {
             // Gaussian-filtered white noise: autocorrelation exp(−l²/(4σ²)).
             let expected = (-((l * l) as f64) / (4.0 * shape.correlation.powi(2))).exp();
-            assert!(
-                (lag(l) - expected).abs() < 0.02,
-                "lag {l}: {} vs {expected}",
-                lag(l)
-            );
+            assert!((lag(l) - expected).abs() < 0.02, "lag {l}: {} vs {expected}", lag(l));
         }
         // White noise is the plain stream of the seed.
         let mut normal = NormalSource::new(5);
@@ -655,9 +525,7 @@ mod tests {
 
     #[test]
     fn link_margin_twin_has_the_reference_noise_level() {
-        let sim: Vec<f64> = (0..600)
-            .map(|i| (-0.5 * ((i as f64 - 300.0) / 6.0).powi(2)).exp())
-            .collect();
+        let sim: Vec<f64> = (0..600).map(|i| (-0.5 * ((i as f64 - 300.0) / 6.0).powi(2)).exp()).collect();
         let twin = LinkMarginTwin::new(5.0, 0.95);
         let t = twin.apply(&sim, SIM_BIN_M, 3).expect("twin");
         let pre: Vec<f64> = t.wave[..200].iter().map(|&v| f64::from(v)).collect();
@@ -665,13 +533,7 @@ mod tests {
         let sd = (pre.iter().map(|v| (v - m).powi(2)).sum::<f64>() / 199.0).sqrt();
         assert!((m - 93.5).abs() < 1.0, "mean {m}");
         assert!((sd - 5.0).abs() < 0.8, "sd {sd}");
-        assert!(t
-            .wave
-            .iter()
-            .all(|&v| (0.0..4096.0).contains(&v) && v.fract() == 0.0));
-        assert_eq!(
-            LinkMarginTwin::new(5.0, 1.0).apply(&sim, SIM_BIN_M, 3),
-            Err(TwinError::Invalid("cover"))
-        );
+        assert!(t.wave.iter().all(|&v| (0.0..4096.0).contains(&v) && v.fract() == 0.0));
+        assert_eq!(LinkMarginTwin::new(5.0, 1.0).apply(&sim, SIM_BIN_M, 3), Err(TwinError::Invalid("cover")));
     }
 }

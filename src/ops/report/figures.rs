@@ -98,7 +98,6 @@ where
     Ok(())
 }
 
-
 fn font(size: u32) -> TextStyle<'static> {
     (FAMILY, size).into_font().color(&BLACK)
 }
@@ -243,7 +242,11 @@ impl Figure for LinePanels {
         let yr = padded_range(all().map(|p| p.1), self.zero_line);
         let areas = root.split_evenly((1, self.panels.len().max(1)));
         for ((title, series), area) in self.panels.iter().zip(&areas) {
-            let yr = if self.own_y { padded_range(series.iter().flat_map(|s| s.1.iter()).map(|p| p.1), self.zero_line) } else { yr.clone() };
+            let yr = if self.own_y {
+                padded_range(series.iter().flat_map(|s| s.1.iter()).map(|p| p.1), self.zero_line)
+            } else {
+                yr.clone()
+            };
             let mut chart = ChartBuilder::on(area)
                 .caption(title, font(16))
                 .margin(10)
@@ -274,7 +277,8 @@ impl Figure for LinePanels {
                     .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], color));
             }
             if !series.is_empty() {
-                let corner = if self.legend_lower { SeriesLabelPosition::LowerLeft } else { SeriesLabelPosition::UpperLeft };
+                let corner =
+                    if self.legend_lower { SeriesLabelPosition::LowerLeft } else { SeriesLabelPosition::UpperLeft };
                 draw_legend(&mut chart, corner, 13)?;
             }
         }

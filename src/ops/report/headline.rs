@@ -80,7 +80,11 @@ impl Headline {
         }
         let path = report_dir.join("msd.parquet");
         for b in read(&path)? {
-            let (w, a, g) = (strings(&b, &path, "weighting")?, strings(&b, &path, "algorithm")?, strings(&b, &path, "sensitivity_group")?);
+            let (w, a, g) = (
+                strings(&b, &path, "weighting")?,
+                strings(&b, &path, "algorithm")?,
+                strings(&b, &path, "sensitivity_group")?,
+            );
             let (sb, sdsd, lcs) = (numbers(&b, &path, "sb")?, numbers(&b, &path, "sdsd")?, numbers(&b, &path, "lcs")?);
             let (msd, n) = (numbers(&b, &path, "msd")?, numbers(&b, &path, "n")?);
             for i in 0..b.num_rows() {
@@ -114,7 +118,11 @@ impl Headline {
     pub fn ground_table(&self) -> String {
         let mut s = String::new();
         let _ = writeln!(s, "Ground detection: GEDI ground − ALS ground, count weighting (m)");
-        let _ = writeln!(s, "{:<10} {:>6} {:>8} {:>7} │ {:>6} {:>8} │ {:>6} {:>8}", "algorithm", "n", "bias", "rmse", "n low", "bias", "n high", "bias");
+        let _ = writeln!(
+            s,
+            "{:<10} {:>6} {:>8} {:>7} │ {:>6} {:>8} │ {:>6} {:>8}",
+            "algorithm", "n", "bias", "rmse", "n low", "bias", "n high", "bias"
+        );
         let cell = |a: &str, g: &str| self.ground.iter().find(|r| r.algorithm == a && r.sensitivity_group == g);
         for a in self.algorithms() {
             let (all, low, high) = (cell(&a, "all"), cell(&a, "low"), cell(&a, "high"));
@@ -152,7 +160,9 @@ impl Headline {
         }
         let _ = writeln!(s, "{}", line.trim_end());
         for a in self.algorithms() {
-            let cell = |w: &str| self.msd.iter().find(|r| r.algorithm == a && r.weighting == w && r.sensitivity_group == "all");
+            let cell = |w: &str| {
+                self.msd.iter().find(|r| r.algorithm == a && r.weighting == w && r.sensitivity_group == "all")
+            };
             let n = weightings.iter().filter_map(|w| cell(w)).map(|r| r.n).max().unwrap_or(0);
             let mut line = format!("{a:<10} {n:>6}");
             for w in weightings {
@@ -178,7 +188,13 @@ mod tests {
 
     #[test]
     fn tables_lay_out_every_algorithm_and_weighting() {
-        let g = |a: &str, grp: &str, n: i64, bias: f64| GroundRow { algorithm: a.into(), sensitivity_group: grp.into(), n, bias, rmse: bias.abs() + 0.1 };
+        let g = |a: &str, grp: &str, n: i64, bias: f64| GroundRow {
+            algorithm: a.into(),
+            sensitivity_group: grp.into(),
+            n,
+            bias,
+            rmse: bias.abs() + 0.1,
+        };
         let m = |w: &str, a: &str| MsdRow {
             weighting: w.into(),
             algorithm: a.into(),

@@ -18,8 +18,8 @@ use arrow::array::{Array, AsArray, RecordBatch};
 use arrow::datatypes::{DataType, Float64Type, SchemaRef};
 
 use crate::dataset::{self, tables, Dataset};
-use crate::ops::progress::{Progress, Step};
 use crate::error::{Error, Result};
+use crate::ops::progress::{Progress, Step};
 
 /// One of the study's tables: its name (file stem), a title and its SQL.
 #[derive(Debug, Clone, Copy)]

@@ -37,12 +37,7 @@ impl<'a> EnergyProfile<'a> {
             smoothed[i] * (1.0 - f) + next * f - mean
         }));
         let total: f64 = buffer.iter().sum();
-        (total > 0.0).then_some(Self {
-            values: buffer,
-            botloc,
-            grid,
-            total,
-        })
+        (total > 0.0).then_some(Self { values: buffer, botloc, grid, total })
     }
 
     /// Position of grid step `j` (0 = botloc, increasing upward).
@@ -70,13 +65,8 @@ impl<'a> EnergyProfile<'a> {
 
     /// Share (%) of the total energy at or below `position`.
     pub(super) fn percent_below(&self, position: f64) -> f64 {
-        let below: f64 = self
-            .values
-            .iter()
-            .enumerate()
-            .take_while(|&(j, _)| self.position(j) >= position)
-            .map(|(_, &v)| v)
-            .sum();
+        let below: f64 =
+            self.values.iter().enumerate().take_while(|&(j, _)| self.position(j) >= position).map(|(_, &v)| v).sum();
         100.0 * below / self.total
     }
 }

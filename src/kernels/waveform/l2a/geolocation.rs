@@ -54,8 +54,7 @@ impl WaveformGeolocation {
 
     /// Elevation (m) at a fractional 0-based sample position.
     pub fn elevation_at(&self, position: f64) -> f64 {
-        self.elevation_bin0
-            + (self.elevation_lastbin - self.elevation_bin0) * self.fraction(position)
+        self.elevation_bin0 + (self.elevation_lastbin - self.elevation_bin0) * self.fraction(position)
     }
 
     /// Latitude (degrees) at a fractional 0-based sample position.
@@ -65,8 +64,7 @@ impl WaveformGeolocation {
 
     /// Longitude (degrees) at a fractional 0-based sample position.
     pub fn longitude_at(&self, position: f64) -> f64 {
-        self.longitude_bin0
-            + (self.longitude_lastbin - self.longitude_bin0) * self.fraction(position)
+        self.longitude_bin0 + (self.longitude_lastbin - self.longitude_bin0) * self.fraction(position)
     }
 
     /// Whether the elevations are finite (a prerequisite for relative heights).

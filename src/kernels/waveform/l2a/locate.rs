@@ -33,14 +33,7 @@ pub(super) fn signal_end(smoothed: &[f64], threshold: f64, grid: f64) -> Option<
 ///
 /// A maximum is a + → − sign change of the forward difference; its position is the zero crossing
 /// of the difference (differences sit at half-sample positions), rounded to the grid.
-pub(super) fn find_modes(
-    smoothed: &[f64],
-    top: f64,
-    bottom: f64,
-    threshold: f64,
-    grid: f64,
-    out: &mut Vec<Mode>,
-) {
+pub(super) fn find_modes(smoothed: &[f64], top: f64, bottom: f64, threshold: f64, grid: f64, out: &mut Vec<Mode>) {
     out.clear();
     let n = smoothed.len();
     if n < 3 {
@@ -54,10 +47,7 @@ pub(super) fn find_modes(
         if rise > 0.0 && fall <= 0.0 && smoothed[i] > threshold {
             let x = i as f64 - 0.5 + rise / (rise - fall);
             if (top..=bottom).contains(&x) {
-                out.push(Mode {
-                    position: (x * grid).round() / grid,
-                    amplitude: smoothed[i],
-                });
+                out.push(Mode { position: (x * grid).round() / grid, amplitude: smoothed[i] });
             }
         }
     }

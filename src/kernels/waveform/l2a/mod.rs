@@ -16,9 +16,7 @@ mod settings;
 mod smoothing;
 
 pub use geolocation::WaveformGeolocation;
-pub use settings::{
-    AlgorithmSettings, MinDetectionModel, MAX_MODE_COUNT, MIN_DETECTION_PULSE_WIDTH, RH_COUNT,
-};
+pub use settings::{AlgorithmSettings, MinDetectionModel, MAX_MODE_COUNT, MIN_DETECTION_PULSE_WIDTH, RH_COUNT};
 pub use smoothing::{GaussianKernel, SIGMA_OFFSET, TRUNCATION_RATIO};
 
 use cumulative::EnergyProfile;
@@ -172,12 +170,8 @@ impl L2aProcessor {
         validate_input(wave, noise, geo)?;
         // Smoothing depends on the samples alone: keep it while the same waveform comes back
         // (e.g. one SQL row per algorithm). Comparing costs one pass, smoothing about 44.
-        let same = self.last_wave.len() == wave.len()
-            && self
-                .last_wave
-                .iter()
-                .zip(wave)
-                .all(|(&a, b)| a == b.to_bits());
+        let same =
+            self.last_wave.len() == wave.len() && self.last_wave.iter().zip(wave).all(|(&a, b)| a == b.to_bits());
         if !same {
             self.begin_waveform();
             self.last_wave.clear();
@@ -204,11 +198,7 @@ impl L2aProcessor {
             return;
         }
         let energy_total = energy_total(wave, noise.mean);
-        out.extend(
-            settings
-                .iter()
-                .map(|s| self.run(wave, noise, geo, s, energy_total)),
-        );
+        out.extend(settings.iter().map(|s| self.run(wave, noise, geo, s, energy_total)));
     }
 
     /// Marks every cached smoothing stale: a new waveform starts.
@@ -219,10 +209,7 @@ impl L2aProcessor {
 
     /// Index of the smoother for `width`, smoothing `wave` with it if not done yet.
     fn smoothed(&mut self, wave: &[f32], width: f64) -> usize {
-        let found = self
-            .smoothers
-            .iter()
-            .position(|s| s.kernel.width().to_bits() == width.to_bits());
+        let found = self.smoothers.iter().position(|s| s.kernel.width().to_bits() == width.to_bits());
         let index = found.unwrap_or_else(|| {
             self.smoothers.push(Smoother {
                 kernel: GaussianKernel::for_width(width),
@@ -268,8 +255,8 @@ impl L2aProcessor {
         if self.modes.is_empty() {
             return Err(NoResult::NoModes);
         }
-        let profile = EnergyProfile::new(zc, noise.mean, toploc, botloc, grid, &mut self.profile)
-            .ok_or(NoResult::NoSignal)?;
+        let profile =
+            EnergyProfile::new(zc, noise.mean, toploc, botloc, grid, &mut self.profile).ok_or(NoResult::NoSignal)?;
         let rx_cumulative = profile.cumulative_positions();
         let ground = if s.enable_select_mode {
             cumulative::select_ground(&self.modes, &profile, s.cumulative_energy_thresh)
@@ -352,10 +339,7 @@ fn validate_input(wave: &[f32], noise: Noise, geo: &WaveformGeolocation) -> Resu
         return Err(NoResult::InvalidNoise);
     }
     if geo.sample_count != wave.len() {
-        return Err(NoResult::GeometryMismatch {
-            sample_count: geo.sample_count,
-            waveform_len: wave.len(),
-        });
+        return Err(NoResult::GeometryMismatch { sample_count: geo.sample_count, waveform_len: wave.len() });
     }
     if !geo.is_valid() {
         return Err(NoResult::InvalidElevation);
@@ -382,31 +366,17 @@ mod tests {
         WaveformGeolocation::from_spacing(n, 500.0, 0.15)
     }
 
-    const NOISE: Noise = Noise {
-        mean: 200.0,
-        stddev: 3.0,
-    };
+    const NOISE: Noise = Noise { mean: 200.0, stddev: 3.0 };
 
     #[test]
     fn synthetic_two_mode_waveform_is_processed_by_every_algorithm() {
         let wave = synthetic(800, 200.0);
         let mut p = L2aProcessor::new();
         let mut out = Vec::new();
-        p.process_all(
-            &wave,
-            NOISE,
-            &geo(800),
-            &AlgorithmSettings::all_gedi(),
-            &mut out,
-        );
+        p.process_all(&wave, NOISE, &geo(800), &AlgorithmSettings::all_gedi(), &mut out);
         for r in out.iter().map(|o| o.as_ref().expect("processed")) {
             assert_eq!(r.num_modes, 2, "a{}", r.algorithm);
-            assert!(
-                (r.zcross - 360.0).abs() <= 0.25,
-                "a{} zcross {}",
-                r.algorithm,
-                r.zcross
-            );
+            assert!((r.zcross - 360.0).abs() <= 0.25, "a{} zcross {}", r.algorithm, r.zcross);
             assert!(r.toploc < 290.0 && r.botloc > 365.0);
             assert_eq!(r.rx_cumulative[0], r.botloc);
             assert_eq!(r.rx_cumulative[100], r.toploc);
@@ -414,97 +384,56 @@ mod tests {
             assert!(r.sensitivity > 0.0 && r.sensitivity < 1.0);
         }
         // One-shot helper gives the same answer as the reusing processor.
-        assert_eq!(
-            process_waveform(&wave, NOISE, &geo(800), &AlgorithmSettings::a3()).as_ref(),
-            out[2].as_ref()
-        );
+        assert_eq!(process_waveform(&wave, NOISE, &geo(800), &AlgorithmSettings::a3()).as_ref(), out[2].as_ref());
     }
 
     #[test]
     fn bad_inputs_give_a_reason_not_a_panic() {
         let s = AlgorithmSettings::a1();
-        assert_eq!(
-            process_waveform(&[], NOISE, &geo(0), &s),
-            Err(NoResult::EmptyWaveform)
-        );
+        assert_eq!(process_waveform(&[], NOISE, &geo(0), &s), Err(NoResult::EmptyWaveform));
 
         let flat = vec![200.0f32; 800];
-        assert_eq!(
-            process_waveform(&flat, NOISE, &geo(800), &s),
-            Err(NoResult::NoSignal)
-        );
+        assert_eq!(process_waveform(&flat, NOISE, &geo(800), &s), Err(NoResult::NoSignal));
 
         // Pseudo-random noise of σ 3 around the mean (deterministic LCG): no signal either.
         let mut state = 12345u64;
         let noisy: Vec<f32> = (0..800)
             .map(|_| {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
                 200.0 + 3.0 * 1.7 * ((state >> 11) as f32 / (1u64 << 53) as f32 - 0.5) * 2.0
             })
             .collect();
         for alg in AlgorithmSettings::all_gedi() {
-            assert_eq!(
-                process_waveform(&noisy, NOISE, &geo(800), &alg),
-                Err(NoResult::NoSignal)
-            );
+            assert_eq!(process_waveform(&noisy, NOISE, &geo(800), &alg), Err(NoResult::NoSignal));
         }
 
         let mut nan = synthetic(800, 200.0);
         nan[17] = f32::NAN;
-        assert_eq!(
-            process_waveform(&nan, NOISE, &geo(800), &s),
-            Err(NoResult::NonFiniteSample { index: 17 })
-        );
+        assert_eq!(process_waveform(&nan, NOISE, &geo(800), &s), Err(NoResult::NonFiniteSample { index: 17 }));
 
         let wave = synthetic(800, 200.0);
         for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
-            let noise = Noise {
-                mean: 200.0,
-                stddev: bad,
-            };
-            assert_eq!(
-                process_waveform(&wave, noise, &geo(800), &s),
-                Err(NoResult::InvalidNoise)
-            );
+            let noise = Noise { mean: 200.0, stddev: bad };
+            assert_eq!(process_waveform(&wave, noise, &geo(800), &s), Err(NoResult::InvalidNoise));
         }
         assert_eq!(
             process_waveform(&wave, NOISE, &geo(10), &s),
-            Err(NoResult::GeometryMismatch {
-                sample_count: 10,
-                waveform_len: 800
-            })
+            Err(NoResult::GeometryMismatch { sample_count: 10, waveform_len: 800 })
         );
         let nan_top = WaveformGeolocation::vertical(800, f64::NAN, 380.0);
-        assert_eq!(
-            process_waveform(&wave, NOISE, &nan_top, &s),
-            Err(NoResult::InvalidElevation)
-        );
+        assert_eq!(process_waveform(&wave, NOISE, &nan_top, &s), Err(NoResult::InvalidElevation));
         let mut zero_grid = s.clone();
         zero_grid.subbin_resolution = 0;
-        assert_eq!(
-            process_waveform(&wave, NOISE, &geo(800), &zero_grid),
-            Err(NoResult::InvalidSettings)
-        );
+        assert_eq!(process_waveform(&wave, NOISE, &geo(800), &zero_grid), Err(NoResult::InvalidSettings));
 
         // A single sample and a monotonic ramp: no mode, never a panic.
         assert!(process_waveform(&[900.0], NOISE, &geo(1), &s).is_err());
         let ramp: Vec<f32> = (0..100).map(|i| 200.0 + i as f32 * 10.0).collect();
-        assert_eq!(
-            process_waveform(&ramp, NOISE, &geo(100), &s),
-            Err(NoResult::NoModes)
-        );
+        assert_eq!(process_waveform(&ramp, NOISE, &geo(100), &s), Err(NoResult::NoModes));
 
         // process_all reports the input problem once per algorithm.
         let mut out = Vec::new();
-        L2aProcessor::new().process_all(
-            &[],
-            NOISE,
-            &geo(0),
-            &AlgorithmSettings::all_gedi(),
-            &mut out,
-        );
+        L2aProcessor::new().process_all(&[], NOISE, &geo(0), &AlgorithmSettings::all_gedi(), &mut out);
         assert_eq!(out, vec![Err(NoResult::EmptyWaveform); 6]);
     }
 
@@ -519,13 +448,11 @@ mod tests {
                     + 30.0 * (-0.5 * ((x - 360.0) / 3.0).powi(2)).exp()
             })
             .collect();
-        let a2 = process_waveform(&wave, NOISE, &geo(800), &AlgorithmSettings::a2())
-            .expect("a2 processes");
+        let a2 = process_waveform(&wave, NOISE, &geo(800), &AlgorithmSettings::a2()).expect("a2 processes");
         assert_eq!(a2.num_modes, 2);
         assert_eq!(a2.selected_mode, 0);
         assert!((a2.zcross - 300.0).abs() <= 0.25);
-        let a5 = process_waveform(&wave, NOISE, &geo(800), &AlgorithmSettings::a5())
-            .expect("a5 processes");
+        let a5 = process_waveform(&wave, NOISE, &geo(800), &AlgorithmSettings::a5()).expect("a5 processes");
         assert_eq!(a5.selected_mode, a5.num_modes - 1);
         assert!((a5.zcross - 360.0).abs() <= 0.5);
     }

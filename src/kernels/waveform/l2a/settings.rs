@@ -74,38 +74,18 @@ const GEDI_TABLE: [[f64; 4]; 6] = [
 /// `min_detection_threshold` against `stddev` on the calibration half of the shared V1 granule
 /// (beams BEAM0001, BEAM0011, BEAM0110, BEAM1011; docs/l2a.md).
 const MIN_DETECTION_FIT: [MinDetectionModel; 6] = [
-    MinDetectionModel {
-        per_sigma: 8.641,
-        offset: -1.060,
-    },
-    MinDetectionModel {
-        per_sigma: 3.829,
-        offset: -1.081,
-    },
-    MinDetectionModel {
-        per_sigma: 7.204,
-        offset: -1.199,
-    },
-    MinDetectionModel {
-        per_sigma: 8.641,
-        offset: -1.060,
-    },
-    MinDetectionModel {
-        per_sigma: 2.796,
-        offset: -1.381,
-    },
-    MinDetectionModel {
-        per_sigma: 5.010,
-        offset: -1.318,
-    },
+    MinDetectionModel { per_sigma: 8.641, offset: -1.060 },
+    MinDetectionModel { per_sigma: 3.829, offset: -1.081 },
+    MinDetectionModel { per_sigma: 7.204, offset: -1.199 },
+    MinDetectionModel { per_sigma: 8.641, offset: -1.060 },
+    MinDetectionModel { per_sigma: 2.796, offset: -1.381 },
+    MinDetectionModel { per_sigma: 5.010, offset: -1.318 },
 ];
 
 impl AlgorithmSettings {
     /// The GEDI setting group `aN` for `alg` in 1..=6, or `None` for any other number.
     pub fn gedi(alg: u8) -> Option<Self> {
-        (1..=6)
-            .contains(&alg)
-            .then(|| Self::from_table(usize::from(alg) - 1))
+        (1..=6).contains(&alg).then(|| Self::from_table(usize::from(alg) - 1))
     }
 
     /// Settings of the table row `index` (0 = a1); callers guarantee `index < 6`.

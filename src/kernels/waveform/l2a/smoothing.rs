@@ -25,10 +25,7 @@ impl GaussianKernel {
     pub fn for_width(width: f64) -> Self {
         let sigma = width - SIGMA_OFFSET;
         if !sigma.is_finite() || sigma <= 0.0 {
-            return Self {
-                width,
-                taps: vec![1.0],
-            };
+            return Self { width, taps: vec![1.0] };
         }
         let reach = sigma * (2.0 * (1.0 / TRUNCATION_RATIO).ln()).sqrt();
         let half = reach.floor() as usize;
@@ -123,9 +120,7 @@ mod tests {
         k.smooth_into(&wave, &mut out);
         let h = k.half_width();
         for i in h..60 - h {
-            let direct: f64 = (0..=2 * h)
-                .map(|j| f64::from(wave[i + j - h]) * k.taps[j])
-                .sum();
+            let direct: f64 = (0..=2 * h).map(|j| f64::from(wave[i + j - h]) * k.taps[j]).sum();
             assert!((out[i] - direct).abs() < 1e-12, "sample {i}");
         }
         // Short waveforms: every sample is an edge sample (lengths around 2·half + 1 included).
