@@ -70,14 +70,18 @@ fn main() {
     let out = run(&["collocate", "--dataset", tmp.path().to_str().unwrap(), "--stats"]);
     let wall = t.elapsed().as_secs_f64();
     let rss_mb = field(&out, " MB,");
-    println!("collocate benchmark: 24,719,400 ALS points, 40 shots, ±10 m at 1 m (441 offsets), vertical solve included (2 cores)");
+    println!(
+        "collocate benchmark: 24,719,400 ALS points, 40 shots, ±10 m at 1 m (441 offsets), vertical solve \
+        included (2 cores)"
+    );
     println!("  gedisim collocate : {wall:.2} s wall (process), {}", out.trim());
     println!(
         "  reference         : {REFERENCE_S} s, {REFERENCE_GB} GB (collocateWaves, docs/simulator-reference.md §6.4)"
     );
     let cpu = field(&out, " s, peak");
     println!(
-        "  speed-up {:.0}× (wall), {:.0}× (CPU time against the reference's single-threaded user time 100.0 s); memory {:.1}× smaller",
+        "  speed-up {:.0}× (wall), {:.0}× (CPU time against the reference's single-threaded user time 100.0 s); \
+            memory {:.1}× smaller",
         REFERENCE_S / wall,
         100.0 / cpu,
         REFERENCE_GB * 1024.0 / rss_mb
@@ -94,7 +98,8 @@ fn print_offsets(ds: &Path, plant: &Plant) {
         let n = b.column_by_name("n_shots").unwrap().as_primitive::<UInt32Type>().clone();
         for i in 0..b.num_rows() {
             println!(
-                "  recovered: dx {:+.2} dy {:+.2} dz {:+.3} m (planted {:+.1} {:+.1} {:+.1}) from {} shots; r {:.3} → {:.4}",
+                "  recovered: dx {:+.2} dy {:+.2} dz {:+.3} m (planted {:+.1} {:+.1} {:+.1}) from {} shots; r {:.3} \
+                    → {:.4}",
                 v("dx", i),
                 v("dy", i),
                 v("dz", i),

@@ -9,12 +9,12 @@
 //! (default `1,2`), `GEDISIM_BENCH_SEEDS` (default `1,2`), `GEDISIM_BENCH_CONTROLS` (control seeds,
 //! default `1,2,3,4`), `GEDISIM_BENCH_DIR` (worlds kept there; default a temporary folder).
 
+use gedisim::kernels::diagnose::json::DiagnosisJson;
+use gedisim::kernels::scenario::effects::ParamValue;
 use gedisim::kernels::scenario::truth::Truth;
 use std::path::Path;
 use std::process::Command;
 use std::time::Instant;
-
-use serde_json::Value;
 
 const EFFECTS: [&str; 9] = [
     "datum",
@@ -89,19 +89,22 @@ fn world(dir: &Path, effect: &str, magnitude: &str, seed: &str) -> Option<Row> {
         return None;
     }
     let seconds = start.elapsed().as_secs_f64();
-    let d: Value = serde_json::from_str(&std::fs::read_to_string(o.join("diagnosis.json")).ok()?).ok()?;
+    let d: DiagnosisJson = serde_json::from_str(&std::fs::read_to_string(o.join("diagnosis.json")).ok()?).ok()?;
     let t: Truth = serde_json::from_str(&std::fs::read_to_string(ws.join("truth.json")).ok()?).ok()?;
-    let first = &d["effects"][0];
+    let first = d.effects.first()?;
     let (p, _) = main_param(effect);
     let truth = t.effects.first().and_then(|e| e.number(p)).unwrap_or(f64::NAN);
-    let fitted = if first["name"] == effect { first["params"][p].as_f64().unwrap_or(f64::NAN) } else { f64::NAN };
+    let fitted = match first.params.get(p) {
+        Some(ParamValue::Number(x)) if first.name == effect => *x,
+        _ => f64::NAN,
+    };
     Some(Row {
         effect: effect.to_string(),
         magnitude: if effect == "none" { "-".into() } else { magnitude.to_string() },
         seed: seed.to_string(),
-        first: first["name"].as_str().unwrap_or("?").to_string(),
-        unexplained: d["unexplained"].as_bool().unwrap_or(false),
-        shrink: first["held_out"]["shrink"].as_f64().unwrap_or(f64::NAN),
+        first: first.name.clone(),
+        unexplained: d.unexplained,
+        shrink: first.held_out.shrink.unwrap_or(f64::NAN),
         truth,
         fitted,
         seconds,

@@ -191,7 +191,12 @@ fn write_las(path: &Path, format: u8, wkt: bool, extra_bytes: u16, evlr: bool) {
             user_id: "LASF_Projection".into(),
             record_id: 2112,
             description: "WKT".into(),
-            data: br#"PROJCS["RGF93 v1 / Lambert-93",GEOGCS["RGF93 v1",AUTHORITY["EPSG","4171"]],AUTHORITY["EPSG","2154"]]"#.to_vec(),
+            data: concat!(
+                r#"PROJCS["RGF93 v1 / Lambert-93",GEOGCS["RGF93 v1",AUTHORITY["EPSG","4171"]],"#,
+                r#"AUTHORITY["EPSG","2154"]]"#
+            )
+            .as_bytes()
+            .to_vec(),
         });
     }
     if extra_bytes > 0 {

@@ -29,7 +29,8 @@ fn ingest_gedi_writes_shots_once_and_sql_reads_them() {
     let (ok, _, err) = gedisim(&args);
     assert!(ok && err.contains("already ingested"), "{err}");
     assert_eq!(files_with_suffix(&ds.join("shots"), ".parquet").len(), 1);
-    let q = "select count(*) as n, count(rx_waveform) as with_l1b, count(rh) as with_l2a, min(shot_number) as first from shots";
+    let q = "select count(*) as n, count(rx_waveform) as with_l1b, count(rh) as with_l2a, min(shot_number) as first \
+        from shots";
     let (ok, out, err) = gedisim(&["sql", "--dataset", ds.to_str().unwrap(), q]);
     assert!(ok, "{err}");
     let row = out.lines().nth(3).unwrap();

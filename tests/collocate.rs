@@ -239,7 +239,8 @@ fn beam_level_recovers_the_planted_offset_and_simulate_applies_it() {
     }
 
     // The table is queryable in SQL like every other table.
-    let q = "select level, count(*) as segments, sum(n_shots) as shots, min(cardinality(shot_numbers)) as listed from offsets group by level";
+    let q = "select level, count(*) as segments, sum(n_shots) as shots, min(cardinality(shot_numbers)) as listed \
+        from offsets group by level";
     let (ok, out, err) = gedisim(&["sql", "--dataset", tmp.path().to_str().unwrap(), q]);
     assert!(ok, "{err}");
     let row = out.lines().nth(3).unwrap_or_default();
@@ -249,7 +250,8 @@ fn beam_level_recovers_the_planted_offset_and_simulate_applies_it() {
     // simulate --dataset moves each shot by its segment's offset and says which.
     let (ok, _, err) = gedisim(&["simulate", "--dataset", tmp.path().to_str().unwrap()]);
     assert!(ok, "{err}");
-    let q = "select footprint_id, x, offset_segment_id, offset_dx, offset_dy from sim where weighting = 'count' order by footprint_id";
+    let q = "select footprint_id, x, offset_segment_id, offset_dx, offset_dy from sim where weighting = 'count' \
+        order by footprint_id";
     let (ok, out, err) = gedisim(&["sql", "--dataset", tmp.path().to_str().unwrap(), q]);
     assert!(ok, "{err}");
     let first = (FIRST_SHOT).to_string();
@@ -308,7 +310,10 @@ fn shot_level_gives_every_shot_an_offset_from_its_neighbours() {
                 && (r.v[2] - dz_true).abs() <= r.v[8]
         })
         .count();
-    println!("  {within_1m}/48 shots within 1 m on both axes; planted offset inside the reported half-extents for {inside_region}/48");
+    println!(
+        "  {within_1m}/48 shots within 1 m on both axes; planted offset inside the reported half-extents for \
+        {inside_region}/48"
+    );
     // Asserted: what the shot level reaches (docs/collocation.md): the vertical goal for every
     // shot; horizontally 1 m for the median shot, not for all — its uncertainty is reported.
     assert!(ez.2 <= 0.15, "vertical");

@@ -115,12 +115,19 @@ fn validate(shots: &[RealShot]) -> [[Agreement; 6]; 3] {
 
 fn print_table(title: &str, rows: &[Agreement; 6]) {
     println!("\n{title} ({} shots)", rows[0].shots);
-    println!("Agreement rates (%): positions within ±{POSITION_TOL} sample, RH within ±{RH_TOL_M} m, sensitivity within ±{SENSITIVITY_TOL}; 'exact' = same ¼ sample / same cm");
-    println!("alg | processed | toploc | botloc | zcross | rh (all k) | rh worst k | sensitivity | ground choice | toploc exact | botloc exact | zcross exact | rh exact");
+    println!(
+        "Agreement rates (%): positions within ±{POSITION_TOL} sample, RH within ±{RH_TOL_M} m, sensitivity \
+        within ±{SENSITIVITY_TOL}; 'exact' = same ¼ sample / same cm"
+    );
+    println!(
+        "alg | processed | toploc | botloc | zcross | rh (all k) | rh worst k | sensitivity | ground choice | \
+        toploc exact | botloc exact | zcross exact | rh exact"
+    );
     for (alg, a) in rows.iter().enumerate() {
         let (k, worst) = a.rh_worst();
         println!(
-            "a{} | {:5.1} | {:5.1} | {:5.1} | {:5.1} | {:5.1} | {:5.1} (RH{k}) | {:5.1} | {:5.1} | {:5.1} | {:5.1} | {:5.1} | {:5.1}",
+            "a{} | {:5.1} | {:5.1} | {:5.1} | {:5.1} | {:5.1} | {:5.1} (RH{k}) | {:5.1} | {:5.1} | {:5.1} | {:5.1} \
+                | {:5.1} | {:5.1}",
             alg + 1,
             a.rate(a.processed),
             a.rate(a.toploc),

@@ -2,7 +2,8 @@
 //! - dependencies point one way: `cli` → `ops` → `sql` → `dataset` → `io` → `kernels` (the command
 //!   line also opens the `dataset` handle it hands to an operation), and every
 //!   layer may use `error`; kernels use nothing but kernels (no files, no Arrow, no Parquet);
-//! - no module imports one of its importers (no cycle between the modules of the tree).
+//! - no module imports one of its importers (no cycle between the modules of the tree);
+//! - no line is wider than `rustfmt.toml`'s `max_width` (rustfmt leaves long strings alone).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -190,4 +191,28 @@ fn every_top_level_folder_is_a_layer() {
             assert!(doc.contains(&format!("`src/{name}/`")), "docs/ARCHITECTURE.md does not map src/{name}/");
         }
     }
+}
+
+#[test]
+fn no_line_is_wider_than_rustfmt_toml() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let config = std::fs::read_to_string(root.join("rustfmt.toml")).unwrap();
+    let width: usize = config
+        .lines()
+        .find_map(|l| l.strip_prefix("max_width"))
+        .and_then(|v| v.trim().trim_start_matches('=').trim().parse().ok())
+        .expect("rustfmt.toml sets max_width");
+    let mut files = Vec::new();
+    for dir in ["src", "tests", "benches"] {
+        rust_files(&root.join(dir), &mut files);
+    }
+    let mut wide = Vec::new();
+    for f in files {
+        for (n, line) in std::fs::read_to_string(&f).unwrap().lines().enumerate() {
+            if line.chars().count() > width {
+                wide.push(format!("{}:{}: {} characters", f.display(), n + 1, line.chars().count()));
+            }
+        }
+    }
+    assert!(wide.is_empty(), "lines wider than {width} (rustfmt does not wrap strings):\n{}", wide.join("\n"));
 }

@@ -30,7 +30,8 @@ fn agree(sens: (f64, f64), rh50: (i32, i32), rh98: (i32, i32)) -> [bool; 3] {
 const DRAWS: u64 = 4;
 
 /// Per algorithm, summed over [`DRAWS`] twins of each shot: [processed, sensitivity ok, RH50 ok,
-/// RH98 ok, all three ok, misses with another ground mode] against NASA, and all three ok between the twins of draws 2k and 2k+1.
+/// RH98 ok, all three ok, misses with another ground mode] against NASA, and all three ok between the twins of draws
+/// 2k and 2k+1.
 fn twin_rates(shots: &[RealShot], shape: NoiseShape) -> ([[usize; 6]; 6], [usize; 6]) {
     let settings = AlgorithmSettings::all_gedi();
     let mut processor = L2aProcessor::new();
@@ -102,7 +103,8 @@ fn shot_twin_of_each_denoised_real_waveform_reproduces_nasa_l2a() {
             shots.len()
         );
         println!(
-            "alg | processed | sensitivity ±{SENSITIVITY_TOL} | RH50 ±0.3 m | RH98 ±0.3 m | all three | twin vs twin (another seed) | misses with another ground mode (% of misses)"
+            "alg | processed | sensitivity ±{SENSITIVITY_TOL} | RH50 ±0.3 m | RH98 ±0.3 m | all three | twin vs \
+                twin (another seed) | misses with another ground mode (% of misses)"
         );
         for (alg, c) in counts.iter().enumerate() {
             println!(
@@ -176,8 +178,14 @@ fn real_record_noise_has_the_measured_shape() {
     };
     let (cal_ratio, cal_corr, cal_rho) = measure(true);
     let (held_ratio, held_corr, held_rho) = measure(false);
-    println!("real record noise, calibration half: per-sample σ = {cal_ratio:.3}·noise_stddev, filter σ {cal_corr:.3} samples, autocorrelation lags 1–4 {cal_rho:.3?}");
-    println!("real record noise, held-out half:    per-sample σ = {held_ratio:.3}·noise_stddev, filter σ {held_corr:.3} samples, autocorrelation lags 1–4 {held_rho:.3?}");
+    println!(
+        "real record noise, calibration half: per-sample σ = {cal_ratio:.3}·noise_stddev, filter σ \
+        {cal_corr:.3} samples, autocorrelation lags 1–4 {cal_rho:.3?}"
+    );
+    println!(
+        "real record noise, held-out half:    per-sample σ = {held_ratio:.3}·noise_stddev, filter σ \
+        {held_corr:.3} samples, autocorrelation lags 1–4 {held_rho:.3?}"
+    );
     let shape = NoiseShape::GEDI_V1;
     assert!((cal_ratio - shape.per_sample_ratio).abs() < 0.01, "{cal_ratio}");
     assert!((cal_corr - shape.correlation).abs() < 0.01, "{cal_corr}");

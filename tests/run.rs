@@ -122,7 +122,8 @@ WITH base AS (
   WHERE m.status = 'ok' AND m.als_cover > 0 AND m.als_cover < 1 AND m.rh[101] BETWEEN 5 AND 30
     AND s.degrade_flag = 0 AND s.geoid_offset_used IS NOT NULL
     AND 1514764800000000 + s.delta_time * 1000000
-        BETWEEN CAST(t.acquisition_start AS BIGINT) - 10 * 86400000000.0 AND CAST(t.acquisition_end AS BIGINT) + 10 * 86400000000.0
+        BETWEEN CAST(t.acquisition_start AS BIGINT) - 10 * 86400000000.0
+            AND CAST(t.acquisition_end AS BIGINT) + 10 * 86400000000.0
 )
 SELECT shot_number, weighting, 'default' FROM base WHERE quality_flag = 1 AND sensitivity >= 0.9
 UNION ALL SELECT shot_number, weighting, 'a1' FROM base WHERE quality_flag_a1 = 1 AND sensitivity_a1 >= 0.9

@@ -43,8 +43,10 @@ fn ingest(world: &Path, ds: &Path) -> usize {
 /// Median over shots of (GEDI ground − geoid − mean ALS ground point within 3 m of the shot),
 /// with the ALS ground read from the ingested ALS table, not from truth.json.
 fn median_ground_offset(ds: &Path) -> (usize, f64) {
-    let q = "select count(*) as n, median(d) as med from (select s.shot_number, avg(s.elev_lowestmode - s.geoid - a.z) as d \
-             from shots s join als a on a.classification = 2 and a.x between s.x - 3 and s.x + 3 and a.y between s.y - 3 and s.y + 3 \
+    let q = "select count(*) as n, median(d) as med from (select s.shot_number, avg(s.elev_lowestmode - s.geoid - \
+    a.z) as d \
+             from shots s join als a on a.classification = 2 and a.x between s.x - 3 and s.x + 3 and a.y between \
+             s.y - 3 and s.y + 3 \
              where s.quality_flag = 1 group by s.shot_number) t";
     let (ok, out, err) = gedisim(&["sql", "--dataset", ds.to_str().unwrap(), q]);
     assert!(ok, "{err}");

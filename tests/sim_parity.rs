@@ -234,21 +234,48 @@ fn gedirat_profile_matches_golden_files() {
                     compare(sim, w, &golden, &metrics[&fp.id], &mut t);
                 }
                 println!(
-                    "{tile:34} {variant:12} {:5}: {} waves, {} lines ({} identical as printed), max dev/peak total {:.1e} split {:.1e}; \
-                     truths {}/{} identical (max |d| ground {:.3} top {:.3} slope {:.4} cover {:.5}); rhReal {}/{} identical",
-                    w.name(), t.waves, t.bins, t.lines_identical, t.max_dev_total, t.max_dev_split,
-                    t.truths_identical, t.truths, t.max_dev_ground, t.max_dev_top, t.max_dev_slope, t.max_dev_cover,
-                    t.rh_identical, t.rh
+                    "{tile:34} {variant:12} {:5}: {} waves, {} lines ({} identical as printed), max dev/peak total \
+                    {:.1e} split {:.1e}; \
+                     truths {}/{} identical (max |d| ground {:.3} top {:.3} slope {:.4} cover {:.5}); rhReal {}/{} \
+                     identical",
+                    w.name(),
+                    t.waves,
+                    t.bins,
+                    t.lines_identical,
+                    t.max_dev_total,
+                    t.max_dev_split,
+                    t.truths_identical,
+                    t.truths,
+                    t.max_dev_ground,
+                    t.max_dev_top,
+                    t.max_dev_slope,
+                    t.max_dev_cover,
+                    t.rh_identical,
+                    t.rh
                 );
                 total.add(&t);
             }
         }
     }
     println!(
-        "PARITY SUMMARY: {} waveforms, {} bins x 3 columns ({} lines identical as printed), max |dev|/peak {:.2e} (totals) {:.2e} (canopy/ground); \
-         {} truths ({} identical as printed; max |d| ground {:.4} m, top {:.4} m, slope {:.4} deg, cover {:.5}); {} rhReal values ({} identical, max |d| {:.3} m)",
-        total.waves, total.bins, total.lines_identical, total.max_dev_total, total.max_dev_split, total.truths, total.truths_identical,
-        total.max_dev_ground, total.max_dev_top, total.max_dev_slope, total.max_dev_cover, total.rh, total.rh_identical, total.max_dev_rh
+        "PARITY SUMMARY: {} waveforms, {} bins x 3 columns ({} lines identical as printed), max |dev|/peak {:.2e} \
+        (totals) {:.2e} (canopy/ground); \
+         {} truths ({} identical as printed; max |d| ground {:.4} m, top {:.4} m, slope {:.4} deg, cover {:.5}); {} \
+         rhReal values ({} identical, max |d| {:.3} m)",
+        total.waves,
+        total.bins,
+        total.lines_identical,
+        total.max_dev_total,
+        total.max_dev_split,
+        total.truths,
+        total.truths_identical,
+        total.max_dev_ground,
+        total.max_dev_top,
+        total.max_dev_slope,
+        total.max_dev_cover,
+        total.rh,
+        total.rh_identical,
+        total.max_dev_rh
     );
     assert_eq!(total.waves, 3 * 3 * 3 * 52);
     // Measured: exact parity as printed, so assert it (stricter than the tolerances above).
@@ -340,7 +367,10 @@ fn effect_of_each_default_decision() {
             effect(&base, &default, &mut effects[8].1);
         }
     }
-    println!("| switched off | footprint-weightings | same bin grid | max |dwave|/peak | RH changed | max |dRH0..100| m | max |dRH1..99| m | max |dground| m | max |dtop| m | skip changes |");
+    println!(
+        "| switched off | footprint-weightings | same bin grid | max |dwave|/peak | RH changed | max \
+        |dRH0..100| m | max |dRH1..99| m | max |dground| m | max |dtop| m | skip changes |"
+    );
     for (name, e) in &effects {
         println!(
             "| {name} | {} | {} | {:.1e} | {} | {:.2} | {:.2} | {:.4} | {:.2} | {} |",
@@ -356,7 +386,8 @@ fn effect_of_each_default_decision() {
         );
     }
     println!(
-        "default profile: {default_waves} footprints (3 weightings each) in {default_secs:.3} s = {:.3} ms per footprint (this build, index build included)",
+        "default profile: {default_waves} footprints (3 weightings each) in {default_secs:.3} s = {:.3} ms per \
+            footprint (this build, index build included)",
         1e3 * default_secs / default_waves as f64
     );
     // Every footprint of the golden tiles is inside its tile: the default profile keeps them all.

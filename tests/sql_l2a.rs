@@ -185,7 +185,8 @@ fn bad_waveforms_give_a_reason_in_the_struct() {
     let (_tmp, ds) = session_with(waves, &noise);
     let batches = query(
         &ds,
-        "select id, gedi_l2a(wave, mean, sd, 1) as r, gedi_l2a(wave, mean, sd, 5, 100.0, 40.15)['elev_lowestmode'] as e \
+        "select id, gedi_l2a(wave, mean, sd, 1) as r, gedi_l2a(wave, mean, sd, 5, 100.0, 40.15)['elev_lowestmode'] \
+        as e \
          from waves order by id",
     )
     .unwrap();

@@ -92,7 +92,8 @@ pub enum IngestCommand {
 
 #[derive(Subcommand)]
 pub enum ExportCommand {
-    /// A table (shots or results) as GeoParquet 1.1: WKB point geometry (lon, lat; OGC:CRS84) and a bbox covering column.
+    /// A table (shots or results) as GeoParquet 1.1: WKB point geometry (lon, lat; OGC:CRS84) and a bbox covering
+    /// column.
     Geoparquet(ExportGeoArgs),
 }
 

@@ -29,7 +29,8 @@ impl Progress for Bars {
             let b = ProgressBar::new(total);
             b.set_style(
                 ProgressStyle::with_template(&format!(
-                    "{{prefix:>11}} {{elapsed_precise}} [{{bar:40}}] {{human_pos}}/{{human_len}} {} ({{per_sec}}, eta {{eta}})",
+                    "{{prefix:>11}} {{elapsed_precise}} [{{bar:40}}] {{human_pos}}/{{human_len}} {} ({{per_sec}}, \
+                        eta {{eta}})",
                     step.unit()
                 ))
                 .expect("valid template")

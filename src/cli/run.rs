@@ -161,7 +161,11 @@ pub fn print_run(r: &gedisim::ops::run::RunReport) {
         eprintln!("nothing new since the last run: no ingest, collocation or simulation; results unchanged");
     }
     let t = &r.totals;
-    println!("Filters over the {} granules of the dataset (rows = shots × 3 weightings × 7 algorithms; a row counts at the first filter it fails):", r.granules.len());
+    println!(
+        "Filters over the {} granules of the dataset (rows = shots × 3 weightings × 7 algorithms; a row counts \
+        at the first filter it fails):",
+        r.granules.len()
+    );
     println!("  {:>10}  candidate rows ({} shots)", t.candidates, t.shots);
     for f in Filter::ALL {
         let mut line = format!("− {:>10}  {}", t.removed_by(f), f.describe(&r.rules));

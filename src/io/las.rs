@@ -231,7 +231,10 @@ mod tests {
 
     #[test]
     fn epsg_of_lambert93_wkt1_and_wkt2() {
-        let wkt1 = r#"PROJCS["RGF93 v1 / Lambert-93",GEOGCS["RGF93 v1",AUTHORITY["EPSG","4171"]],PROJECTION["Lambert_Conformal_Conic_2SP"],AUTHORITY["EPSG","2154"]]"#;
+        let wkt1 = concat!(
+            r#"PROJCS["RGF93 v1 / Lambert-93",GEOGCS["RGF93 v1",AUTHORITY["EPSG","4171"]],"#,
+            r#"PROJECTION["Lambert_Conformal_Conic_2SP"],AUTHORITY["EPSG","2154"]]"#
+        );
         assert_eq!(epsg_from_wkt(wkt1), Some(2154));
         let wkt2 = r#"PROJCRS["RGF93 v1 / Lambert-93",BASEGEOGCRS["RGF93 v1",ID["EPSG",4171]],ID["EPSG",2154]]"#;
         assert_eq!(epsg_from_wkt(wkt2), Some(2154));

@@ -8,7 +8,6 @@ use std::sync::Arc;
 
 use arrow::array::{Array, AsArray, Float64Array, ListArray, RecordBatch, StringArray, UInt64Array};
 use arrow::datatypes::{Field, Float32Type, Float64Type, Schema, UInt64Type, UInt8Type};
-use serde_json::{json, Value};
 
 use crate::dataset::als::AlsTable;
 use crate::dataset::{self, tables, Dataset};
@@ -18,11 +17,11 @@ use crate::kernels::diagnose::case::{
     configs, nominal_noise_stddev, site_grid, site_of, RealAlgorithm, RealShot, SimShot, Site, Strata, FSIGMA_GRID,
     NOMINAL_WIDTH, RECOLLOCATE_SHIFT_M, RECOLLOCATE_STEP_M, SHORT_SEGMENT_SHOTS,
 };
-use crate::kernels::diagnose::gap::{GapMetrics, N_PCT};
-use crate::kernels::diagnose::rank::Trial;
+use crate::kernels::diagnose::gap::N_PCT;
+use crate::kernels::diagnose::json::{params, DiagnosisJson};
 use crate::kernels::diagnose::{self, Diagnosis, ShotCase};
 use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
-use crate::kernels::scenario::effects::{Effect, ParamValue};
+use crate::kernels::scenario::effects::ParamValue;
 use crate::kernels::sim::{self, Footprint, Weighting};
 use crate::kernels::study::classes;
 use crate::kernels::waveform::l2a::Noise;
@@ -457,7 +456,7 @@ fn simulate_cases(
 #[derive(Debug, Clone)]
 pub struct DiagnosisOutput {
     pub diagnosis: Diagnosis,
-    pub json: Value,
+    pub json: DiagnosisJson,
     pub files: Vec<PathBuf>,
     pub cases: CaseReport,
 }
@@ -549,7 +548,7 @@ pub fn diagnose_dataset(
     let d = diagnose::diagnose(cases, &names, &|step| progress.note(step));
     progress.finish();
     std::fs::create_dir_all(out).map_err(|e| Error::file(out, e))?;
-    let json = to_json(&d, &report);
+    let json = DiagnosisJson::of(&d, report.shots_read, &report.dropped);
     let mut files = write_tables(&d, out)?;
     files.extend(write_figures(&d, out)?);
     let path = out.join("diagnosis.json");
@@ -565,97 +564,6 @@ pub fn dropped_text(r: &CaseReport) -> String {
         return "none dropped".into();
     }
     r.dropped.iter().map(|(k, n)| format!("{k} ({n})")).collect::<Vec<_>>().join(", ")
-}
-
-fn param_json(v: &ParamValue) -> Value {
-    match v {
-        ParamValue::Number(x) => json!(x),
-        other => json!(other.to_string()),
-    }
-}
-
-/// The effect's parameters as a JSON object (contract names).
-pub fn params_json(e: &Effect) -> Value {
-    Value::Object(e.params().into_iter().map(|(k, v)| (k.to_string(), param_json(&v))).collect())
-}
-
-fn finite(x: f64) -> Value {
-    if x.is_finite() {
-        json!(x)
-    } else {
-        Value::Null
-    }
-}
-
-fn gap_json(m: &GapMetrics) -> Value {
-    json!({
-        "mean_abs_bias_rh1_99": finite(m.mean_abs_bias),
-        "mean_abs_bias_rh_frame": finite(m.mean_abs_bias_rh),
-        "mean_abs_bias_als_frame": finite(m.mean_abs_bias_als),
-        "systematic_gap": finite(m.systematic),
-        "msd": finite(m.msd), "sb": finite(m.sb), "sdsd": finite(m.sdsd), "lcs": finite(m.lcs),
-        "ground_bias_m": finite(m.ground_bias), "n_pairs": m.n_pairs,
-    })
-}
-
-fn trial_json(t: &Trial) -> Value {
-    let h = &t.held_out;
-    json!({
-        "name": t.effect.name(),
-        "params": params_json(&t.effect),
-        "held_out": {
-            "mean_abs_bias_rh1_99_before": finite(h.before.mean_abs_bias),
-            "mean_abs_bias_rh1_99_after": finite(h.after.mean_abs_bias),
-            "shrink": finite(h.shrink),
-            "ci95": [finite(h.ci95[0]), finite(h.ci95[1])],
-            "systematic_gap_before": finite(h.before.systematic),
-            "systematic_gap_after": finite(h.after.systematic),
-            "gain_m_ci95": [finite(h.gain_ci95[0]), finite(h.gain_ci95[1])],
-            "shrink_mean_abs_bias": finite(h.shrink_mean_abs_bias),
-            "msd_before": finite(h.before.msd), "msd_after": finite(h.after.msd),
-            "waveform_chi2_before": finite(h.profile_chi2[0]), "waveform_chi2_after": finite(h.profile_chi2[1]),
-            "waveform_shrink": h.profile_shrink().map_or(Value::Null, finite),
-            "score": finite(h.score()),
-            "before": gap_json(&h.before), "after": gap_json(&h.after),
-            "measure": if h.spread.is_some() { "excess_msd" } else { "systematic_gap" },
-            "spread": h.spread.as_ref().map_or(Value::Null, |s| json!({
-                "msd_segments_replaced": finite(s.msd[0]), "msd_shots_replaced": finite(s.msd[1]),
-                "floor_msd_segments_replaced": finite(s.floor[0]), "floor_msd_shots_replaced": finite(s.floor[1]),
-                "excess_msd_before": finite(s.excess()[0]), "excess_msd_after": finite(s.excess()[1]),
-            })),
-        },
-        "fold_params": t.fold_effects.iter().map(|e| e.as_ref().map_or(Value::Null, params_json)).collect::<Vec<_>>(),
-    })
-}
-
-fn to_json(d: &Diagnosis, r: &CaseReport) -> Value {
-    let w = &d.where_;
-    json!({
-        "baseline": {
-            "description": "study baseline: real RH of the selected algorithm as stored vs noise-free simulated RH (count, 15 ns, σf 5.5 m) from the ALS ground, per-track collocated, nominal geoid",
-            "mean_abs_bias_rh1_99": finite(w.overall.mean_abs_bias_rh),
-            "msd": finite(w.percentiles.iter().map(|p| p.sb + p.sdsd + p.lcs).sum::<f64>() / N_PCT as f64),
-            "sb": finite(w.percentiles.iter().map(|p| p.sb).sum::<f64>() / N_PCT as f64),
-            "sdsd": finite(w.percentiles.iter().map(|p| p.sdsd).sum::<f64>() / N_PCT as f64),
-            "lcs": finite(w.percentiles.iter().map(|p| p.lcs).sum::<f64>() / N_PCT as f64),
-            "mean_abs_bias_als_frame": finite(w.overall.mean_abs_bias_als),
-            "ground_bias_m": finite(w.overall.ground_bias),
-            "n_shots": d.n_shots,
-            "n_tracks": d.n_tracks,
-        },
-        "nominal_chain": gap_json(&d.nominal),
-        "effects": d.ranking.effects.iter().map(trial_json).collect::<Vec<_>>(),
-        "ladder": d.ranking.ladder.iter().map(trial_json).collect::<Vec<_>>(),
-        "unexplained": d.ranking.unexplained,
-        "where": {
-            "percentiles": w.percentiles.iter().map(|p| json!({"rh": p.k, "bias": p.bias, "bias_als_frame": p.bias_als_frame, "rmse": p.rmse, "sb": p.sb, "sdsd": p.sdsd, "lcs": p.lcs})).collect::<Vec<_>>(),
-            "strata": w.strata.iter().map(|s| json!({"kind": s.kind, "label": s.label, "n_shots": s.n_shots, "mean_abs_bias_rh1_99": finite(s.metrics.mean_abs_bias_rh), "msd": finite(s.metrics.msd), "sb": finite(s.metrics.sb), "sdsd": finite(s.metrics.sdsd), "lcs": finite(s.metrics.lcs), "ground_bias_m": finite(s.metrics.ground_bias), "share_of_squared_error": s.share_of_squared_error})).collect::<Vec<_>>(),
-            "waveform_residual": {"height_m": w.waveform.height, "real": w.waveform.real, "simulated": w.waveform.simulated, "residual": w.waveform.residual, "n_shots": w.waveform.n_shots},
-        },
-        "shots": {"read": r.shots_read, "used": d.n_shots, "re_placed_per_hypothesis": d.n_replaceable, "pairs_ground_mismatch": d.mismatched, "dropped": r.dropped.iter().map(|(k, n)| json!({"reason": k, "n": n})).collect::<Vec<_>>()},
-        "settings": {"min_shrink_lower": crate::kernels::diagnose::rank::MIN_SHRINK_LOWER, "min_gain_m": crate::kernels::diagnose::rank::MIN_GAIN_M, "bootstrap": crate::kernels::diagnose::rank::BOOTSTRAP, "folds": 2, "split": "by track (granule/beam)",
-            "placement": {"short_segment_shots": SHORT_SEGMENT_SHOTS, "site_grid_step_m": crate::kernels::diagnose::case::SITE_STEP_M, "site_grid_half_width_m": f64::from(crate::kernels::diagnose::case::SITE_HALF) * crate::kernels::diagnose::case::SITE_STEP_M, "recollocation_shift_m": RECOLLOCATE_SHIFT_M, "recollocation_step_m": RECOLLOCATE_STEP_M}},
-    })
 }
 
 fn batch(fields: Vec<(&str, Arc<dyn Array>)>) -> Result<RecordBatch> {
@@ -725,7 +633,7 @@ fn write_tables(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
             &batch(vec![
                 ("step", floats((0..trials.len()).map(|i| i as f64 + 1.0))),
                 ("effect", texts(trials.iter().map(|t| t.effect.name()))),
-                ("params", texts(trials.iter().map(|t| params_json(&t.effect).to_string()))),
+                ("params", texts(trials.iter().map(|t| serde_json::to_string(&params(&t.effect)).unwrap_or_default()))),
                 ("mean_abs_bias_before", floats(trials.iter().map(|t| t.held_out.before.mean_abs_bias))),
                 ("mean_abs_bias_after", floats(trials.iter().map(|t| t.held_out.after.mean_abs_bias))),
                 ("shrink", floats(trials.iter().map(|t| t.held_out.shrink))),
@@ -837,15 +745,19 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
     if d.ranking.unexplained {
         let best = d.ranking.effects.first();
         lines.push(match best {
-            Some(t) => format!(
-                "Which: unexplained — the best candidate, {}, shrinks the held-out {} by {:.0} % (95 % CI {:.0} to {:.0} %), not enough to name it{}.",
+            Some(t) => {
+                format!(
+                "Which: unexplained — the best candidate, {}, shrinks the held-out {} by {:.0} % (95 % CI {:.0} to \
+                    {:.0} %), not enough to name it{}.",
                 t.effect.name(),
                 if t.held_out.spread.is_some() { "excess spread" } else { "gap" },
                 100.0 * t.held_out.shrink,
                 100.0 * t.held_out.ci95[0],
                 100.0 * t.held_out.ci95[1],
-                if t.held_out.spread.is_some() { format!(" (or its per-shot offsets are under {} m)", crate::kernels::diagnose::rank::MIN_SHOT_SIGMA_M) } else { String::new() }
-            ),
+                if t.held_out.spread.is_some() { format!(" (or its per-shot offsets are under {} m)",
+                    crate::kernels::diagnose::rank::MIN_SHOT_SIGMA_M) } else { String::new() }
+            )
+            }
             None => "Which: unexplained — no effect could be fitted.".into(),
         });
     } else {

@@ -177,7 +177,8 @@ pub fn run_study(opts: &RunOptions, progress: &dyn Progress) -> Result<RunReport
     let foreign = ds.root().join(tables::SIM).join("shots.parquet");
     if foreign.exists() {
         report.warnings.push(format!(
-            "{}: written by `gedisim simulate --dataset`, it repeats shots that run simulates into sim/<granule>.parquet; remove it so that each shot is in sim/ once",
+            "{}: written by `gedisim simulate --dataset`, it repeats shots that run simulates into \
+                sim/<granule>.parquet; remove it so that each shot is in sim/ once",
             foreign.display()
         ));
     }

@@ -48,7 +48,9 @@ const ARGS: [&str; 6] =
 static DOCUMENTATION: LazyLock<Documentation> = LazyLock::new(|| {
     Documentation::builder(
         DOC_SECTION,
-        "GEDI L2A (algorithm 1..6) of one waveform, as a struct {toploc, botloc, zcross, elev_lowestmode, rh, sensitivity, energy_total, num_modes, no_result_reason}: the same kernel and values as `gedisim l2a` (docs/l2a.md). rh[k+1] is RH k (m above the ground found).",
+        "GEDI L2A (algorithm 1..6) of one waveform, as a struct {toploc, botloc, zcross, elev_lowestmode, rh, \
+            sensitivity, energy_total, num_modes, no_result_reason}: the same kernel and values as `gedisim l2a` \
+            (docs/l2a.md). rh[k+1] is RH k (m above the ground found).",
         "gedi_l2a(rxwaveform, noise_mean, noise_stddev, algorithm [, elevation_bin0, elevation_lastbin])",
     )
     .with_argument("rxwaveform", "received waveform (list of numbers, DN, 1 ns samples)")
@@ -57,7 +59,10 @@ static DOCUMENTATION: LazyLock<Documentation> = LazyLock::new(|| {
     .with_argument("algorithm", "GEDI L2A algorithm setting, 1..6")
     .with_argument("elevation_bin0", "optional: elevation of the first sample (m); without it elev_lowestmode is null")
     .with_argument("elevation_lastbin", "optional: elevation of the last sample (m)")
-    .with_sql_example("select shot_number, gedi_l2a(rxwaveform, noise_mean_corrected, noise_stddev_corrected, 1).rh from shots limit 3")
+    .with_sql_example(
+        "select shot_number, gedi_l2a(rxwaveform, noise_mean_corrected, noise_stddev_corrected, 1).rh \
+        from shots limit 3",
+    )
     .build()
 });
 

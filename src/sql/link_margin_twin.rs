@@ -21,7 +21,8 @@ pub static LINK_MARGIN_TWIN: TwinFunction = TwinFunction {
 fn documentation() -> Documentation {
     Documentation::builder(
         DOC_SECTION,
-        "A noisy waveform with gediMetric's link-margin noise model, from a noise-free simulated one, as the same struct as gedi_noise_twin.",
+        "A noisy waveform with gediMetric's link-margin noise model, from a noise-free simulated one, as the same \
+            struct as gedi_noise_twin.",
         "gedi_link_margin_twin(wave, z0, dz, link_margin_db, cover, seed [, true_cover])",
     )
     .with_argument("wave", "simulated waveform, list of numbers; sample k at elevation z0 − k·dz")

@@ -25,8 +25,11 @@ pub static NOISE_TWIN: TwinFunction = TwinFunction {
 fn documentation() -> Documentation {
     Documentation::builder(
         DOC_SECTION,
-        "A GEDI-like received waveform (the noise twin of one real shot) from a noise-free simulated one, as a struct {rxwaveform, elevation_bin0, elevation_lastbin, noise_mean, noise_stddev, no_result_reason} that gedi_l2a can process.",
-        "gedi_noise_twin(wave, z0, dz, energy_total, noise_mean, noise_stddev, sample_count, start, seed [, quantum [, noise_correlation, noise_ratio]])",
+        "A GEDI-like received waveform (the noise twin of one real shot) from a noise-free simulated one, as a \
+            struct {rxwaveform, elevation_bin0, elevation_lastbin, noise_mean, noise_stddev, no_result_reason} that \
+            gedi_l2a can process.",
+        "gedi_noise_twin(wave, z0, dz, energy_total, noise_mean, noise_stddev, sample_count, start, seed [, quantum \
+            [, noise_correlation, noise_ratio]])",
     )
     .with_argument("wave", "simulated waveform, list of numbers; sample k at elevation z0 − k·dz")
     .with_argument("z0", "elevation of sample 0 (m)")

@@ -42,14 +42,18 @@ impl Default for GediRh {
 static DOCUMENTATION: LazyLock<Documentation> = LazyLock::new(|| {
     Documentation::builder(
         DOC_SECTION,
-        "RH0…RH100 (m above `ground`) of a simulated waveform, as gediMetric computes them: a list of 101 values, element k+1 is RH k.",
+        "RH0…RH100 (m above `ground`) of a simulated waveform, as gediMetric computes them: a list of 101 values, \
+            element k+1 is RH k.",
         "gedi_rh(wave, z0, dz, ground)",
     )
     .with_argument("wave", "waveform (list<float32>); sample k at elevation z0 − k·dz")
     .with_argument("z0", "elevation of sample 0 (m)")
     .with_argument("dz", "sample spacing (m)")
     .with_argument("ground", "ground elevation the heights are measured from (m)")
-    .with_sql_example("select id, gedi_rh(wave, z0, dz, als_ground)[99] as rh98 from sim where weighting = 'count' limit 3")
+    .with_sql_example(
+        "select id, gedi_rh(wave, z0, dz, als_ground)[99] as rh98 from sim where weighting = 'count' \
+        limit 3",
+    )
     .build()
 });
 

@@ -152,7 +152,9 @@ impl CollocateConfig {
             || q.divide_by_taps
         {
             return Err(Error::Usage(
-                "collocation model: density normalisation, cleaning, pulse-before-binning, batch grids and tap division are not supported".into(),
+                "collocation model: density normalisation, cleaning, pulse-before-binning, batch grids and tap \
+                    division are not supported"
+                    .into(),
             ));
         }
         if !(m.fsigma > 0.0) || !(m.res > 0.0) || !(self.vertical_half_window >= 0.0) || !(self.tolerance > 0.0) {

@@ -16,6 +16,7 @@ pub mod case;
 pub mod chain;
 pub mod fit;
 pub mod gap;
+pub mod json;
 pub mod locate;
 pub mod profile;
 pub mod rank;

@@ -63,7 +63,8 @@ impl Projector {
     pub fn new(epsg: u32) -> Result<Self> {
         let def = proj_string(epsg).ok_or_else(|| {
             Error::Usage(format!(
-                "EPSG:{epsg} is not a supported projected CRS (supported: 2154, 3942-3950, 3035, 3857, 25828-25838, 32601-32660, 32701-32760)"
+                "EPSG:{epsg} is not a supported projected CRS (supported: 2154, 3942-3950, 3035, 3857, 25828-25838, \
+                    32601-32660, 32701-32760)"
             ))
         })?;
         let dst = Proj::from_proj_string(&def).map_err(|e| Error::Usage(format!("EPSG:{epsg}: {e}")))?;

@@ -152,7 +152,11 @@ impl Headline {
     /// the shares of SB, SDSD and LCS in it (%).
     pub fn msd_table(&self) -> String {
         let mut s = String::new();
-        let _ = writeln!(s, "MSD of simulated vs real RH1–RH99, all sensitivities: MSD m² (SB / SDSD / LCS % of MSD)");
+        let _ = writeln!(
+            s,
+            "MSD of simulated vs real RH1–RH99, all sensitivities: MSD m² (SB / SDSD / LCS % of \
+            MSD)"
+        );
         let weightings = ["count", "frac", "int"];
         let mut line = format!("{:<10} {:>6}", "algorithm", "n");
         for w in weightings {

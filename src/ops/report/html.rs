@@ -103,8 +103,9 @@ pub fn page(
     let _ = writeln!(
         s,
         "<p>Simulated GEDI RH against real GEDI RH aligned to the ALS ground \
-         (<code>RH_aligned = RH_GEDI + (z_ground,GEDI − z_ALS)</code>). Bias is simulated − real unless said otherwise; \
-         ground detection is GEDI ground − ALS ground. MSD split after Kobayashi &amp; Salam (2000), population moments. \
+         (<code>RH_aligned = RH_GEDI + (z_ground,GEDI − z_ALS)</code>). \
+         Bias is simulated − real unless said otherwise; ground detection is GEDI ground − ALS ground. \
+         MSD split after Kobayashi &amp; Salam (2000), population moments. \
          Every table is also in this folder as Parquet and CSV; the SQL is in <code>queries/</code>.</p>"
     );
     // Figures first, then the tables in report order.
@@ -116,7 +117,8 @@ pub fn page(
         let bytes = std::fs::read(&png).map_err(|e| Error::file(&png, format!("cannot read: {e}")))?;
         let _ = writeln!(
             s,
-            "<figure><img alt=\"{n}\" src=\"data:image/png;base64,{}\">\n<figcaption>{} (<a href=\"{n}.svg\">SVG</a>, <a href=\"{n}.png\">PNG</a>)</figcaption></figure>",
+            "<figure><img alt=\"{n}\" src=\"data:image/png;base64,{}\">\n<figcaption>{} (<a \
+                href=\"{n}.svg\">SVG</a>, <a href=\"{n}.png\">PNG</a>)</figcaption></figure>",
             base64(&bytes),
             escape(caption),
             n = escape(name)
@@ -129,7 +131,8 @@ pub fn page(
     for t in ran {
         let _ = writeln!(
             s,
-            "<h3 id=\"{n}\">{}</h3>\n<p class=\"note\"><a href=\"{n}.csv\">{n}.csv</a> · <a href=\"{n}.parquet\">{n}.parquet</a> · {} rows</p>",
+            "<h3 id=\"{n}\">{}</h3>\n<p class=\"note\"><a href=\"{n}.csv\">{n}.csv</a> · <a \
+                href=\"{n}.parquet\">{n}.parquet</a> · {} rows</p>",
             escape(t.query.title),
             t.rows(),
             n = escape(t.query.name)
@@ -152,7 +155,12 @@ pub fn page(
         s.push_str("<h2>GeoParquet hand-off</h2>\n<ul>\n");
         for p in &summary.geoparquet {
             let n = p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-            let _ = writeln!(s, "<li><a href=\"{n}\">{n}</a>: GeoParquet 1.1, WKB points (lon, lat, OGC:CRS84), bbox covering column</li>", n = escape(&n));
+            let _ = writeln!(
+                s,
+                "<li><a href=\"{n}\">{n}</a>: GeoParquet 1.1, WKB points (lon, lat, OGC:CRS84), \
+                bbox covering column</li>",
+                n = escape(&n)
+            );
         }
         for n in geo_notes {
             let _ = writeln!(s, "<li class=\"note\">{}</li>", escape(n));

@@ -476,7 +476,9 @@ pub fn figure_data(ran: &[TableOutput]) -> Result<FigureData> {
         }
         if panels.is_empty() {
             fd.notes.push(
-                "phenology: no shot with a known phenology (V1 granules carry no leaf_off_flag: every shot is `unknown`)".into(),
+                "phenology: no shot with a known phenology (V1 granules carry no leaf_off_flag: every shot is \
+                    `unknown`)"
+                    .into(),
             );
         } else {
             fd.drawable.push(("phenology", AnyFigure::Phenology(figures::PhenologyBands { panels })));

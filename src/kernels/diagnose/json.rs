@@ -1,0 +1,347 @@
+//! `diagnosis.json` (docs/diagnosis.md): one set of serde types shared by its writer
+//! (`ops::diagnose`) and its readers (the benchmarks). Non-finite numbers are written as null.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use super::case::{RECOLLOCATE_SHIFT_M, RECOLLOCATE_STEP_M, SHORT_SEGMENT_SHOTS, SITE_HALF, SITE_STEP_M};
+use super::gap::{GapMetrics, N_PCT};
+use super::rank::{Comparison, Trial, BOOTSTRAP, MIN_GAIN_M, MIN_SHRINK_LOWER};
+use super::Diagnosis;
+use crate::kernels::scenario::effects::{Effect, ParamValue};
+
+/// An effect's parameters by contract name.
+pub type Params = BTreeMap<String, ParamValue>;
+
+/// The whole file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DiagnosisJson {
+    pub baseline: Baseline,
+    /// The nominal chain's held-out gap (every effect's "before").
+    pub nominal_chain: Gap,
+    /// Every effect tried, best first.
+    pub effects: Vec<TrialJson>,
+    /// The greedy ladder of combined causes.
+    pub ladder: Vec<TrialJson>,
+    pub unexplained: bool,
+    #[serde(rename = "where")]
+    pub where_: WhereJson,
+    pub shots: ShotsJson,
+    pub settings: Settings,
+}
+
+/// The study's baseline gap.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Baseline {
+    pub description: String,
+    pub mean_abs_bias_rh1_99: Option<f64>,
+    pub msd: Option<f64>,
+    pub sb: Option<f64>,
+    pub sdsd: Option<f64>,
+    pub lcs: Option<f64>,
+    pub mean_abs_bias_als_frame: Option<f64>,
+    pub ground_bias_m: Option<f64>,
+    pub n_shots: usize,
+    pub n_tracks: usize,
+}
+
+/// The gap of a set of shots ([`GapMetrics`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Gap {
+    pub mean_abs_bias_rh1_99: Option<f64>,
+    pub mean_abs_bias_rh_frame: Option<f64>,
+    pub mean_abs_bias_als_frame: Option<f64>,
+    pub systematic_gap: Option<f64>,
+    pub msd: Option<f64>,
+    pub sb: Option<f64>,
+    pub sdsd: Option<f64>,
+    pub lcs: Option<f64>,
+    pub ground_bias_m: Option<f64>,
+    pub n_pairs: usize,
+}
+
+/// One effect tried: its fitted parameters and its held-out comparison.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrialJson {
+    pub name: String,
+    pub params: Params,
+    pub held_out: HeldOut,
+    /// Parameters fitted on each fold's calibration set.
+    pub fold_params: Vec<Option<Params>>,
+}
+
+/// The held-out comparison ([`Comparison`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HeldOut {
+    pub mean_abs_bias_rh1_99_before: Option<f64>,
+    pub mean_abs_bias_rh1_99_after: Option<f64>,
+    pub shrink: Option<f64>,
+    pub ci95: [Option<f64>; 2],
+    pub systematic_gap_before: Option<f64>,
+    pub systematic_gap_after: Option<f64>,
+    pub gain_m_ci95: [Option<f64>; 2],
+    pub shrink_mean_abs_bias: Option<f64>,
+    pub msd_before: Option<f64>,
+    pub msd_after: Option<f64>,
+    pub waveform_chi2_before: Option<f64>,
+    pub waveform_chi2_after: Option<f64>,
+    pub waveform_shrink: Option<f64>,
+    pub score: Option<f64>,
+    pub before: Gap,
+    pub after: Gap,
+    /// `systematic_gap`, or `excess_msd` for an effect judged on spread.
+    pub measure: String,
+    pub spread: Option<SpreadJson>,
+}
+
+/// The spread gap of `geolocation` (m²).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SpreadJson {
+    pub msd_segments_replaced: Option<f64>,
+    pub msd_shots_replaced: Option<f64>,
+    pub floor_msd_segments_replaced: Option<f64>,
+    pub floor_msd_shots_replaced: Option<f64>,
+    pub excess_msd_before: Option<f64>,
+    pub excess_msd_after: Option<f64>,
+}
+
+/// Where the gap lies.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WhereJson {
+    pub percentiles: Vec<PercentileJson>,
+    pub strata: Vec<StratumJson>,
+    pub waveform_residual: WaveformResidualJson,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PercentileJson {
+    pub rh: usize,
+    pub bias: Option<f64>,
+    pub bias_als_frame: Option<f64>,
+    pub rmse: Option<f64>,
+    pub sb: Option<f64>,
+    pub sdsd: Option<f64>,
+    pub lcs: Option<f64>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StratumJson {
+    pub kind: String,
+    pub label: String,
+    pub n_shots: usize,
+    pub mean_abs_bias_rh1_99: Option<f64>,
+    pub msd: Option<f64>,
+    pub sb: Option<f64>,
+    pub sdsd: Option<f64>,
+    pub lcs: Option<f64>,
+    pub ground_bias_m: Option<f64>,
+    pub share_of_squared_error: Option<f64>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WaveformResidualJson {
+    pub height_m: Vec<Option<f64>>,
+    pub real: Vec<Option<f64>>,
+    pub simulated: Vec<Option<f64>>,
+    pub residual: Vec<Option<f64>>,
+    pub n_shots: usize,
+}
+
+/// The shots read, used and dropped.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ShotsJson {
+    pub read: usize,
+    pub used: usize,
+    pub re_placed_per_hypothesis: usize,
+    pub pairs_ground_mismatch: usize,
+    pub dropped: Vec<DroppedJson>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DroppedJson {
+    pub reason: String,
+    pub n: usize,
+}
+
+/// The decision rules and the placement model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Settings {
+    pub min_shrink_lower: f64,
+    pub min_gain_m: f64,
+    pub bootstrap: usize,
+    pub folds: usize,
+    pub split: String,
+    pub placement: Placement,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Placement {
+    pub short_segment_shots: usize,
+    pub site_grid_step_m: f64,
+    pub site_grid_half_width_m: f64,
+    pub recollocation_shift_m: f64,
+    pub recollocation_step_m: f64,
+}
+
+fn finite(x: f64) -> Option<f64> {
+    x.is_finite().then_some(x)
+}
+
+fn finite_all(v: &[f64]) -> Vec<Option<f64>> {
+    v.iter().map(|&x| finite(x)).collect()
+}
+
+/// An effect's parameters by contract name.
+pub fn params(e: &Effect) -> Params {
+    e.params().into_iter().map(|(k, v)| (k.to_string(), v)).collect()
+}
+
+impl Gap {
+    pub fn of(m: &GapMetrics) -> Gap {
+        Gap {
+            mean_abs_bias_rh1_99: finite(m.mean_abs_bias),
+            mean_abs_bias_rh_frame: finite(m.mean_abs_bias_rh),
+            mean_abs_bias_als_frame: finite(m.mean_abs_bias_als),
+            systematic_gap: finite(m.systematic),
+            msd: finite(m.msd),
+            sb: finite(m.sb),
+            sdsd: finite(m.sdsd),
+            lcs: finite(m.lcs),
+            ground_bias_m: finite(m.ground_bias),
+            n_pairs: m.n_pairs,
+        }
+    }
+}
+
+impl HeldOut {
+    pub fn of(h: &Comparison) -> HeldOut {
+        HeldOut {
+            mean_abs_bias_rh1_99_before: finite(h.before.mean_abs_bias),
+            mean_abs_bias_rh1_99_after: finite(h.after.mean_abs_bias),
+            shrink: finite(h.shrink),
+            ci95: [finite(h.ci95[0]), finite(h.ci95[1])],
+            systematic_gap_before: finite(h.before.systematic),
+            systematic_gap_after: finite(h.after.systematic),
+            gain_m_ci95: [finite(h.gain_ci95[0]), finite(h.gain_ci95[1])],
+            shrink_mean_abs_bias: finite(h.shrink_mean_abs_bias),
+            msd_before: finite(h.before.msd),
+            msd_after: finite(h.after.msd),
+            waveform_chi2_before: finite(h.profile_chi2[0]),
+            waveform_chi2_after: finite(h.profile_chi2[1]),
+            waveform_shrink: h.profile_shrink().and_then(finite),
+            score: finite(h.score()),
+            before: Gap::of(&h.before),
+            after: Gap::of(&h.after),
+            measure: if h.spread.is_some() { "excess_msd" } else { "systematic_gap" }.to_string(),
+            spread: h.spread.as_ref().map(|s| SpreadJson {
+                msd_segments_replaced: finite(s.msd[0]),
+                msd_shots_replaced: finite(s.msd[1]),
+                floor_msd_segments_replaced: finite(s.floor[0]),
+                floor_msd_shots_replaced: finite(s.floor[1]),
+                excess_msd_before: finite(s.excess()[0]),
+                excess_msd_after: finite(s.excess()[1]),
+            }),
+        }
+    }
+}
+
+impl TrialJson {
+    pub fn of(t: &Trial) -> TrialJson {
+        TrialJson {
+            name: t.effect.name().to_string(),
+            params: params(&t.effect),
+            held_out: HeldOut::of(&t.held_out),
+            fold_params: t.fold_effects.iter().map(|e| e.as_ref().map(params)).collect(),
+        }
+    }
+}
+
+impl DiagnosisJson {
+    /// The file of diagnosis `d` of `shots_read` shots, `dropped` (reason, count) before it.
+    pub fn of(d: &Diagnosis, shots_read: usize, dropped: &[(String, usize)]) -> DiagnosisJson {
+        let w = &d.where_;
+        let mean = |f: fn(&super::locate::PercentileGap) -> f64| {
+            finite(w.percentiles.iter().map(f).sum::<f64>() / N_PCT as f64)
+        };
+        DiagnosisJson {
+            baseline: Baseline {
+                description: "study baseline: real RH of the selected algorithm as stored vs noise-free simulated RH \
+                              (count, 15 ns, σf 5.5 m) from the ALS ground, per-beam collocated, nominal geoid"
+                    .to_string(),
+                mean_abs_bias_rh1_99: finite(w.overall.mean_abs_bias_rh),
+                msd: mean(|p| p.sb + p.sdsd + p.lcs),
+                sb: mean(|p| p.sb),
+                sdsd: mean(|p| p.sdsd),
+                lcs: mean(|p| p.lcs),
+                mean_abs_bias_als_frame: finite(w.overall.mean_abs_bias_als),
+                ground_bias_m: finite(w.overall.ground_bias),
+                n_shots: d.n_shots,
+                n_tracks: d.n_tracks,
+            },
+            nominal_chain: Gap::of(&d.nominal),
+            effects: d.ranking.effects.iter().map(TrialJson::of).collect(),
+            ladder: d.ranking.ladder.iter().map(TrialJson::of).collect(),
+            unexplained: d.ranking.unexplained,
+            where_: WhereJson {
+                percentiles: w
+                    .percentiles
+                    .iter()
+                    .map(|p| PercentileJson {
+                        rh: p.k,
+                        bias: finite(p.bias),
+                        bias_als_frame: finite(p.bias_als_frame),
+                        rmse: finite(p.rmse),
+                        sb: finite(p.sb),
+                        sdsd: finite(p.sdsd),
+                        lcs: finite(p.lcs),
+                    })
+                    .collect(),
+                strata: w
+                    .strata
+                    .iter()
+                    .map(|s| StratumJson {
+                        kind: s.kind.clone(),
+                        label: s.label.clone(),
+                        n_shots: s.n_shots,
+                        mean_abs_bias_rh1_99: finite(s.metrics.mean_abs_bias_rh),
+                        msd: finite(s.metrics.msd),
+                        sb: finite(s.metrics.sb),
+                        sdsd: finite(s.metrics.sdsd),
+                        lcs: finite(s.metrics.lcs),
+                        ground_bias_m: finite(s.metrics.ground_bias),
+                        share_of_squared_error: finite(s.share_of_squared_error),
+                    })
+                    .collect(),
+                waveform_residual: WaveformResidualJson {
+                    height_m: finite_all(&w.waveform.height),
+                    real: finite_all(&w.waveform.real),
+                    simulated: finite_all(&w.waveform.simulated),
+                    residual: finite_all(&w.waveform.residual),
+                    n_shots: w.waveform.n_shots,
+                },
+            },
+            shots: ShotsJson {
+                read: shots_read,
+                used: d.n_shots,
+                re_placed_per_hypothesis: d.n_replaceable,
+                pairs_ground_mismatch: d.mismatched,
+                dropped: dropped.iter().map(|(reason, n)| DroppedJson { reason: reason.clone(), n: *n }).collect(),
+            },
+            settings: Settings {
+                min_shrink_lower: MIN_SHRINK_LOWER,
+                min_gain_m: MIN_GAIN_M,
+                bootstrap: BOOTSTRAP,
+                folds: 2,
+                split: "by track (one beam of one granule)".to_string(),
+                placement: Placement {
+                    short_segment_shots: SHORT_SEGMENT_SHOTS,
+                    site_grid_step_m: SITE_STEP_M,
+                    site_grid_half_width_m: f64::from(SITE_HALF) * SITE_STEP_M,
+                    recollocation_shift_m: RECOLLOCATE_SHIFT_M,
+                    recollocation_step_m: RECOLLOCATE_STEP_M,
+                },
+            },
+        }
+    }
+}
