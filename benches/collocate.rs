@@ -53,7 +53,7 @@ fn main() {
         energy: 6000.0,
     };
     let plant = Plant { shift: (4.0, -3.0), datum: 47.5, l1b_geoid: 47.3, noise_sigma: 2.5, seed: 11 };
-    let l1b: PathBuf = tmp.path().join(gedisim::io::granule::v2_file_name("01_B", "2019108080338", 1964, 2, 5337));
+    let l1b: PathBuf = tmp.path().join(gedisim::kernels::gedi::v2_file_name("01_B", "2019108080338", 1964, 2, 5337));
     write_planted_l1b(&ds, &[beam], &plant, &l1b);
     run(&[
         "ingest",

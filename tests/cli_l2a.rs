@@ -85,7 +85,8 @@ fn l2a_cli_rows_agree_with_nasa() {
 /// `no_result: <reason>` status and null values, never a failed run or a panic.
 #[test]
 fn l2a_cli_reports_bad_waveforms_as_no_result_rows() {
-    use gedisim::io::granule::{v2_file_name, write_l1b_v2, Beam, GranuleMeta};
+    use gedisim::io::granule::{write_l1b_v2, Beam, GranuleMeta};
+    use gedisim::kernels::gedi::v2_file_name;
     use gedisim::kernels::gedi::L1bShot;
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join(v2_file_name("01_B", "2023100120000", 1, 1, 1));

@@ -140,7 +140,7 @@ fn planted_dataset(geoid_offset: Option<&str>) -> tempfile::TempDir {
         std::fs::copy(&f, als.join(f.file_name().unwrap())).unwrap();
     }
     let ds = Dataset::open(tmp.path()).unwrap();
-    let l1b = tmp.path().join(gedisim::io::granule::v2_file_name("01_B", "2019108080338", 1964, 2, 5337));
+    let l1b = tmp.path().join(gedisim::kernels::gedi::v2_file_name("01_B", "2019108080338", 1964, 2, 5337));
     write_planted_l1b(&ds, &beams(), &PLANT, &l1b);
     let mut args = vec!["ingest", "gedi", "--l1b", l1b.to_str().unwrap(), "--out", tmp.path().to_str().unwrap()];
     if let Some(n) = geoid_offset {
@@ -408,7 +408,7 @@ fn shots_off_the_als_and_short_runs_are_reported_not_solved() {
         shots: 10,
         energy: 6000.0,
     };
-    let l1b = tmp.path().join(gedisim::io::granule::v2_file_name("01_B", "2019108080338", 1964, 2, 5337));
+    let l1b = tmp.path().join(gedisim::kernels::gedi::v2_file_name("01_B", "2019108080338", 1964, 2, 5337));
     write_planted_l1b(&ds, &[beam], &PLANT, &l1b);
     let dir = tmp.path().to_str().unwrap();
     let (ok, _, err) = gedisim(&["ingest", "gedi", "--l1b", l1b.to_str().unwrap(), "--out", dir]);

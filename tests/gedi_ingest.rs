@@ -7,10 +7,12 @@ use std::slice::from_ref;
 use arrow::array::{Array, AsArray, RecordBatch};
 use arrow::compute::concat_batches;
 use arrow::datatypes::{DataType, Float64Type, Int16Type, Int8Type, UInt32Type, UInt64Type, UInt8Type};
-use gedisim::io::granule::{v2_file_name, write_l1b_v2, write_l2a_v2, write_values, Beam, GranuleMeta, Values};
+use gedisim::dataset::shots::shots_schema;
+use gedisim::io::granule::{write_l1b_v2, write_l2a_v2, write_values, Beam, GranuleMeta, Values};
+use gedisim::kernels::gedi::v2_file_name;
 use gedisim::kernels::gedi::{L1bShot, L2aShot};
 use gedisim::kernels::geo::projection::Projector;
-use gedisim::ops::ingest_gedi::{granule_key, ingest_gedi, read_gedi, shots_schema, GediOptions, IngestReport};
+use gedisim::ops::ingest_gedi::{granule_key, ingest_gedi, read_gedi, GediOptions, IngestReport};
 use hdf5::types::{IntSize, TypeDescriptor};
 
 // ---------------------------------------------------------------------------------------------

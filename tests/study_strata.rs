@@ -9,8 +9,9 @@ use std::sync::Arc;
 use arrow::array::{AsArray, Float64Array, RecordBatch, UInt64Array};
 use arrow::datatypes::{DataType, Field, Schema, UInt16Type, UInt64Type};
 use gedisim::dataset::{write_parquet, Dataset};
+use gedisim::io::landcover::{LandCoverRaster, PixelSample};
 use gedisim::kernels::geo::projection::Projector;
-use gedisim::ops::ingest_strata::{ingest_strata, PixelSample};
+use gedisim::ops::ingest_strata::ingest_strata;
 use gedisim::ops::progress::NoProgress;
 use tiff::encoder::{colortype, TiffEncoder};
 use tiff::tags::Tag;
@@ -377,7 +378,7 @@ fn tiled_raster_including_edge_tiles() {
         assert_eq!(got[k].1, expected, "shot {k} at {px:?}");
     }
     // Every pixel centre, including those of the partial right-hand and bottom tiles.
-    let mut raster = gedisim::ops::ingest_strata::LandCoverRaster::open(&tif).unwrap();
+    let mut raster = LandCoverRaster::open(&tif).unwrap();
     let centres: Vec<(f64, f64)> = (0..30)
         .flat_map(|r| (0..40).map(move |c| (x0 + 100.0 * c as f64 + 50.0, y0 - 100.0 * r as f64 - 50.0)))
         .collect();

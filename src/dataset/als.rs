@@ -113,11 +113,8 @@ pub fn dataset_epsg(dataset: &Dataset) -> Result<Option<u32>> {
     }
     let files = dataset::table_files(&tiles_dir).map_err(|e| Error::file(&tiles_dir, e))?;
     let Some(first) = files.first() else { return Ok(None) };
-    let file = File::open(first).map_err(|e| Error::file(first, e))?;
-    let reader =
-        parquet::file::serialized_reader::SerializedFileReader::new(file).map_err(|e| Error::table(first, e))?;
-    use parquet::file::reader::FileReader;
-    let kv = reader.metadata().file_metadata().key_value_metadata().cloned().unwrap_or_default();
+    let builder = super::read::open(first)?;
+    let kv = builder.metadata().file_metadata().key_value_metadata().cloned().unwrap_or_default();
     Ok(kv.iter().find(|k| k.key == meta::EPSG).and_then(|k| k.value.as_deref()?.parse().ok()))
 }
 
@@ -314,14 +311,14 @@ impl AlsTable {
                 continue;
             }
             stats.row_groups_read += wanted.len();
-            let file = File::open(&f.path).map_err(|e| Error::file(&f.path, e))?;
-            let reader = ParquetRecordBatchReaderBuilder::try_new(file)
-                .and_then(|b| {
-                    // The point attributes only: `tile` and `cell` are constant per row group.
-                    let columns = POINT_COLUMNS.iter().copied();
-                    let mask = parquet::arrow::ProjectionMask::columns(b.parquet_schema(), columns);
-                    b.with_row_groups(wanted).with_projection(mask).with_batch_size(1 << 16).build()
-                })
+            let b = super::read::open(&f.path)?;
+            // The point attributes only: `tile` and `cell` are constant per row group.
+            let mask = parquet::arrow::ProjectionMask::columns(b.parquet_schema(), POINT_COLUMNS.iter().copied());
+            let reader = b
+                .with_row_groups(wanted)
+                .with_projection(mask)
+                .with_batch_size(1 << 16)
+                .build()
                 .map_err(|e| Error::table(&f.path, e))?;
             for batch in reader {
                 let batch = batch.map_err(|e| Error::table(&f.path, e))?;

@@ -11,9 +11,11 @@ pub mod als;
 pub mod blocks;
 pub mod l2a;
 pub mod offsets;
+pub mod read;
 pub mod results;
 pub mod shots;
 pub mod sim;
+pub mod strata;
 
 use std::collections::HashMap;
 use std::fs::File;

@@ -6,10 +6,10 @@ use std::path::Path;
 use std::sync::Arc;
 
 use arrow::array::{ArrayRef, AsArray, Float64Array, ListBuilder, StringArray, UInt32Array, UInt64Builder};
-use arrow::datatypes::{DataType, Field, Float64Type, Schema, SchemaRef, UInt64Type};
+use arrow::datatypes::{DataType, Field, Schema, SchemaRef, UInt64Type};
 use arrow::record_batch::RecordBatch;
 
-use crate::dataset::{self, tables, Dataset};
+use crate::dataset::{self, read, tables, Dataset};
 use crate::error::{Error, Result};
 
 /// One solved segment.
@@ -125,46 +125,22 @@ pub fn read_r_after(ds: &Dataset) -> Result<HashMap<String, f64>> {
         return Ok(out);
     }
     for path in dataset::table_files(&dir).map_err(|e| Error::file(&dir, e))? {
-        let file = std::fs::File::open(&path).map_err(|e| Error::file(&path, e))?;
-        let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-            .map_err(|e| Error::table(&path, e))?;
-        let mask = parquet::arrow::ProjectionMask::columns(builder.parquet_schema(), ["segment_id", "r_after"]);
-        for b in builder.with_projection(mask).build().map_err(|e| Error::table(&path, e))? {
-            let b = b.map_err(|e| Error::table(&path, e))?;
-            let ids = b.column_by_name("segment_id").and_then(|c| c.as_string_opt::<i32>().cloned());
-            let ids = ids.ok_or_else(|| Error::field(&path, "segment_id", "missing or not a string"))?;
-            let r = b.column_by_name("r_after").and_then(|c| c.as_primitive_opt::<Float64Type>().cloned());
-            let r = r.ok_or_else(|| Error::field(&path, "r_after", "missing or not float64"))?;
-            for i in 0..b.num_rows() {
+        read::for_each_batch(&path, Some(&["segment_id", "r_after"]), None, |c| {
+            let (ids, r) = (c.strings("segment_id")?, c.f64s("r_after")?);
+            for i in 0..c.num_rows() {
                 out.insert(ids.value(i).to_string(), r.value(i));
             }
-        }
+            Ok(())
+        })?;
     }
     Ok(out)
 }
 
 fn read_file(path: &Path, out: &mut HashMap<u64, AppliedOffset>) -> Result<()> {
-    let file = std::fs::File::open(path).map_err(|e| Error::file(path, e))?;
-    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .and_then(|b| b.build())
-        .map_err(|e| Error::table(path, e))?;
-    for b in reader {
-        let b = b.map_err(|e| Error::table(path, e))?;
-        let col =
-            |n: &str| b.column_by_name(n).ok_or_else(|| Error::field(path, n, "column missing from the offsets table"));
-        let f64s = |n: &str| -> Result<Float64Array> {
-            col(n)?.as_primitive_opt::<Float64Type>().cloned().ok_or_else(|| Error::field(path, n, "not float64"))
-        };
-        let ids = col("segment_id")?
-            .as_string_opt::<i32>()
-            .cloned()
-            .ok_or_else(|| Error::field(path, "segment_id", "not a string"))?;
-        let shots = col("shot_numbers")?
-            .as_list_opt::<i32>()
-            .cloned()
-            .ok_or_else(|| Error::field(path, "shot_numbers", "not a list"))?;
-        let (dx, dy, dz) = (f64s("dx")?, f64s("dy")?, f64s("dz")?);
-        for i in 0..b.num_rows() {
+    read::for_each_batch(path, None, None, |c| {
+        let (ids, shots) = (c.strings("segment_id")?, c.lists("shot_numbers")?);
+        let (dx, dy, dz) = (c.f64s("dx")?, c.f64s("dy")?, c.f64s("dz")?);
+        for i in 0..c.num_rows() {
             let list = shots.value(i);
             let list = list
                 .as_primitive_opt::<UInt64Type>()
@@ -184,8 +160,8 @@ fn read_file(path: &Path, out: &mut HashMap<u64, AppliedOffset>) -> Result<()> {
                 }
             }
         }
-    }
-    Ok(())
+        Ok(())
+    })
 }
 
 #[cfg(test)]

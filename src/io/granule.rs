@@ -105,14 +105,6 @@ impl Default for GranuleMeta {
     }
 }
 
-/// A V2 granule file name, e.g. `GEDI01_B_2019170155833_O02932_02_T02267_02_005_01_V002.h5`.
-///
-/// `level` is `"01_B"` or `"02_A"`; `start` the acquisition start `YYYYDDDHHMMSS`. The reader pairs
-/// L1B and L2A files whose names agree up to the track field.
-pub fn v2_file_name(level: &str, start: &str, orbit: u32, sub_orbit: u8, track: u32) -> String {
-    format!("GEDI{level}_{start}_O{orbit:05}_{sub_orbit:02}_T{track:05}_02_005_01_V002.h5")
-}
-
 /// Write a V2-layout L1B granule with the given beams.
 pub fn write_l1b_v2(path: &Path, beams: &[Beam<L1bShot>], meta: &GranuleMeta) -> Result<()> {
     write_granule(path, "GEDI_L1B", beams, meta, l1b_datasets)

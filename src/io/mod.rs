@@ -2,7 +2,9 @@
 //! written from them. No sequencing of steps (that is `ops`), no Parquet tables (that is `dataset`).
 
 pub mod footprints;
+pub mod gedi;
 pub mod granule;
+pub mod landcover;
 pub mod las;
 pub mod pulse;
 

@@ -61,6 +61,14 @@ pub fn beam_number(name: &str) -> Option<u16> {
     is_beam_group(name).then(|| u16::from_str_radix(&name[4..], 2).ok()).flatten()
 }
 
+/// A V2 granule file name, e.g. `GEDI01_B_2019170155833_O02932_02_T02267_02_005_01_V002.h5`.
+///
+/// `level` is `"01_B"` or `"02_A"`; `start` the acquisition start `YYYYDDDHHMMSS`. The reader pairs
+/// L1B and L2A files whose names agree up to the track field.
+pub fn v2_file_name(level: &str, start: &str, orbit: u32, sub_orbit: u8, track: u32) -> String {
+    format!("GEDI{level}_{start}_O{orbit:05}_{sub_orbit:02}_T{track:05}_02_005_01_V002.h5")
+}
+
 // The shot records of a granule (what `io::granule` writes and the scenario makes).
 
 /// One L1B shot: the waveforms and their geolocation.

@@ -14,7 +14,6 @@ use std::path::{Path, PathBuf};
 
 use arrow::array::{Array, AsArray};
 use arrow::datatypes::{Float64Type, UInt32Type, UInt64Type, UInt8Type};
-use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use parquet::arrow::ProjectionMask;
 
 use crate::dataset::als::{AlsTable, BBox};
@@ -398,8 +397,7 @@ fn along_track_steps(shots: &[ShotRecord], beams: &BTreeMap<&str, Vec<usize>>) -
 
 /// Pass A: the cheap columns of every shot of one `shots/` file, classified.
 fn read_shot_records(path: &Path) -> Result<(String, Vec<ShotRecord>)> {
-    let file = std::fs::File::open(path).map_err(|e| Error::file(path, e))?;
-    let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| Error::table(path, e))?;
+    let builder = crate::dataset::read::open(path)?;
     let schema = builder.schema().clone();
     for required in ["shot_number", "x", "y", "rx_waveform", "elevation_bin0", "elevation_lastbin", "geoid_offset_used"]
     {
@@ -503,36 +501,13 @@ fn read_waveforms(path: &Path, rows: impl Iterator<Item = usize>) -> Result<Vec<
     if rows.is_empty() {
         return Ok(Vec::new());
     }
-    let file = std::fs::File::open(path).map_err(|e| Error::file(path, e))?;
-    let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| Error::table(path, e))?;
-    let total = builder.metadata().file_metadata().num_rows() as usize;
-    let selection = crate::dataset::row_selection(&rows, total);
-    let mask = ProjectionMask::columns(builder.parquet_schema(), ["rx_waveform"]);
-    let reader = builder
-        .with_projection(mask)
-        .with_row_selection(selection)
-        .with_batch_size(1024)
-        .build()
-        .map_err(|e| Error::table(path, e))?;
     let mut out = Vec::with_capacity(rows.len());
-    for b in reader {
-        let b = b.map_err(|e| Error::table(path, e))?;
-        let col = b
-            .column_by_name("rx_waveform")
-            .ok_or_else(|| Error::field(path, "rx_waveform", "column missing from the shots table"))?;
-        let list = col.as_list_opt::<i32>().ok_or_else(|| Error::field(path, "rx_waveform", "not a list"))?;
-        for i in 0..list.len() {
-            if list.is_null(i) {
-                out.push(None);
-                continue;
-            }
-            let v = list.value(i);
-            let v = v
-                .as_primitive_opt::<arrow::datatypes::Float32Type>()
-                .ok_or_else(|| Error::field(path, "rx_waveform", "not a list of float32"))?;
-            out.push(Some(v.values().to_vec()));
+    crate::dataset::read::for_each_batch(path, Some(&["rx_waveform"]), Some(&rows), |c| {
+        for i in 0..c.num_rows() {
+            out.push(c.f32_list("rx_waveform", i)?);
         }
-    }
+        Ok(())
+    })?;
     if out.len() != rows.len() {
         return Err(Error::field(path, "rx_waveform", format!("read {} waveforms for {} rows", out.len(), rows.len())));
     }

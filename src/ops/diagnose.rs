@@ -6,10 +6,11 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use arrow::array::{Array, AsArray, Float64Array, ListArray, RecordBatch, StringArray, UInt64Array};
-use arrow::datatypes::{Field, Float32Type, Float64Type, Schema, UInt64Type, UInt8Type};
+use arrow::array::{Array, Float64Array, RecordBatch, StringArray};
+use arrow::datatypes::{Field, Schema};
 
 use crate::dataset::als::AlsTable;
+use crate::dataset::read::{self, value};
 use crate::dataset::{self, tables, Dataset};
 use crate::error::{Error, Result};
 use crate::kernels::collocate::segments::Level;
@@ -61,12 +62,14 @@ struct Pending {
 pub fn read_cases(ds: &Dataset, progress: &dyn Progress) -> Result<(Vec<ShotCase>, CaseReport)> {
     let mut report = CaseReport::default();
     let offsets = crate::dataset::offsets::read_offsets(ds)?;
-    let forest = read_forest_types(ds)?;
+    let forest = crate::dataset::strata::read_forest_types(ds)?;
     let dir = ds.root().join(tables::SHOTS);
     let files = dataset::table_files(&dir)
         .map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi`")))?;
     let mut pending = Vec::new();
-    for_each_batch(files, |f, b| read_shots(f, b, &offsets, &forest, &mut pending, &mut report))?;
+    for f in files {
+        read::for_each_batch(&f, None, None, |c| read_shots(c, &offsets, &forest, &mut pending, &mut report))?;
+    }
     let mut segment_shots: HashMap<&str, usize> = HashMap::new();
     offsets.values().for_each(|o| *segment_shots.entry(o.segment_id.as_str()).or_default() += 1);
     for p in &mut pending {
@@ -80,126 +83,48 @@ pub fn read_cases(ds: &Dataset, progress: &dyn Progress) -> Result<(Vec<ShotCase
     Ok((cases?, report))
 }
 
-fn read_forest_types(ds: &Dataset) -> Result<HashMap<u64, String>> {
-    let mut out = HashMap::new();
-    if !ds.has_table(tables::STRATA) {
-        return Ok(out);
-    }
-    let dir = ds.root().join(tables::STRATA);
-    let files = dataset::table_files(&dir).map_err(|e| Error::file(&dir, e))?;
-    for_each_batch(files, |f, b| {
-        let sn = column(f, b, "shot_number")?
-            .as_primitive_opt::<UInt64Type>()
-            .cloned()
-            .ok_or_else(|| Error::field(f, "shot_number", "not uint64"))?;
-        let ft = column(f, b, "forest_type")?
-            .as_string_opt::<i32>()
-            .cloned()
-            .ok_or_else(|| Error::field(f, "forest_type", "not a string"))?;
-        for i in 0..b.num_rows() {
-            out.insert(sn.value(i), ft.value(i).to_string());
-        }
-        Ok(())
-    })?;
-    Ok(out)
-}
-
-/// Call `f` on every batch of every file of `files` (Parquet).
-fn for_each_batch(files: Vec<PathBuf>, mut f: impl FnMut(&Path, &RecordBatch) -> Result<()>) -> Result<()> {
-    for path in files {
-        let file = std::fs::File::open(&path).map_err(|e| Error::file(&path, e))?;
-        let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-            .and_then(|b| b.build())
-            .map_err(|e| Error::table(&path, e))?;
-        for b in reader {
-            f(&path, &b.map_err(|e| Error::table(&path, e))?)?;
-        }
-    }
-    Ok(())
-}
-
-fn column<'a>(path: &Path, b: &'a RecordBatch, name: &str) -> Result<&'a Arc<dyn Array>> {
-    b.column_by_name(name).ok_or_else(|| Error::field(path, name, "column missing from the table"))
-}
-
-fn f64s(path: &Path, b: &RecordBatch, name: &str) -> Result<Float64Array> {
-    column(path, b, name)?
-        .as_primitive_opt::<Float64Type>()
-        .cloned()
-        .ok_or_else(|| Error::field(path, name, "not float64"))
-}
-
-fn u8s(path: &Path, b: &RecordBatch, name: &str) -> Result<arrow::array::UInt8Array> {
-    column(path, b, name)?.as_primitive_opt::<UInt8Type>().cloned().ok_or_else(|| Error::field(path, name, "not uint8"))
-}
-
-fn lists(path: &Path, b: &RecordBatch, name: &str) -> Result<ListArray> {
-    column(path, b, name)?.as_list_opt::<i32>().cloned().ok_or_else(|| Error::field(path, name, "not a list"))
-}
-
-fn list_f32(l: &ListArray, i: usize) -> Option<Vec<f32>> {
-    if l.is_null(i) {
-        return None;
-    }
-    let v = l.value(i);
-    let v = v.as_primitive_opt::<Float32Type>()?;
-    Some(v.values().to_vec())
-}
-
-fn opt<P: arrow::datatypes::ArrowPrimitiveType>(a: &arrow::array::PrimitiveArray<P>, i: usize) -> Option<P::Native> {
-    (!a.is_null(i)).then(|| a.value(i))
-}
-
 fn read_shots(
-    path: &Path,
-    b: &RecordBatch,
+    c: read::Columns,
     offsets: &HashMap<u64, crate::dataset::offsets::AppliedOffset>,
     forest: &HashMap<u64, String>,
     out: &mut Vec<Pending>,
     report: &mut CaseReport,
 ) -> Result<()> {
-    let s = |n: &str| -> Result<StringArray> {
-        column(path, b, n)?.as_string_opt::<i32>().cloned().ok_or_else(|| Error::field(path, n, "not a string"))
-    };
-    let (granule, beam, beam_type) = (s("granule")?, s("beam")?, s("beam_type")?);
-    let sn: UInt64Array = column(path, b, "shot_number")?
-        .as_primitive_opt::<UInt64Type>()
-        .cloned()
-        .ok_or_else(|| Error::field(path, "shot_number", "not uint64"))?;
-    let (x, y) = (f64s(path, b, "x")?, f64s(path, b, "y")?);
-    let (bin0, lastbin) = (f64s(path, b, "elevation_bin0")?, f64s(path, b, "elevation_lastbin")?);
-    let (nmean, nsd) = (f64s(path, b, "noise_mean_corrected")?, f64s(path, b, "noise_stddev_corrected")?);
-    let (geoid, geoid_used) = (f64s(path, b, "geoid")?, f64s(path, b, "geoid_offset_used")?);
-    let rx = lists(path, b, "rx_waveform")?;
-    let degrade = u8s(path, b, "degrade_flag")?;
-    let selected = u8s(path, b, "selected_algorithm")?;
-    let leaf_off = u8s(path, b, "leaf_off_flag")?;
+    let (granule, beam, beam_type) = (c.strings("granule")?, c.strings("beam")?, c.strings("beam_type")?);
+    let sn = c.u64s("shot_number")?;
+    let (x, y) = (c.f64s("x")?, c.f64s("y")?);
+    let (bin0, lastbin) = (c.f64s("elevation_bin0")?, c.f64s("elevation_lastbin")?);
+    let (nmean, nsd) = (c.f64s("noise_mean_corrected")?, c.f64s("noise_stddev_corrected")?);
+    let (geoid, geoid_used) = (c.f64s("geoid")?, c.f64s("geoid_offset_used")?);
+    let degrade = c.u8s("degrade_flag")?;
+    let selected = c.u8s("selected_algorithm")?;
+    let leaf_off = c.u8s("leaf_off_flag")?;
     let mut alg_cols = Vec::new();
     for a in 1..=N_ALGORITHMS {
         alg_cols.push((
-            f64s(path, b, &format!("elev_lowestmode_a{a}"))?,
-            lists(path, b, &format!("rh_a{a}"))?,
-            f64s(path, b, &format!("sensitivity_a{a}"))?,
-            u8s(path, b, &format!("quality_flag_a{a}"))?,
+            c.f64s(&format!("elev_lowestmode_a{a}"))?,
+            format!("rh_a{a}"),
+            c.f64s(&format!("sensitivity_a{a}"))?,
+            c.u8s(&format!("quality_flag_a{a}"))?,
         ));
     }
-    for i in 0..b.num_rows() {
+    for i in 0..c.num_rows() {
         report.shots_read += 1;
-        let (Some(px), Some(py)) = (opt(&x, i), opt(&y, i)) else {
+        let (Some(px), Some(py)) = (value(x, i), value(y, i)) else {
             count_dropped(report, "no position");
             continue;
         };
-        let Some(wave) = list_f32(&rx, i).filter(|w| w.len() > 1) else {
+        let Some(wave) = c.f32_list("rx_waveform", i)?.filter(|w| w.len() > 1) else {
             count_dropped(report, "no L1B waveform");
             continue;
         };
         let (Some(e0), Some(e1), Some(mean), Some(sd)) =
-            (opt(&bin0, i), opt(&lastbin, i), opt(&nmean, i), opt(&nsd, i))
+            (value(bin0, i), value(lastbin, i), value(nmean, i), value(nsd, i))
         else {
             count_dropped(report, "no record geolocation or noise");
             continue;
         };
-        let Some(n_geoid) = opt(&geoid_used, i).or(opt(&geoid, i)) else {
+        let Some(n_geoid) = value(geoid_used, i).or(value(geoid, i)) else {
             count_dropped(report, "no geoid");
             continue;
         };
@@ -214,19 +139,19 @@ fn read_shots(
         let shot = sn.value(i);
         let algorithms: [Option<RealAlgorithm>; N_ALGORITHMS] = std::array::from_fn(|a| {
             let (elev, rh, sens, q) = &alg_cols[a];
-            if !classes::passes_quality(opt(q, i), opt(&degrade, i), opt(sens, i)) {
+            if !classes::passes_quality(value(q, i), value(degrade, i), value(sens, i)) {
                 return None;
             }
-            let ground = opt(elev, i)?;
-            let rh = list_f32(rh, i).filter(|r| r.len() == RH_LEN)?;
+            let ground = value(elev, i)?;
+            let rh = c.f32_list(rh, i).ok().flatten().filter(|r| r.len() == RH_LEN)?;
             ground.is_finite().then_some(RealAlgorithm { ground: ground - n_geoid, rh })
         });
         if algorithms.iter().all(Option::is_none) {
             count_dropped(report, "no algorithm passes quality (quality_flag, degrade_flag, sensitivity ≥ 0.9)");
             continue;
         }
-        let sel = opt(&selected, i).filter(|s| (1..=N_ALGORITHMS as u8).contains(s)).unwrap_or(1);
-        let sens_sel = opt(&alg_cols[usize::from(sel) - 1].2, i).unwrap_or(f64::NAN);
+        let sel = value(selected, i).filter(|s| (1..=N_ALGORITHMS as u8).contains(s)).unwrap_or(1);
+        let sens_sel = value(alg_cols[usize::from(sel) - 1].2, i).unwrap_or(f64::NAN);
         let energy: f64 = wave.iter().map(|&v| f64::from(v) - mean).sum();
         let (dx, dy) = offsets.get(&shot).map_or((0.0, 0.0), |o| (o.dx, o.dy));
         let collocation_dz = offsets.get(&shot).map(|o| o.dz).filter(|dz| dz.is_finite());
@@ -248,7 +173,7 @@ fn read_shots(
             collocation_dz,
             strata: Strata {
                 forest_type: forest.get(&shot).cloned().unwrap_or_else(|| classes::UNKNOWN.to_string()),
-                phenology: classes::phenology(opt(&leaf_off, i)).to_string(),
+                phenology: classes::phenology(value(leaf_off, i)).to_string(),
                 sensitivity_group: classes::sensitivity_group(sens_sel).unwrap_or(classes::UNKNOWN).to_string(),
                 beam_type: beam_type.value(i).to_string(),
                 ..Default::default()

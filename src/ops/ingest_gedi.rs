@@ -16,23 +16,19 @@ use std::sync::Arc;
 
 use arrow::array::{ArrayRef, BooleanArray, Float32Builder, ListBuilder, PrimitiveArray, RecordBatch, StringArray};
 use arrow::datatypes::{
-    ArrowPrimitiveType, DataType, Field, Float64Type, Int16Type, Int8Type, Schema, SchemaRef, UInt32Type, UInt64Type,
-    UInt8Type,
+    ArrowPrimitiveType, Float64Type, Int16Type, Int8Type, SchemaRef, UInt32Type, UInt64Type, UInt8Type,
 };
-use hdf5::types::{FixedAscii, FixedUnicode, H5Type, TypeDescriptor, VarLenAscii, VarLenUnicode};
-use hdf5::{Dataset, File, Group, Location};
 use rayon::prelude::*;
 
-use crate::error::{one_line, Error, Result};
-use crate::kernels::gedi::{is_beam_group, BeamType, N_ALGORITHMS, RH_LEN};
+use crate::dataset::shots::{granules_schema, shots_schema, VERTICAL_DATUM};
+use crate::error::{Error, Result};
+use crate::io::gedi::{open_product, read_l1b, read_l2a, L1bBeam, L2aBeam, Product};
+use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
 use crate::kernels::geo::projection::Projector;
 use crate::ops::progress::{Progress, Step};
 
 /// Maximum rows per emitted batch (a beam larger than this is split).
 pub const BATCH_ROWS: usize = 8192;
-
-/// Value of the `vertical_datum` column: every GEDI height stays WGS84-ellipsoidal.
-pub const VERTICAL_DATUM: &str = "WGS84 ellipsoid";
 
 /// Options of the GEDI ingest.
 #[derive(Debug, Clone, PartialEq)]
@@ -147,85 +143,6 @@ impl IngestReport {
     pub fn warnings(&self) -> Vec<String> {
         self.notes.iter().cloned().chain(self.beams.iter().flat_map(BeamReport::warnings)).collect()
     }
-}
-
-// ---------------------------------------------------------------------------------------------
-// Schema
-// ---------------------------------------------------------------------------------------------
-
-fn list_f32() -> DataType {
-    DataType::List(Arc::new(Field::new_list_field(DataType::Float32, true)))
-}
-
-/// The schema of the `shots` table; `epsg` is recorded in its metadata (`gedisim:crs_epsg`).
-///
-/// Every column is documented in `docs/schemas.md`. Columns from one product are nullable,
-/// because a shot may come from the other product only.
-pub fn shots_schema(epsg: u32) -> SchemaRef {
-    use DataType::*;
-    let f = |name: &str, t: DataType, nullable: bool| Field::new(name, t, nullable);
-    let mut fields = vec![
-        f("granule", Utf8, false),
-        f("shot_number", UInt64, false),
-        f("beam", Utf8, false),
-        f("beam_type", Utf8, false),
-        f("in_l1b", Boolean, false),
-        f("in_l2a", Boolean, false),
-        f("delta_time", Float64, true),
-        f("lat_bin0", Float64, true),
-        f("lon_bin0", Float64, true),
-        f("lat_lastbin", Float64, true),
-        f("lon_lastbin", Float64, true),
-        f("lat_lowestmode", Float64, true),
-        f("lon_lowestmode", Float64, true),
-        f("x", Float64, true),
-        f("y", Float64, true),
-        f("xy_source", Utf8, true),
-        f("elevation_bin0", Float64, true),
-        f("elevation_lastbin", Float64, true),
-        f("rx_waveform", list_f32(), true),
-        f("rx_sample_count", UInt32, true),
-        f("tx_waveform", list_f32(), true),
-        f("noise_mean_corrected", Float64, true),
-        f("noise_stddev_corrected", Float64, true),
-        f("stale_return_flag", UInt8, true),
-        f("degrade", Int8, true),
-        f("geoid", Float64, true),
-        f("geoid_offset_used", Float64, true),
-        f("vertical_datum", Utf8, false),
-        f("quality_flag", UInt8, true),
-        f("degrade_flag", UInt8, true),
-        f("sensitivity", Float64, true),
-        f("selected_algorithm", UInt8, true),
-        f("elev_lowestmode", Float64, true),
-        f("rh", list_f32(), true),
-        f("energy_total", Float64, true),
-    ];
-    for n in 1..=N_ALGORITHMS {
-        fields.extend([
-            f(&format!("elev_lowestmode_a{n}"), Float64, true),
-            f(&format!("rh_a{n}"), list_f32(), true),
-            f(&format!("sensitivity_a{n}"), Float64, true),
-            f(&format!("quality_flag_a{n}"), UInt8, true),
-            f(&format!("toploc_a{n}"), Float64, true),
-            f(&format!("botloc_a{n}"), Float64, true),
-            f(&format!("zcross_a{n}"), Float64, true),
-        ]);
-    }
-    fields.extend([
-        f("leaf_off_flag", UInt8, true),
-        f("leaf_off_doy", Int16, true),
-        f("leaf_on_doy", Int16, true),
-        f("pft_class", UInt8, true),
-        f("region_class", UInt8, true),
-        f("urban_proportion", UInt8, true),
-        f("landsat_water_persistence", UInt8, true),
-    ]);
-    let metadata = [
-        ("gedisim:crs_epsg".to_string(), epsg.to_string()),
-        ("gedisim:vertical_reference".to_string(), VERTICAL_DATUM.to_string()),
-    ];
-    Arc::new(Schema::new(fields).with_metadata(metadata.into_iter().collect()))
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -394,399 +311,6 @@ pub fn read_granule(
         reports.push(report);
     }
     Ok(reports)
-}
-
-// ---------------------------------------------------------------------------------------------
-// HDF5 access
-// ---------------------------------------------------------------------------------------------
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Product {
-    L1b,
-    L2a,
-}
-
-impl Product {
-    fn short_name(self) -> &'static str {
-        match self {
-            Product::L1b => "GEDI_L1B",
-            Product::L2a => "GEDI_L2A",
-        }
-    }
-}
-
-/// An open granule file.
-struct Granule<'a> {
-    path: &'a Path,
-    file: File,
-}
-
-fn open_product(path: &Path, product: Product) -> Result<Granule<'_>> {
-    let file = File::open(path).map_err(|e| Error::file(path, format!("cannot open as HDF5: {e}")))?;
-    // A swapped --l1b/--l2a would otherwise fail later with a confusing "missing dataset".
-    if let Some(name) = read_str_attr(&file, "short_name") {
-        let other = if product == Product::L1b { Product::L2a } else { Product::L1b };
-        if name.trim() == other.short_name() {
-            return Err(Error::field(
-                path,
-                "short_name",
-                format!("file is {name} but was given as {}", product.short_name()),
-            ));
-        }
-    }
-    Ok(Granule { path, file })
-}
-
-/// Read a scalar string attribute of any HDF5 string flavour; `None` if absent or not a string.
-fn read_str_attr(loc: &Location, name: &str) -> Option<String> {
-    let attr = loc.attr(name).ok()?;
-    let r = attr.as_reader();
-    let s = match attr.dtype().ok()?.to_descriptor().ok()? {
-        TypeDescriptor::VarLenUnicode => r.read_raw::<VarLenUnicode>().ok()?.first()?.to_string(),
-        TypeDescriptor::VarLenAscii => r.read_raw::<VarLenAscii>().ok()?.first()?.to_string(),
-        TypeDescriptor::FixedAscii(_) => r.read_raw::<FixedAscii<256>>().ok()?.first()?.to_string(),
-        TypeDescriptor::FixedUnicode(_) => r.read_raw::<FixedUnicode<256>>().ok()?.first()?.to_string(),
-        _ => return None,
-    };
-    Some(s)
-}
-
-impl<'a> Granule<'a> {
-    fn beams(&self) -> Result<Vec<String>> {
-        let names = self.file.member_names().map_err(|e| Error::file(self.path, format!("cannot list groups: {e}")))?;
-        Ok(names.into_iter().filter(|n| is_beam_group(n)).collect())
-    }
-
-    fn beam(&self, name: &str) -> Result<Option<BeamGroup<'a>>> {
-        if !self.file.link_exists(name) {
-            return Ok(None);
-        }
-        let group = self.file.group(name).map_err(|e| Error::field(self.path, name, e))?;
-        let mut g = BeamGroup { path: self.path, beam: name.to_string(), group, n: 0 };
-        g.n = g.shot_numbers_len()?;
-        Ok(Some(g))
-    }
-}
-
-/// Numeric element types a dataset can be read into (HDF5 converts from the file's dtype).
-trait Numeric: H5Type + Copy {
-    /// Whether the target is a float (integer targets refuse float sources: no silent truncation).
-    const FLOAT: bool;
-}
-macro_rules! numeric {
-    ($($t:ty => $float:expr),*) => { $(impl Numeric for $t { const FLOAT: bool = $float; })* };
-}
-numeric!(u8 => false, i8 => false, i16 => false, u64 => false, i64 => false, f32 => true, f64 => true);
-
-/// Expected shape of a dataset in a beam group with `n` shots.
-#[derive(Clone, Copy)]
-enum Shape {
-    /// `(n,)`.
-    PerShot,
-    /// `(n, k)`.
-    Rows(usize),
-    /// Any 1-D length (flat waveform arrays).
-    Flat,
-}
-
-/// One beam group of one file, with its shot count.
-struct BeamGroup<'a> {
-    path: &'a Path,
-    beam: String,
-    group: Group,
-    n: usize,
-}
-
-impl BeamGroup<'_> {
-    fn field(&self, rel: &str) -> String {
-        format!("{}/{rel}", self.beam)
-    }
-
-    fn err(&self, rel: &str, msg: impl std::fmt::Display) -> Error {
-        Error::field(self.path, self.field(rel), one_line(&msg.to_string()))
-    }
-
-    /// The dataset at `rel` (e.g. `geolocation/elevation_bin0`), or `None` if any component is absent.
-    fn dataset(&self, rel: &str) -> Result<Option<Dataset>> {
-        let (dirs, name) = rel.rsplit_once('/').unwrap_or(("", rel));
-        let mut g = self.group.clone();
-        for part in dirs.split('/').filter(|p| !p.is_empty()) {
-            if !g.link_exists(part) {
-                return Ok(None);
-            }
-            g = g.group(part).map_err(|e| self.err(rel, e))?;
-        }
-        if !g.link_exists(name) {
-            return Ok(None);
-        }
-        g.dataset(name).map(Some).map_err(|e| self.err(rel, e))
-    }
-
-    fn require_dataset(&self, rel: &str) -> Result<Dataset> {
-        self.dataset(rel)?.ok_or_else(|| self.err(rel, "missing"))
-    }
-
-    /// Check the dataset's shape against the beam's shot count.
-    fn check_shape(&self, rel: &str, ds: &Dataset, shape: Shape) -> Result<()> {
-        let dims = ds.shape();
-        let ok = match shape {
-            Shape::PerShot => dims == [self.n],
-            Shape::Rows(k) => dims == [self.n, k],
-            Shape::Flat => dims.len() == 1,
-        };
-        if ok {
-            return Ok(());
-        }
-        let expected = match shape {
-            Shape::PerShot => format!("({},)", self.n),
-            Shape::Rows(k) => format!("({}, {k})", self.n),
-            Shape::Flat => "1-D".to_string(),
-        };
-        Err(self.err(
-            rel,
-            format!("shape {dims:?} does not match {expected} ({}/shot_number has {} shots)", self.beam, self.n),
-        ))
-    }
-
-    /// Read a numeric dataset into `Vec<T>` (row-major), converting from the file's dtype.
-    fn read_ds<T: Numeric>(&self, rel: &str, ds: &Dataset, shape: Shape) -> Result<Vec<T>> {
-        self.check_shape(rel, ds, shape)?;
-        let desc = ds.dtype().and_then(|t| t.to_descriptor()).map_err(|e| self.err(rel, e))?;
-        match desc {
-            TypeDescriptor::Float(_) if !T::FLOAT => {
-                return Err(self.err(rel, format!("expected an integer dtype, found {desc}")));
-            }
-            TypeDescriptor::Integer(_) | TypeDescriptor::Unsigned(_) | TypeDescriptor::Float(_) => {}
-            _ => return Err(self.err(rel, format!("expected a numeric dtype, found {desc}"))),
-        }
-        ds.read_raw::<T>().map_err(|e| self.err(rel, e))
-    }
-
-    /// A required dataset: missing ⇒ `<file>: BEAMxxxx/<rel>: missing`.
-    fn require<T: Numeric>(&self, rel: &str, shape: Shape) -> Result<Vec<T>> {
-        let ds = self.require_dataset(rel)?;
-        self.read_ds(rel, &ds, shape)
-    }
-
-    /// An optional dataset: `None` when absent, an error when present but malformed.
-    fn optional<T: Numeric>(&self, rel: &str, shape: Shape) -> Result<Option<Vec<T>>> {
-        self.dataset(rel)?.map(|ds| self.read_ds(rel, &ds, shape)).transpose()
-    }
-
-    fn shot_numbers_len(&self) -> Result<usize> {
-        let ds = self.require_dataset("shot_number")?;
-        match ds.shape().as_slice() {
-            [n] => Ok(*n),
-            dims => Err(self.err("shot_number", format!("shape {dims:?} is not 1-D"))),
-        }
-    }
-
-    /// `shot_number` as u64, never through a float (values exceed 2^53); int64 is accepted and cast.
-    fn shot_numbers(&self) -> Result<Vec<u64>> {
-        let rel = "shot_number";
-        let ds = self.require_dataset(rel)?;
-        self.check_shape(rel, &ds, Shape::PerShot)?;
-        let desc = ds.dtype().and_then(|t| t.to_descriptor()).map_err(|e| self.err(rel, e))?;
-        match desc {
-            TypeDescriptor::Unsigned(_) => ds.read_raw::<u64>().map_err(|e| self.err(rel, e)),
-            TypeDescriptor::Integer(_) => {
-                let v = ds.read_raw::<i64>().map_err(|e| self.err(rel, e))?;
-                v.into_iter()
-                    .map(|s| u64::try_from(s).map_err(|_| self.err(rel, format!("negative shot number {s}"))))
-                    .collect()
-            }
-            _ => {
-                Err(self
-                    .err(rel, format!("expected an integer dtype (a float cannot hold shot numbers), found {desc}")))
-            }
-        }
-    }
-}
-
-// ---------------------------------------------------------------------------------------------
-// Beam contents
-// ---------------------------------------------------------------------------------------------
-
-/// A flat waveform array with each shot's (0-based start, count), validated against its length.
-struct Waveforms {
-    samples: Vec<f32>,
-    spans: Vec<(usize, usize)>,
-}
-
-impl Waveforms {
-    fn get(&self, i: usize) -> &[f32] {
-        let (s, c) = self.spans[i];
-        &self.samples[s..s + c]
-    }
-}
-
-/// Read `<wave>`, `<prefix>_sample_start_index` (1-based) and `<prefix>_sample_count`; `None`
-/// when any of the three is absent (the caller decides whether that is an error).
-fn read_waveforms(g: &BeamGroup, shots: &[u64], wave: &str, prefix: &str) -> Result<Option<Waveforms>> {
-    let start_rel = format!("{prefix}_sample_start_index");
-    let count_rel = format!("{prefix}_sample_count");
-    let (w, s, c) = match (g.dataset(wave)?, g.dataset(&start_rel)?, g.dataset(&count_rel)?) {
-        (Some(w), Some(s), Some(c)) => (w, s, c),
-        _ => return Ok(None),
-    };
-    let samples = g.read_ds::<f32>(wave, &w, Shape::Flat)?;
-    let start = g.read_ds::<u64>(&start_rel, &s, Shape::PerShot)?;
-    let count = g.read_ds::<u64>(&count_rel, &c, Shape::PerShot)?;
-    let len = samples.len() as u64;
-    let mut spans = Vec::with_capacity(shots.len());
-    for ((&shot, &s), &c) in shots.iter().zip(&start).zip(&count) {
-        if s == 0 {
-            return Err(g.err(&start_rel, format!("shot {shot}: index 0, but GEDI's start index is 1-based")));
-        }
-        // 1-based: the shot's samples are [s-1, s-1+c).
-        let end = (s - 1).checked_add(c).filter(|&e| e <= len).ok_or_else(|| {
-            g.err(&start_rel, format!("shot {shot}: start {s} + {count_rel} {c} - 1 exceeds the {wave} length {len}"))
-        })?;
-        spans.push(((s - 1) as usize, (end - (s - 1)) as usize));
-    }
-    Ok(Some(Waveforms { samples, spans }))
-}
-
-/// The L1B datasets of one beam that the shots table uses.
-struct L1bBeam {
-    shot_number: Vec<u64>,
-    delta_time: Option<Vec<f64>>,
-    rx: Waveforms,
-    tx: Option<Waveforms>,
-    elevation_bin0: Vec<f64>,
-    elevation_lastbin: Vec<f64>,
-    lat_bin0: Vec<f64>,
-    lon_bin0: Vec<f64>,
-    lat_lastbin: Vec<f64>,
-    lon_lastbin: Vec<f64>,
-    noise_mean: Option<Vec<f64>>,
-    noise_stddev: Option<Vec<f64>>,
-    stale_return_flag: Option<Vec<u8>>,
-    degrade: Option<Vec<i8>>,
-    geoid: Option<Vec<f64>>,
-}
-
-fn read_l1b(g: &BeamGroup) -> Result<L1bBeam> {
-    use Shape::PerShot;
-    let shot_number = g.shot_numbers()?;
-    // Name the first missing waveform dataset (read_waveforms only says "not all present").
-    for rel in ["rxwaveform", "rx_sample_start_index", "rx_sample_count"] {
-        g.require_dataset(rel)?;
-    }
-    // The coordinates are required: NaN or out-of-range values are an error naming the field.
-    let coord = |rel: &str, limit: f64| -> Result<Vec<f64>> {
-        let v = g.require::<f64>(rel, PerShot)?;
-        if let Some((i, x)) = v.iter().enumerate().find(|(_, x)| !(x.is_finite() && x.abs() <= limit)) {
-            return Err(g.err(rel, format!("shot {}: invalid coordinate {x}", shot_number[i])));
-        }
-        Ok(v)
-    };
-    Ok(L1bBeam {
-        delta_time: g.optional("delta_time", PerShot)?,
-        rx: read_waveforms(g, &shot_number, "rxwaveform", "rx")?.ok_or_else(|| g.err("rxwaveform", "missing"))?,
-        tx: read_waveforms(g, &shot_number, "txwaveform", "tx")?,
-        elevation_bin0: g.require("geolocation/elevation_bin0", PerShot)?,
-        elevation_lastbin: g.require("geolocation/elevation_lastbin", PerShot)?,
-        lat_bin0: coord("geolocation/latitude_bin0", 90.0)?,
-        lon_bin0: coord("geolocation/longitude_bin0", 360.0)?,
-        lat_lastbin: coord("geolocation/latitude_lastbin", 90.0)?,
-        lon_lastbin: coord("geolocation/longitude_lastbin", 360.0)?,
-        noise_mean: g.optional("noise_mean_corrected", PerShot)?,
-        noise_stddev: g.optional("noise_stddev_corrected", PerShot)?,
-        stale_return_flag: g.optional("stale_return_flag", PerShot)?,
-        degrade: g.optional("geolocation/degrade", PerShot)?,
-        geoid: g.optional("geophys_corr/geoid", PerShot)?,
-        shot_number,
-    })
-}
-
-/// One algorithm's per-shot outputs (each optional).
-struct L2aAlgorithm {
-    elev_lowestmode: Option<Vec<f64>>,
-    /// RH in metres (converted from the stored centimetres), row-major N×101.
-    rh: Option<Vec<f32>>,
-    sensitivity: Option<Vec<f64>>,
-    quality_flag: Option<Vec<u8>>,
-    toploc: Option<Vec<f64>>,
-    botloc: Option<Vec<f64>>,
-    zcross: Option<Vec<f64>>,
-}
-
-/// The L2A datasets of one beam that the shots table uses.
-struct L2aBeam {
-    shot_number: Vec<u64>,
-    delta_time: Option<Vec<f64>>,
-    quality_flag: Vec<u8>,
-    degrade_flag: Vec<u8>,
-    sensitivity: Vec<f64>,
-    selected_algorithm: Vec<u8>,
-    elev_lowestmode: Vec<f64>,
-    lat_lowestmode: Option<Vec<f64>>,
-    lon_lowestmode: Option<Vec<f64>>,
-    /// Metres, row-major N×101.
-    rh: Vec<f32>,
-    energy_total: Option<Vec<f64>>,
-    algorithms: Vec<L2aAlgorithm>,
-    leaf_off_flag: Option<Vec<u8>>,
-    leaf_off_doy: Option<Vec<i16>>,
-    leaf_on_doy: Option<Vec<i16>>,
-    pft_class: Option<Vec<u8>>,
-    region_class: Option<Vec<u8>>,
-    urban_proportion: Option<Vec<u8>>,
-    landsat_water_persistence: Option<Vec<u8>>,
-}
-
-fn read_l2a(g: &BeamGroup) -> Result<L2aBeam> {
-    use Shape::{PerShot, Rows};
-    let algorithms = (1..=N_ALGORITHMS)
-        .map(|n| {
-            let geo = |name: &str| format!("geolocation/{name}_a{n}");
-            let rxp = |name: &str| format!("rx_processing_a{n}/{name}");
-            // rh_aN is integer centimetres (int32 in V1, int16 in V2); f64 holds either exactly.
-            let rh_cm = g.optional::<f64>(&geo("rh"), Rows(RH_LEN))?;
-            Ok(L2aAlgorithm {
-                elev_lowestmode: g.optional(&geo("elev_lowestmode"), PerShot)?,
-                rh: rh_cm.map(|v| v.into_iter().map(|cm| (cm / 100.0) as f32).collect()),
-                sensitivity: g.optional(&geo("sensitivity"), PerShot)?,
-                quality_flag: g.optional(&geo("quality_flag"), PerShot)?,
-                toploc: g.optional(&rxp("toploc"), PerShot)?,
-                botloc: g.optional(&rxp("botloc"), PerShot)?,
-                zcross: g.optional(&rxp("zcross"), PerShot)?,
-            })
-        })
-        .collect::<Result<Vec<_>>>()?;
-    let lc = |name: &str| format!("land_cover_data/{name}");
-    Ok(L2aBeam {
-        shot_number: g.shot_numbers()?,
-        delta_time: g.optional("delta_time", PerShot)?,
-        quality_flag: g.require("quality_flag", PerShot)?,
-        degrade_flag: g.require("degrade_flag", PerShot)?,
-        sensitivity: g.require("sensitivity", PerShot)?,
-        selected_algorithm: g.require("selected_algorithm", PerShot)?,
-        elev_lowestmode: g.require("elev_lowestmode", PerShot)?,
-        lat_lowestmode: g.optional("lat_lowestmode", PerShot)?,
-        lon_lowestmode: g.optional("lon_lowestmode", PerShot)?,
-        rh: g.require("rh", Rows(RH_LEN))?,
-        energy_total: g.optional("energy_total", PerShot)?,
-        algorithms,
-        leaf_off_flag: g.optional(&lc("leaf_off_flag"), PerShot)?,
-        leaf_off_doy: g.optional(&lc("leaf_off_doy"), PerShot)?,
-        leaf_on_doy: g.optional(&lc("leaf_on_doy"), PerShot)?,
-        pft_class: g.optional(&lc("pft_class"), PerShot)?,
-        region_class: g.optional(&lc("region_class"), PerShot)?,
-        urban_proportion: g.optional(&lc("urban_proportion"), PerShot)?,
-        landsat_water_persistence: g.optional(&lc("landsat_water_persistence"), PerShot)?,
-    })
-}
-
-impl L2aBeam {
-    /// The lowest-mode (lat, lon) of shot `i` when both are valid coordinates.
-    fn lowestmode(&self, i: usize) -> Option<(f64, f64)> {
-        let lat = self.lat_lowestmode.as_ref()?[i];
-        let lon = self.lon_lowestmode.as_ref()?[i];
-        let valid = lat.is_finite() && lon.is_finite() && lat.abs() <= 90.0 && lon.abs() <= 360.0;
-        valid.then_some((lat, lon))
-    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1089,19 +613,6 @@ pub enum GranuleOutcome {
     AlreadyIngested { granule: String },
 }
 
-/// Schema of the `granules/` table: one row per ingested granule and the content hashes that key it.
-pub fn granules_schema() -> SchemaRef {
-    Arc::new(arrow::datatypes::Schema::new(vec![
-        Field::new("granule", DataType::Utf8, false),
-        Field::new("granule_key", DataType::Utf8, false),
-        Field::new("l1b_path", DataType::Utf8, true),
-        Field::new("l1b_hash", DataType::Utf8, true),
-        Field::new("l2a_path", DataType::Utf8, true),
-        Field::new("l2a_hash", DataType::Utf8, true),
-        Field::new("n_shots", DataType::UInt64, false),
-    ]))
-}
-
 /// `gedisim ingest gedi`: the granules of `l1b` and `l2a` (files, or folders expanded) into
 /// `dataset`, projected to `epsg` (`None`: the dataset's ALS CRS, else 2154), as one
 /// [`Step::IngestGedi`] counted in granules.
@@ -1195,24 +706,15 @@ pub fn ingest_into_dataset(
 /// The (L1B, L2A) content hashes recorded by an earlier ingest of a granule (its
 /// `granules/<key>.parquet` record), if any.
 pub fn previous_hashes(record: &Path) -> Result<Option<(Option<String>, Option<String>)>> {
-    use arrow::array::{Array, AsArray};
     if !record.exists() {
         return Ok(None);
     }
-    let file = std::fs::File::open(record).map_err(|e| Error::file(record, e))?;
-    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .and_then(|b| b.build())
-        .map_err(|e| Error::table(record, e))?;
-    for batch in reader {
-        let batch = batch.map_err(|e| Error::table(record, e))?;
-        if batch.num_rows() == 0 {
-            continue;
+    let mut hashes = None;
+    crate::dataset::read::for_each_batch(record, None, None, |c| {
+        if hashes.is_none() && c.num_rows() > 0 {
+            hashes = Some((c.string("l1b_hash", 0)?, c.string("l2a_hash", 0)?));
         }
-        let get = |c: &str| {
-            let a = batch.column_by_name(c)?.as_string_opt::<i32>()?;
-            (!a.is_null(0)).then(|| a.value(0).to_string())
-        };
-        return Ok(Some((get("l1b_hash"), get("l2a_hash"))));
-    }
-    Ok(None)
+        Ok(())
+    })?;
+    Ok(hashes)
 }

@@ -18,20 +18,15 @@
 //! The pure decisions live in `study::select`; this module reads and writes files.
 
 use std::collections::{BTreeMap, HashMap, HashSet};
-use std::fs::File;
 use std::path::{Path, PathBuf};
 
-use arrow::array::{Array, ArrayRef, AsArray, BooleanArray, RecordBatch};
-use arrow::datatypes::{Float32Type, Float64Type, TimestampMicrosecondType, UInt64Type, UInt8Type};
-use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
-use parquet::arrow::ProjectionMask;
-use parquet::file::reader::FileReader;
+use arrow::array::{AsArray, BooleanArray, RecordBatch};
 use sha2::{Digest, Sha256};
 
 use crate::dataset::als::AlsTable;
 use crate::dataset::offsets::{offsets_batch, offsets_schema, read_offsets, read_r_after, AppliedOffset};
 use crate::dataset::results::{results_batch, results_metadata, results_schema};
-use crate::dataset::{self, tables, Dataset};
+use crate::dataset::{self, read, tables, Dataset};
 use crate::error::{Error, Result};
 use crate::kernels::sim::{Footprint, Profile, SimConfig};
 use crate::kernels::study::select::{
@@ -283,32 +278,14 @@ fn list_granules(ds: &Dataset) -> Result<Vec<GranuleFile>> {
 
 /// The first value of string column `column` of a Parquet file.
 fn first_string(path: &Path, column: &str) -> Result<Option<String>> {
-    let builder = reader_builder(path)?;
-    let mask = ProjectionMask::columns(builder.parquet_schema(), [column]);
-    let reader =
-        builder.with_projection(mask).with_batch_size(1).with_limit(1).build().map_err(|e| Error::table(path, e))?;
-    for b in reader {
-        let b = b.map_err(|e| Error::table(path, e))?;
-        if let Some(c) = b.column_by_name(column).and_then(|c| c.as_string_opt::<i32>().cloned()) {
-            if !c.is_empty() && c.is_valid(0) {
-                return Ok(Some(c.value(0).to_string()));
-            }
+    let mut first = None;
+    read::for_each_batch(path, Some(&[column]), None, |c| {
+        if first.is_none() && c.num_rows() > 0 {
+            first = c.string(column, 0)?;
         }
-    }
-    Ok(None)
-}
-
-fn reader_builder(path: &Path) -> Result<ParquetRecordBatchReaderBuilder<File>> {
-    let file = File::open(path).map_err(|e| Error::file(path, e))?;
-    ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| Error::table(path, e))
-}
-
-/// Key-value metadata of a Parquet file; `None` when it cannot be read.
-fn file_metadata(path: &Path) -> Option<HashMap<String, String>> {
-    let file = File::open(path).ok()?;
-    let reader = parquet::file::serialized_reader::SerializedFileReader::new(file).ok()?;
-    let kv = reader.metadata().file_metadata().key_value_metadata()?;
-    Some(kv.iter().filter_map(|k| Some((k.key.clone(), k.value.clone()?))).collect())
+        Ok(())
+    })?;
+    Ok(first)
 }
 
 /// Collocate the granules never collocated (or re-ingested since), merging their segments into
@@ -324,13 +301,12 @@ fn collocate(
     let mut existing: Vec<RecordBatch> = Vec::new();
     let mut meta = HashMap::new();
     if dest.exists() {
-        meta = file_metadata(&dest).unwrap_or_default();
-        for b in reader_builder(&dest)?.build().map_err(|e| Error::table(&dest, e))? {
-            let b = b.map_err(|e| Error::table(&dest, e))?;
-            existing.push(
-                RecordBatch::try_new(offsets_schema(), b.columns().to_vec()).map_err(|e| Error::table(&dest, e))?,
-            );
-        }
+        meta = read::key_value_metadata(&dest).unwrap_or_default();
+        read::for_each_batch(&dest, None, None, |c| {
+            let b = RecordBatch::try_new(offsets_schema(), c.batch().columns().to_vec());
+            existing.push(b.map_err(|e| Error::table(&dest, e))?);
+            Ok(())
+        })?;
     }
     let granule_col = |b: &RecordBatch| b.column_by_name("granule").and_then(|c| c.as_string_opt::<i32>().cloned());
     let mut present = HashSet::new();
@@ -425,7 +401,7 @@ impl StudyInputs {
             r_after: read_r_after(ds)?,
             tiles,
             tile_hashes,
-            strata: read_strata(ds)?,
+            strata: crate::dataset::strata::read_forest_types(ds)?,
         })
     }
 }
@@ -435,10 +411,8 @@ fn read_tiles(ds: &Dataset) -> Result<Vec<(TileWindow, String)>> {
     let dir = ds.root().join(tables::TILES);
     let mut out = Vec::new();
     for path in dataset::table_files(&dir).map_err(|e| Error::file(&dir, e))? {
-        for b in reader_builder(&path)?.build().map_err(|e| Error::table(&path, e))? {
-            let b = b.map_err(|e| Error::table(&path, e))?;
-            let c = Columns { b: &b, path: &path };
-            for i in 0..b.num_rows() {
+        read::for_each_batch(&path, None, None, |c| {
+            for i in 0..c.num_rows() {
                 let w = TileWindow {
                     xmin: c.f64("xmin", i)?.unwrap_or(f64::NAN),
                     ymin: c.f64("ymin", i)?.unwrap_or(f64::NAN),
@@ -449,87 +423,10 @@ fn read_tiles(ds: &Dataset) -> Result<Vec<(TileWindow, String)>> {
                 };
                 out.push((w, c.string("content_hash", i)?.unwrap_or_default()));
             }
-        }
+            Ok(())
+        })?;
     }
     Ok(out)
-}
-
-/// Shot → forest type from `strata/` (empty without the table).
-fn read_strata(ds: &Dataset) -> Result<HashMap<u64, String>> {
-    let dir = ds.root().join(tables::STRATA);
-    let mut out = HashMap::new();
-    if !dir.is_dir() {
-        return Ok(out);
-    }
-    for path in dataset::table_files(&dir).map_err(|e| Error::file(&dir, e))? {
-        let builder = reader_builder(&path)?;
-        let mask = ProjectionMask::columns(builder.parquet_schema(), ["shot_number", "forest_type"]);
-        for b in builder.with_projection(mask).build().map_err(|e| Error::table(&path, e))? {
-            let b = b.map_err(|e| Error::table(&path, e))?;
-            let c = Columns { b: &b, path: &path };
-            for i in 0..b.num_rows() {
-                if let (Some(s), Some(f)) = (c.u64("shot_number", i)?, c.string("forest_type", i)?) {
-                    out.insert(s, f);
-                }
-            }
-        }
-    }
-    Ok(out)
-}
-
-/// Typed access to the columns of a batch read from `path`: a missing column or a wrong type
-/// is an error naming the file and the column; a null is `None`.
-struct Columns<'a> {
-    b: &'a RecordBatch,
-    path: &'a Path,
-}
-
-impl Columns<'_> {
-    fn col(&self, name: &str) -> Result<&ArrayRef> {
-        self.b.column_by_name(name).ok_or_else(|| Error::field(self.path, name, "column missing"))
-    }
-
-    fn wrong(&self, name: &str, ty: &str) -> Error {
-        Error::field(self.path, name, format!("not {ty}"))
-    }
-
-    fn f64(&self, name: &str, i: usize) -> Result<Option<f64>> {
-        let c = self.col(name)?.as_primitive_opt::<Float64Type>().ok_or_else(|| self.wrong(name, "float64"))?;
-        Ok(c.is_valid(i).then(|| c.value(i)))
-    }
-
-    fn u8(&self, name: &str, i: usize) -> Result<Option<u8>> {
-        let c = self.col(name)?.as_primitive_opt::<UInt8Type>().ok_or_else(|| self.wrong(name, "uint8"))?;
-        Ok(c.is_valid(i).then(|| c.value(i)))
-    }
-
-    fn u64(&self, name: &str, i: usize) -> Result<Option<u64>> {
-        let c = self.col(name)?.as_primitive_opt::<UInt64Type>().ok_or_else(|| self.wrong(name, "uint64"))?;
-        Ok(c.is_valid(i).then(|| c.value(i)))
-    }
-
-    fn timestamp(&self, name: &str, i: usize) -> Result<Option<i64>> {
-        let c = self
-            .col(name)?
-            .as_primitive_opt::<TimestampMicrosecondType>()
-            .ok_or_else(|| self.wrong(name, "timestamp[µs]"))?;
-        Ok(c.is_valid(i).then(|| c.value(i)))
-    }
-
-    fn string(&self, name: &str, i: usize) -> Result<Option<String>> {
-        let c = self.col(name)?.as_string_opt::<i32>().ok_or_else(|| self.wrong(name, "a string"))?;
-        Ok(c.is_valid(i).then(|| c.value(i).to_string()))
-    }
-
-    fn f32_list(&self, name: &str, i: usize) -> Result<Option<Vec<f32>>> {
-        let c = self.col(name)?.as_list_opt::<i32>().ok_or_else(|| self.wrong(name, "a list"))?;
-        if c.is_null(i) {
-            return Ok(None);
-        }
-        let v = c.value(i);
-        let v = v.as_primitive_opt::<Float32Type>().ok_or_else(|| self.wrong(name, "a list of float32"))?;
-        Ok(Some(v.iter().map(|x| x.unwrap_or(f32::NAN)).collect()))
-    }
 }
 
 /// A shot whose footprint the ALS covers: simulated at its collocated position.
@@ -556,14 +453,10 @@ struct GranulePlan {
 
 /// Pass A of a granule: positions, coverage, and whether its simulation and results are current.
 fn plan_granule(ds: &Dataset, file: GranuleFile, inputs: &StudyInputs, rules: &StudyRules) -> Result<GranulePlan> {
-    let builder = reader_builder(&file.path)?;
-    let mask = ProjectionMask::columns(builder.parquet_schema(), ["shot_number", "x", "y"]);
     let mut covered = Vec::new();
     let mut n = 0;
-    for b in builder.with_projection(mask).build().map_err(|e| Error::table(&file.path, e))? {
-        let b = b.map_err(|e| Error::table(&file.path, e))?;
-        let c = Columns { b: &b, path: &file.path };
-        for i in 0..b.num_rows() {
+    read::for_each_batch(&file.path, Some(&["shot_number", "x", "y"]), None, |c| {
+        for i in 0..c.num_rows() {
             let row = n + i;
             let Some(sn) = c.u64("shot_number", i)? else { continue };
             let (Some(x), Some(y)) = (c.f64("x", i)?, c.f64("y", i)?) else { continue };
@@ -574,8 +467,9 @@ fn plan_granule(ds: &Dataset, file: GranuleFile, inputs: &StudyInputs, rules: &S
                 covered.push(CoveredShot { row, footprint: Footprint { id: sn.to_string(), x, y }, offset });
             }
         }
-        n += b.num_rows();
-    }
+        n += c.num_rows();
+        Ok(())
+    })?;
     // What the simulation depends on: the granule's content, the simulated positions and
     // offsets, the tiles under them, the simulator.
     let mut h = Sha256::new();
@@ -619,14 +513,14 @@ fn plan_granule(ds: &Dataset, file: GranuleFile, inputs: &StudyInputs, rules: &S
 
     let sim_path = ds.table_file(tables::SIM, &file.key)?;
     let results_path = ds.table_file(tables::RESULTS, &file.key)?;
-    let sim_meta = file_metadata(&sim_path);
+    let sim_meta = read::key_value_metadata(&sim_path);
     let needs_sim = !covered.is_empty() && sim_meta.as_ref().and_then(|m| m.get(META_INPUT)) != Some(&sim_input);
     if covered.is_empty() && sim_meta.is_some_and(|m| m.contains_key(META_INPUT)) {
         // This run's own simulation of shots no longer covered: stale.
         std::fs::remove_file(&sim_path)
             .map_err(|e| Error::file(&sim_path, format!("cannot remove a stale simulation: {e}")))?;
     }
-    let results_meta = file_metadata(&results_path);
+    let results_meta = read::key_value_metadata(&results_path);
     let previous = results_meta
         .filter(|m| m.get(META_INPUT) == Some(&results_input))
         .and_then(|m| FilterCounts::from_json(&serde_json::from_str(m.get(META_COUNTS)?).ok()?));
@@ -720,8 +614,6 @@ fn read_shot_facts(path: &Path, rows: impl Iterator<Item = usize>) -> Result<Vec
     if rows.is_empty() {
         return Ok(Vec::new());
     }
-    let builder = reader_builder(path)?;
-    let total = builder.metadata().file_metadata().num_rows() as usize;
     let mut names: Vec<String> = [
         "shot_number",
         "granule",
@@ -747,19 +639,10 @@ fn read_shot_facts(path: &Path, rows: impl Iterator<Item = usize>) -> Result<Vec
             format!("rh_a{n}"),
         ]);
     }
-    let schema = builder.schema().clone();
-    if let Some(missing) = names.iter().find(|n| schema.field_with_name(n).is_err()) {
-        return Err(Error::field(path, missing.as_str(), "column missing from the shots table"));
-    }
-    let mask = ProjectionMask::columns(builder.parquet_schema(), names.iter().map(String::as_str));
-    let selection = crate::dataset::row_selection(&rows, total);
-    let reader =
-        builder.with_projection(mask).with_row_selection(selection).build().map_err(|e| Error::table(path, e))?;
+    let names: Vec<&str> = names.iter().map(String::as_str).collect();
     let mut out = Vec::with_capacity(rows.len());
-    for b in reader {
-        let b = b.map_err(|e| Error::table(path, e))?;
-        let c = Columns { b: &b, path };
-        for i in 0..b.num_rows() {
+    read::for_each_batch(path, Some(&names), Some(&rows), |c| {
+        for i in 0..c.num_rows() {
             let alg = |suffix: &str| -> Result<AlgorithmFacts> {
                 Ok(AlgorithmFacts {
                     quality_flag: c.u8(&format!("quality_flag{suffix}"), i)?,
@@ -782,7 +665,8 @@ fn read_shot_facts(path: &Path, rows: impl Iterator<Item = usize>) -> Result<Vec
                 algorithms,
             });
         }
-    }
+        Ok(())
+    })?;
     if out.len() != rows.len() {
         return Err(Error::table(path, format!("read {} shots for {} rows", out.len(), rows.len())));
     }
@@ -791,16 +675,10 @@ fn read_shot_facts(path: &Path, rows: impl Iterator<Item = usize>) -> Result<Vec
 
 /// Shot → the three weightings' simulation facts of a `sim/` file.
 fn read_sim_facts(path: &Path) -> Result<HashMap<u64, [SimFacts; 3]>> {
-    let builder = reader_builder(path)?;
-    let mask = ProjectionMask::columns(
-        builder.parquet_schema(),
-        ["footprint_id", "weighting", "status", "als_ground", "slope_deg", "als_cover", "rh"],
-    );
+    let columns = ["footprint_id", "weighting", "status", "als_ground", "slope_deg", "als_cover", "rh"];
     let mut out: HashMap<u64, [SimFacts; 3]> = HashMap::new();
-    for b in builder.with_projection(mask).build().map_err(|e| Error::table(path, e))? {
-        let b = b.map_err(|e| Error::table(path, e))?;
-        let c = Columns { b: &b, path };
-        for i in 0..b.num_rows() {
+    read::for_each_batch(path, Some(&columns), None, |c| {
+        for i in 0..c.num_rows() {
             let id = c.string("footprint_id", i)?.unwrap_or_default();
             let sn: u64 =
                 id.parse().map_err(|_| Error::field(path, "footprint_id", format!("`{id}` is not a shot number")))?;
@@ -816,6 +694,7 @@ fn read_sim_facts(path: &Path) -> Result<HashMap<u64, [SimFacts; 3]>> {
                 rh: c.f32_list("rh", i)?,
             };
         }
-    }
+        Ok(())
+    })?;
     Ok(out)
 }

@@ -5,15 +5,16 @@
 
 use std::path::{Path, PathBuf};
 
-use chrono::{DateTime, Datelike, Duration, TimeZone, Timelike, Utc};
+use chrono::{DateTime, TimeZone, Utc};
 
 use crate::error::{Error, Result};
-use crate::io::granule::{v2_file_name, write_l1b_v2, write_l2a_v2, Beam, GranuleMeta};
+use crate::io::granule::{write_l1b_v2, write_l2a_v2, Beam, GranuleMeta};
 use crate::io::las::TileReader;
 use crate::kernels::gedi::{beam_number, BeamType, BEAM_NAMES};
 use crate::kernels::gedi::{L1bShot, L2aShot, LandCover};
 use crate::kernels::geo::projection::Projector;
 use crate::kernels::scenario::effects::{EffectSet, Physics, NOMINAL_FSIGMA_M};
+use crate::kernels::scenario::granules::{delta_time, granule_ids, is_leaf_off, GROUND_SPEED_M_S};
 use crate::kernels::scenario::plan::{plan, Extent, PlanSettings};
 use crate::kernels::scenario::real::{self, ENERGY_LOG_SPREAD, NOISE_MEAN_SPREAD, NOISE_STDDEV_LOG_SPREAD};
 use crate::kernels::scenario::rng::Stream;
@@ -29,13 +30,6 @@ use crate::kernels::waveform::l2a::Noise;
 /// Default nominal geoid height N (m): EGM2008/RAF20 N over metropolitan France spans about
 /// 44–55 m; 49 m is typical of the Massif Central and Alpine foothills.
 pub const DEFAULT_GEOID_M: f64 = 49.0;
-/// Ground speed of the ISS footprint (m/s), for the time between shots.
-const GROUND_SPEED_M_S: f64 = 7000.0;
-/// GEDI epoch (`delta_time` = 0).
-const GEDI_EPOCH_UNIX_S: i64 = 1_514_764_800; // 2018-01-01T00:00:00Z
-/// A GEDI orbit (s) and one orbit's reference time (orbit 1964 started ≈ 2019-04-18 08:03 UTC).
-const ORBIT_S: f64 = 5554.0;
-const ORBIT_1964_DELTA_TIME: f64 = 40_809_818.0;
 
 /// Options of one world.
 #[derive(Debug, Clone)]
@@ -81,11 +75,6 @@ struct Tile {
     acquired: Option<DateTime<Utc>>,
 }
 
-/// Month rule of tests/data/als/PROVENANCE.md: May–October leaf-on, November–April leaf-off.
-fn is_leaf_off(date: Option<DateTime<Utc>>) -> bool {
-    date.map(|d| !(5..=10).contains(&d.month())).unwrap_or(false)
-}
-
 fn read_tile(path: &Path, default_epsg: u32) -> Result<Tile> {
     let reader = TileReader::open(path)?;
     let h = reader.header().clone();
@@ -110,15 +99,6 @@ fn read_tile(path: &Path, default_epsg: u32) -> Result<Tile> {
         epsg: h.epsg.unwrap_or(default_epsg),
         acquired,
     })
-}
-
-/// `YYYYDDDHHMMSS` of a time.
-fn gedi_start(t: DateTime<Utc>) -> String {
-    format!("{:04}{:03}{:02}{:02}{:02}", t.year(), t.ordinal(), t.hour(), t.minute(), t.second())
-}
-
-fn delta_time(t: DateTime<Utc>) -> f64 {
-    (t.timestamp() - GEDI_EPOCH_UNIX_S) as f64 + f64::from(t.timestamp_subsec_micros()) * 1e-6
 }
 
 /// Build the world and write it under `opts.out`.
@@ -157,40 +137,8 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
     let layout = plan(&extents, &settings, opts.seed);
 
     // Granule identities.
-    struct Granule {
-        tile: usize,
-        pass: usize,
-        start: DateTime<Utc>,
-        orbit: u32,
-        sub_orbit: u8,
-        track: u32,
-        l1b: String,
-        l2a: String,
-    }
-    let fallback = Utc.with_ymd_and_hms(2022, 7, 1, 10, 0, 0).single().expect("valid date");
-    let mut granules = Vec::new();
-    for (t, tile) in tiles.iter().enumerate() {
-        for pass in 0..opts.passes_per_tile {
-            let mut g = Stream::new(opts.seed, &["granule", &t.to_string(), &pass.to_string()]);
-            let day = tile.acquired.unwrap_or(fallback).date_naive().and_hms_opt(0, 0, 0).expect("midnight").and_utc();
-            let start =
-                day + Duration::days(7 * pass as i64) + Duration::seconds(3600 * 6 + (g.uniform() * 43_200.0) as i64);
-            let orbit = (1964.0 + ((delta_time(start) - ORBIT_1964_DELTA_TIME) / ORBIT_S).floor()).max(1.0) as u32;
-            let sub_orbit = 1 + (g.next_u64() % 4) as u8;
-            let track = 1 + (g.next_u64() % 4470) as u32;
-            let s = gedi_start(start);
-            granules.push(Granule {
-                tile: t,
-                pass,
-                start,
-                orbit,
-                sub_orbit,
-                track,
-                l1b: v2_file_name("01_B", &s, orbit, sub_orbit, track),
-                l2a: v2_file_name("02_A", &s, orbit, sub_orbit, track),
-            });
-        }
-    }
+    let acquired: Vec<Option<DateTime<Utc>>> = tiles.iter().map(|t| t.acquired).collect();
+    let granules = granule_ids(opts.seed, &acquired, opts.passes_per_tile);
 
     // Simulate every tile's shots at their true positions with the true physics.
     let mut sims = vec![None; layout.shots.len()];
@@ -395,7 +343,7 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
                 start_utc: g.start.to_rfc3339(),
                 orbit: g.orbit,
                 sub_orbit: g.sub_orbit,
-                reference_track: g.track,
+                reference_track: g.reference_track,
                 heading_deg: layout.tracks.iter().find(|t| t.granule == i).map(|t| t.heading_deg),
             })
             .collect(),

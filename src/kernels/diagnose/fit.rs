@@ -13,18 +13,8 @@ use super::profile::{self, ShotProfile};
 use crate::kernels::gedi::N_ALGORITHMS;
 use crate::kernels::scenario::effects::{Effect, GeoLevel, WeightMethod, NOMINAL_PULSE_SIGMA_M};
 
-/// The effects the diagnosis fits, in registry order.
-pub const FITTED_EFFECTS: [&str; 9] = [
-    "geolocation",
-    "datum",
-    "weighting",
-    "pulse",
-    "footprint",
-    "noise",
-    "canopy_change",
-    "occlusion",
-    "ground_detection",
-];
+/// The effects the diagnosis fits: every effect of the registry, in its order.
+pub const FITTED_EFFECTS: [&str; 9] = crate::kernels::scenario::effects::EFFECT_NAMES;
 
 /// The `geolocation` hypotheses: every segment re-placed as one (`beam`: the reference a per-shot
 /// error is judged against, since the per-track collocation leaves an error of its own) and every

@@ -6,6 +6,7 @@
 //! and written by `ops::scenario`.
 
 pub mod effects;
+pub mod granules;
 pub mod plan;
 pub mod real;
 pub mod rng;

@@ -175,3 +175,15 @@ mod tests {
         assert_eq!(parse_forest_type("pine"), None);
     }
 }
+
+/// One shot's stratum.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stratum {
+    pub shot_number: u64,
+    pub forest_type: &'static str,
+    /// CLC level-3 code sampled (raster input only).
+    pub clc_code: Option<u16>,
+}
+
+/// A shot's number and WGS84 position (lon, lat), if any.
+pub type ShotPosition = (u64, Option<(f64, f64)>);

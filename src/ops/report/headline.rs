@@ -40,11 +40,12 @@ pub struct Headline {
 }
 
 fn read(path: &Path) -> Result<Vec<RecordBatch>> {
-    let file = std::fs::File::open(path).map_err(|e| Error::file(path, e))?;
-    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .and_then(|b| b.build())
-        .map_err(|e| Error::table(path, e))?;
-    reader.map(|b| b.map_err(|e| Error::table(path, e))).collect()
+    let mut out = Vec::new();
+    crate::dataset::read::for_each_batch(path, None, None, |c| {
+        out.push(c.batch().clone());
+        Ok(())
+    })?;
+    Ok(out)
 }
 
 fn strings(b: &RecordBatch, path: &Path, name: &str) -> Result<Vec<String>> {

@@ -1,0 +1,53 @@
+//! The `strata/` table: the forest type of every shot (docs/schemas.md).
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use arrow::array::{ArrayRef, StringArray, UInt16Array, UInt64Array};
+use arrow::datatypes::{DataType, Field, Schema, SchemaRef};
+use arrow::record_batch::RecordBatch;
+
+use super::{read, tables, Dataset};
+use crate::error::{Error, Result};
+use crate::kernels::study::classes::Stratum;
+
+/// Schema of the `strata` table.
+pub fn strata_schema() -> SchemaRef {
+    Arc::new(Schema::new(vec![
+        Field::new("shot_number", DataType::UInt64, false),
+        Field::new("forest_type", DataType::Utf8, false),
+        Field::new("source", DataType::Utf8, false),
+        Field::new("clc_code", DataType::UInt16, true),
+    ]))
+}
+
+/// Strata rows as a record batch.
+pub fn strata_batch(strata: &[Stratum], source: &str) -> Result<RecordBatch> {
+    let columns: Vec<ArrayRef> = vec![
+        Arc::new(strata.iter().map(|s| s.shot_number).collect::<UInt64Array>()),
+        Arc::new(strata.iter().map(|s| Some(s.forest_type)).collect::<StringArray>()),
+        Arc::new(StringArray::from(vec![source; strata.len()])),
+        Arc::new(strata.iter().map(|s| s.clc_code).collect::<UInt16Array>()),
+    ];
+    RecordBatch::try_new(strata_schema(), columns).map_err(|e| Error::table("strata", e))
+}
+
+/// Shot → forest type from `strata/` (empty without the table).
+pub fn read_forest_types(ds: &Dataset) -> Result<HashMap<u64, String>> {
+    let mut out = HashMap::new();
+    if !ds.has_table(tables::STRATA) {
+        return Ok(out);
+    }
+    let dir = ds.root().join(tables::STRATA);
+    for path in super::table_files(&dir).map_err(|e| Error::file(&dir, e))? {
+        read::for_each_batch(&path, Some(&["shot_number", "forest_type"]), None, |c| {
+            for i in 0..c.num_rows() {
+                if let (Some(s), Some(f)) = (c.u64("shot_number", i)?, c.string("forest_type", i)?) {
+                    out.insert(s, f);
+                }
+            }
+            Ok(())
+        })?;
+    }
+    Ok(out)
+}

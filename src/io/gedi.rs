@@ -1,0 +1,406 @@
+//! GEDI L1B and L2A HDF5 granules (V1 and V2 layouts, docs/gedi-products.md §2–§3) read beam by
+//! beam: the datasets `ops::ingest_gedi` joins into the `shots` table. Facts relied on:
+//! `shot_number` is uint64 (int64 in some old subsets; never float); `rx_sample_start_index` is
+//! **1-based**; L2A `geolocation/rh_aN` is integer centimetres while root `rh` is metres; V1 has no
+//! `land_cover_data/leaf_off_flag`.
+
+use std::path::Path;
+
+use hdf5::types::{FixedAscii, FixedUnicode, H5Type, TypeDescriptor, VarLenAscii, VarLenUnicode};
+use hdf5::{Dataset, File, Group, Location};
+
+use crate::error::{one_line, Error, Result};
+use crate::kernels::gedi::{is_beam_group, N_ALGORITHMS, RH_LEN};
+
+// ---------------------------------------------------------------------------------------------
+// HDF5 access
+// ---------------------------------------------------------------------------------------------
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Product {
+    L1b,
+    L2a,
+}
+
+impl Product {
+    pub fn short_name(self) -> &'static str {
+        match self {
+            Product::L1b => "GEDI_L1B",
+            Product::L2a => "GEDI_L2A",
+        }
+    }
+}
+
+/// An open granule file.
+pub struct Granule<'a> {
+    pub path: &'a Path,
+    pub file: File,
+}
+
+pub fn open_product(path: &Path, product: Product) -> Result<Granule<'_>> {
+    let file = File::open(path).map_err(|e| Error::file(path, format!("cannot open as HDF5: {e}")))?;
+    // A swapped --l1b/--l2a would otherwise fail later with a confusing "missing dataset".
+    if let Some(name) = read_str_attr(&file, "short_name") {
+        let other = if product == Product::L1b { Product::L2a } else { Product::L1b };
+        if name.trim() == other.short_name() {
+            return Err(Error::field(
+                path,
+                "short_name",
+                format!("file is {name} but was given as {}", product.short_name()),
+            ));
+        }
+    }
+    Ok(Granule { path, file })
+}
+
+/// Read a scalar string attribute of any HDF5 string flavour; `None` if absent or not a string.
+pub fn read_str_attr(loc: &Location, name: &str) -> Option<String> {
+    let attr = loc.attr(name).ok()?;
+    let r = attr.as_reader();
+    let s = match attr.dtype().ok()?.to_descriptor().ok()? {
+        TypeDescriptor::VarLenUnicode => r.read_raw::<VarLenUnicode>().ok()?.first()?.to_string(),
+        TypeDescriptor::VarLenAscii => r.read_raw::<VarLenAscii>().ok()?.first()?.to_string(),
+        TypeDescriptor::FixedAscii(_) => r.read_raw::<FixedAscii<256>>().ok()?.first()?.to_string(),
+        TypeDescriptor::FixedUnicode(_) => r.read_raw::<FixedUnicode<256>>().ok()?.first()?.to_string(),
+        _ => return None,
+    };
+    Some(s)
+}
+
+impl<'a> Granule<'a> {
+    pub fn beams(&self) -> Result<Vec<String>> {
+        let names = self.file.member_names().map_err(|e| Error::file(self.path, format!("cannot list groups: {e}")))?;
+        Ok(names.into_iter().filter(|n| is_beam_group(n)).collect())
+    }
+
+    pub fn beam(&self, name: &str) -> Result<Option<BeamGroup<'a>>> {
+        if !self.file.link_exists(name) {
+            return Ok(None);
+        }
+        let group = self.file.group(name).map_err(|e| Error::field(self.path, name, e))?;
+        let mut g = BeamGroup { path: self.path, beam: name.to_string(), group, n: 0 };
+        g.n = g.shot_numbers_len()?;
+        Ok(Some(g))
+    }
+}
+
+/// Numeric element types a dataset can be read into (HDF5 converts from the file's dtype).
+pub trait Numeric: H5Type + Copy {
+    /// Whether the target is a float (integer targets refuse float sources: no silent truncation).
+    const FLOAT: bool;
+}
+macro_rules! numeric {
+    ($($t:ty => $float:expr),*) => { $(impl Numeric for $t { const FLOAT: bool = $float; })* };
+}
+numeric!(u8 => false, i8 => false, i16 => false, u64 => false, i64 => false, f32 => true, f64 => true);
+
+/// Expected shape of a dataset in a beam group with `n` shots.
+#[derive(Clone, Copy)]
+pub enum Shape {
+    /// `(n,)`.
+    PerShot,
+    /// `(n, k)`.
+    Rows(usize),
+    /// Any 1-D length (flat waveform arrays).
+    Flat,
+}
+
+/// One beam group of one file, with its shot count.
+pub struct BeamGroup<'a> {
+    pub path: &'a Path,
+    pub beam: String,
+    pub group: Group,
+    pub n: usize,
+}
+
+impl BeamGroup<'_> {
+    pub fn field(&self, rel: &str) -> String {
+        format!("{}/{rel}", self.beam)
+    }
+
+    pub fn err(&self, rel: &str, msg: impl std::fmt::Display) -> Error {
+        Error::field(self.path, self.field(rel), one_line(&msg.to_string()))
+    }
+
+    /// The dataset at `rel` (e.g. `geolocation/elevation_bin0`), or `None` if any component is absent.
+    pub fn dataset(&self, rel: &str) -> Result<Option<Dataset>> {
+        let (dirs, name) = rel.rsplit_once('/').unwrap_or(("", rel));
+        let mut g = self.group.clone();
+        for part in dirs.split('/').filter(|p| !p.is_empty()) {
+            if !g.link_exists(part) {
+                return Ok(None);
+            }
+            g = g.group(part).map_err(|e| self.err(rel, e))?;
+        }
+        if !g.link_exists(name) {
+            return Ok(None);
+        }
+        g.dataset(name).map(Some).map_err(|e| self.err(rel, e))
+    }
+
+    pub fn require_dataset(&self, rel: &str) -> Result<Dataset> {
+        self.dataset(rel)?.ok_or_else(|| self.err(rel, "missing"))
+    }
+
+    /// Check the dataset's shape against the beam's shot count.
+    pub fn check_shape(&self, rel: &str, ds: &Dataset, shape: Shape) -> Result<()> {
+        let dims = ds.shape();
+        let ok = match shape {
+            Shape::PerShot => dims == [self.n],
+            Shape::Rows(k) => dims == [self.n, k],
+            Shape::Flat => dims.len() == 1,
+        };
+        if ok {
+            return Ok(());
+        }
+        let expected = match shape {
+            Shape::PerShot => format!("({},)", self.n),
+            Shape::Rows(k) => format!("({}, {k})", self.n),
+            Shape::Flat => "1-D".to_string(),
+        };
+        Err(self.err(
+            rel,
+            format!("shape {dims:?} does not match {expected} ({}/shot_number has {} shots)", self.beam, self.n),
+        ))
+    }
+
+    /// Read a numeric dataset into `Vec<T>` (row-major), converting from the file's dtype.
+    pub fn read_ds<T: Numeric>(&self, rel: &str, ds: &Dataset, shape: Shape) -> Result<Vec<T>> {
+        self.check_shape(rel, ds, shape)?;
+        let desc = ds.dtype().and_then(|t| t.to_descriptor()).map_err(|e| self.err(rel, e))?;
+        match desc {
+            TypeDescriptor::Float(_) if !T::FLOAT => {
+                return Err(self.err(rel, format!("expected an integer dtype, found {desc}")));
+            }
+            TypeDescriptor::Integer(_) | TypeDescriptor::Unsigned(_) | TypeDescriptor::Float(_) => {}
+            _ => return Err(self.err(rel, format!("expected a numeric dtype, found {desc}"))),
+        }
+        ds.read_raw::<T>().map_err(|e| self.err(rel, e))
+    }
+
+    /// A required dataset: missing ⇒ `<file>: BEAMxxxx/<rel>: missing`.
+    pub fn require<T: Numeric>(&self, rel: &str, shape: Shape) -> Result<Vec<T>> {
+        let ds = self.require_dataset(rel)?;
+        self.read_ds(rel, &ds, shape)
+    }
+
+    /// An optional dataset: `None` when absent, an error when present but malformed.
+    pub fn optional<T: Numeric>(&self, rel: &str, shape: Shape) -> Result<Option<Vec<T>>> {
+        self.dataset(rel)?.map(|ds| self.read_ds(rel, &ds, shape)).transpose()
+    }
+
+    pub fn shot_numbers_len(&self) -> Result<usize> {
+        let ds = self.require_dataset("shot_number")?;
+        match ds.shape().as_slice() {
+            [n] => Ok(*n),
+            dims => Err(self.err("shot_number", format!("shape {dims:?} is not 1-D"))),
+        }
+    }
+
+    /// `shot_number` as u64, never through a float (values exceed 2^53); int64 is accepted and cast.
+    pub fn shot_numbers(&self) -> Result<Vec<u64>> {
+        let rel = "shot_number";
+        let ds = self.require_dataset(rel)?;
+        self.check_shape(rel, &ds, Shape::PerShot)?;
+        let desc = ds.dtype().and_then(|t| t.to_descriptor()).map_err(|e| self.err(rel, e))?;
+        match desc {
+            TypeDescriptor::Unsigned(_) => ds.read_raw::<u64>().map_err(|e| self.err(rel, e)),
+            TypeDescriptor::Integer(_) => {
+                let v = ds.read_raw::<i64>().map_err(|e| self.err(rel, e))?;
+                v.into_iter()
+                    .map(|s| u64::try_from(s).map_err(|_| self.err(rel, format!("negative shot number {s}"))))
+                    .collect()
+            }
+            _ => {
+                Err(self
+                    .err(rel, format!("expected an integer dtype (a float cannot hold shot numbers), found {desc}")))
+            }
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Beam contents
+// ---------------------------------------------------------------------------------------------
+
+/// A flat waveform array with each shot's (0-based start, count), validated against its length.
+pub struct Waveforms {
+    pub samples: Vec<f32>,
+    pub spans: Vec<(usize, usize)>,
+}
+
+impl Waveforms {
+    pub fn get(&self, i: usize) -> &[f32] {
+        let (s, c) = self.spans[i];
+        &self.samples[s..s + c]
+    }
+}
+
+/// Read `<wave>`, `<prefix>_sample_start_index` (1-based) and `<prefix>_sample_count`; `None`
+/// when any of the three is absent (the caller decides whether that is an error).
+pub fn read_waveforms(g: &BeamGroup, shots: &[u64], wave: &str, prefix: &str) -> Result<Option<Waveforms>> {
+    let start_rel = format!("{prefix}_sample_start_index");
+    let count_rel = format!("{prefix}_sample_count");
+    let (w, s, c) = match (g.dataset(wave)?, g.dataset(&start_rel)?, g.dataset(&count_rel)?) {
+        (Some(w), Some(s), Some(c)) => (w, s, c),
+        _ => return Ok(None),
+    };
+    let samples = g.read_ds::<f32>(wave, &w, Shape::Flat)?;
+    let start = g.read_ds::<u64>(&start_rel, &s, Shape::PerShot)?;
+    let count = g.read_ds::<u64>(&count_rel, &c, Shape::PerShot)?;
+    let len = samples.len() as u64;
+    let mut spans = Vec::with_capacity(shots.len());
+    for ((&shot, &s), &c) in shots.iter().zip(&start).zip(&count) {
+        if s == 0 {
+            return Err(g.err(&start_rel, format!("shot {shot}: index 0, but GEDI's start index is 1-based")));
+        }
+        // 1-based: the shot's samples are [s-1, s-1+c).
+        let end = (s - 1).checked_add(c).filter(|&e| e <= len).ok_or_else(|| {
+            g.err(&start_rel, format!("shot {shot}: start {s} + {count_rel} {c} - 1 exceeds the {wave} length {len}"))
+        })?;
+        spans.push(((s - 1) as usize, (end - (s - 1)) as usize));
+    }
+    Ok(Some(Waveforms { samples, spans }))
+}
+
+/// The L1B datasets of one beam that the shots table uses.
+pub struct L1bBeam {
+    pub shot_number: Vec<u64>,
+    pub delta_time: Option<Vec<f64>>,
+    pub rx: Waveforms,
+    pub tx: Option<Waveforms>,
+    pub elevation_bin0: Vec<f64>,
+    pub elevation_lastbin: Vec<f64>,
+    pub lat_bin0: Vec<f64>,
+    pub lon_bin0: Vec<f64>,
+    pub lat_lastbin: Vec<f64>,
+    pub lon_lastbin: Vec<f64>,
+    pub noise_mean: Option<Vec<f64>>,
+    pub noise_stddev: Option<Vec<f64>>,
+    pub stale_return_flag: Option<Vec<u8>>,
+    pub degrade: Option<Vec<i8>>,
+    pub geoid: Option<Vec<f64>>,
+}
+
+pub fn read_l1b(g: &BeamGroup) -> Result<L1bBeam> {
+    use Shape::PerShot;
+    let shot_number = g.shot_numbers()?;
+    // Name the first missing waveform dataset (read_waveforms only says "not all present").
+    for rel in ["rxwaveform", "rx_sample_start_index", "rx_sample_count"] {
+        g.require_dataset(rel)?;
+    }
+    // The coordinates are required: NaN or out-of-range values are an error naming the field.
+    let coord = |rel: &str, limit: f64| -> Result<Vec<f64>> {
+        let v = g.require::<f64>(rel, PerShot)?;
+        if let Some((i, x)) = v.iter().enumerate().find(|(_, x)| !(x.is_finite() && x.abs() <= limit)) {
+            return Err(g.err(rel, format!("shot {}: invalid coordinate {x}", shot_number[i])));
+        }
+        Ok(v)
+    };
+    Ok(L1bBeam {
+        delta_time: g.optional("delta_time", PerShot)?,
+        rx: read_waveforms(g, &shot_number, "rxwaveform", "rx")?.ok_or_else(|| g.err("rxwaveform", "missing"))?,
+        tx: read_waveforms(g, &shot_number, "txwaveform", "tx")?,
+        elevation_bin0: g.require("geolocation/elevation_bin0", PerShot)?,
+        elevation_lastbin: g.require("geolocation/elevation_lastbin", PerShot)?,
+        lat_bin0: coord("geolocation/latitude_bin0", 90.0)?,
+        lon_bin0: coord("geolocation/longitude_bin0", 360.0)?,
+        lat_lastbin: coord("geolocation/latitude_lastbin", 90.0)?,
+        lon_lastbin: coord("geolocation/longitude_lastbin", 360.0)?,
+        noise_mean: g.optional("noise_mean_corrected", PerShot)?,
+        noise_stddev: g.optional("noise_stddev_corrected", PerShot)?,
+        stale_return_flag: g.optional("stale_return_flag", PerShot)?,
+        degrade: g.optional("geolocation/degrade", PerShot)?,
+        geoid: g.optional("geophys_corr/geoid", PerShot)?,
+        shot_number,
+    })
+}
+
+/// One algorithm's per-shot outputs (each optional).
+pub struct L2aAlgorithm {
+    pub elev_lowestmode: Option<Vec<f64>>,
+    /// RH in metres (converted from the stored centimetres), row-major N×101.
+    pub rh: Option<Vec<f32>>,
+    pub sensitivity: Option<Vec<f64>>,
+    pub quality_flag: Option<Vec<u8>>,
+    pub toploc: Option<Vec<f64>>,
+    pub botloc: Option<Vec<f64>>,
+    pub zcross: Option<Vec<f64>>,
+}
+
+/// The L2A datasets of one beam that the shots table uses.
+pub struct L2aBeam {
+    pub shot_number: Vec<u64>,
+    pub delta_time: Option<Vec<f64>>,
+    pub quality_flag: Vec<u8>,
+    pub degrade_flag: Vec<u8>,
+    pub sensitivity: Vec<f64>,
+    pub selected_algorithm: Vec<u8>,
+    pub elev_lowestmode: Vec<f64>,
+    pub lat_lowestmode: Option<Vec<f64>>,
+    pub lon_lowestmode: Option<Vec<f64>>,
+    /// Metres, row-major N×101.
+    pub rh: Vec<f32>,
+    pub energy_total: Option<Vec<f64>>,
+    pub algorithms: Vec<L2aAlgorithm>,
+    pub leaf_off_flag: Option<Vec<u8>>,
+    pub leaf_off_doy: Option<Vec<i16>>,
+    pub leaf_on_doy: Option<Vec<i16>>,
+    pub pft_class: Option<Vec<u8>>,
+    pub region_class: Option<Vec<u8>>,
+    pub urban_proportion: Option<Vec<u8>>,
+    pub landsat_water_persistence: Option<Vec<u8>>,
+}
+
+pub fn read_l2a(g: &BeamGroup) -> Result<L2aBeam> {
+    use Shape::{PerShot, Rows};
+    let algorithms = (1..=N_ALGORITHMS)
+        .map(|n| {
+            let geo = |name: &str| format!("geolocation/{name}_a{n}");
+            let rxp = |name: &str| format!("rx_processing_a{n}/{name}");
+            // rh_aN is integer centimetres (int32 in V1, int16 in V2); f64 holds either exactly.
+            let rh_cm = g.optional::<f64>(&geo("rh"), Rows(RH_LEN))?;
+            Ok(L2aAlgorithm {
+                elev_lowestmode: g.optional(&geo("elev_lowestmode"), PerShot)?,
+                rh: rh_cm.map(|v| v.into_iter().map(|cm| (cm / 100.0) as f32).collect()),
+                sensitivity: g.optional(&geo("sensitivity"), PerShot)?,
+                quality_flag: g.optional(&geo("quality_flag"), PerShot)?,
+                toploc: g.optional(&rxp("toploc"), PerShot)?,
+                botloc: g.optional(&rxp("botloc"), PerShot)?,
+                zcross: g.optional(&rxp("zcross"), PerShot)?,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let lc = |name: &str| format!("land_cover_data/{name}");
+    Ok(L2aBeam {
+        shot_number: g.shot_numbers()?,
+        delta_time: g.optional("delta_time", PerShot)?,
+        quality_flag: g.require("quality_flag", PerShot)?,
+        degrade_flag: g.require("degrade_flag", PerShot)?,
+        sensitivity: g.require("sensitivity", PerShot)?,
+        selected_algorithm: g.require("selected_algorithm", PerShot)?,
+        elev_lowestmode: g.require("elev_lowestmode", PerShot)?,
+        lat_lowestmode: g.optional("lat_lowestmode", PerShot)?,
+        lon_lowestmode: g.optional("lon_lowestmode", PerShot)?,
+        rh: g.require("rh", Rows(RH_LEN))?,
+        energy_total: g.optional("energy_total", PerShot)?,
+        algorithms,
+        leaf_off_flag: g.optional(&lc("leaf_off_flag"), PerShot)?,
+        leaf_off_doy: g.optional(&lc("leaf_off_doy"), PerShot)?,
+        leaf_on_doy: g.optional(&lc("leaf_on_doy"), PerShot)?,
+        pft_class: g.optional(&lc("pft_class"), PerShot)?,
+        region_class: g.optional(&lc("region_class"), PerShot)?,
+        urban_proportion: g.optional(&lc("urban_proportion"), PerShot)?,
+        landsat_water_persistence: g.optional(&lc("landsat_water_persistence"), PerShot)?,
+    })
+}
+
+impl L2aBeam {
+    /// The lowest-mode (lat, lon) of shot `i` when both are valid coordinates.
+    pub fn lowestmode(&self, i: usize) -> Option<(f64, f64)> {
+        let lat = self.lat_lowestmode.as_ref()?[i];
+        let lon = self.lon_lowestmode.as_ref()?[i];
+        let valid = lat.is_finite() && lon.is_finite() && lat.abs() <= 90.0 && lon.abs() <= 360.0;
+        valid.then_some((lat, lon))
+    }
+}
