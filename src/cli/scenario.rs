@@ -4,7 +4,6 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use gedisim::ops::ingest_als::{self as als};
 use gedisim::{Error, Result};
 
 #[derive(Args)]
@@ -55,21 +54,12 @@ pub fn scenario(a: ScenarioArgs) -> Result<()> {
                 .ok_or_else(|| Error::Usage(format!("--param {p}: expected key=value")))
         })
         .collect::<Result<Vec<_>>>()?;
-    let effects = gedisim::kernels::scenario::EffectSet::parse(&a.effect, a.magnitude, &params)
-        .map_err(|e| Error::Usage(e.to_string()))?;
-    let inputs = if a.als.is_empty() {
-        vec![PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/als")]
-    } else {
-        a.als.clone()
-    };
-    let tiles = als::expand_inputs(&inputs)?;
     let opts = gedisim::ops::scenario::ScenarioOptions {
         effect_spec: a.effect.clone(),
-        effects,
         magnitude: a.magnitude,
         params,
         seed: a.seed,
-        tiles,
+        tiles: a.als.clone(),
         out: a.out.clone(),
         passes_per_tile: a.passes,
         geoid_m: a.geoid,

@@ -18,11 +18,6 @@ use crate::ops::report::ReportSummary;
 use crate::ops::run::{run_study, RunOptions, RunReport};
 use crate::ops::scenario::{make_scenario, ScenarioOptions, ScenarioReport, DEFAULT_GEOID_M};
 
-/// The tiles bundled with the source (`tests/data/als`).
-pub fn bundled_tiles() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/als")
-}
-
 /// Options of `gedisim demo`.
 #[derive(Debug, Clone)]
 pub struct DemoOptions {
@@ -76,7 +71,8 @@ pub fn demo_collocation() -> CollocateOptions {
 
 /// scenario → run → report → diagnose on the bundled tiles.
 pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoReport> {
-    let effects = EffectSet::parse(&opts.effect, None, &[]).map_err(|e| Error::Usage(e.to_string()))?;
+    // A bad --effect fails here, before any folder is touched.
+    EffectSet::parse(&opts.effect, None, &[]).map_err(|e| Error::Usage(e.to_string()))?;
     let (world_dir, ds_dir) = layout(&opts.out);
     let truth = world_dir.join("truth.json");
     let mut reuse = false;
@@ -109,15 +105,13 @@ pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoRepor
     let world = if reuse {
         None
     } else {
-        let tiles = crate::ops::ingest_als::expand_inputs(&[bundled_tiles()])?;
         progress.start(Step::Scenario, 0);
         let r = make_scenario(&ScenarioOptions {
             effect_spec: opts.effect.clone(),
-            effects,
             magnitude: None,
             params: Vec::new(),
             seed: opts.seed,
-            tiles,
+            tiles: Vec::new(),
             out: world_dir.clone(),
             passes_per_tile: opts.passes,
             geoid_m: DEFAULT_GEOID_M,

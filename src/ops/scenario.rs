@@ -34,13 +34,14 @@ pub const DEFAULT_GEOID_M: f64 = 49.0;
 /// Options of one world.
 #[derive(Debug, Clone)]
 pub struct ScenarioOptions {
-    /// The `--effect` text as given (recorded).
+    /// The `--effect` text: an effect, a pair `a+b`, or `none` (recorded as given).
     pub effect_spec: String,
-    pub effects: EffectSet,
+    /// Scale of the main parameter's departure from nominal (docs/scenario.md).
     pub magnitude: Option<f64>,
+    /// `--param key=value` pairs.
     pub params: Vec<(String, String)>,
     pub seed: u64,
-    /// LAS/LAZ files.
+    /// LAS/LAZ files or folders; empty: the bundled tiles ([`bundled_tiles`]).
     pub tiles: Vec<PathBuf>,
     pub out: PathBuf,
     /// Granules (passes) per tile.
@@ -101,9 +102,19 @@ fn read_tile(path: &Path, default_epsg: u32) -> Result<Tile> {
     })
 }
 
+/// The three real LiDAR HD tiles bundled with the source (`tests/data/als`), the default of
+/// `scenario` and the tiles of `demo`.
+pub fn bundled_tiles() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/als")
+}
+
 /// Build the world and write it under `opts.out`.
 pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
-    if opts.tiles.is_empty() {
+    let effects =
+        EffectSet::parse(&opts.effect_spec, opts.magnitude, &opts.params).map_err(|e| Error::Usage(e.to_string()))?;
+    let inputs = if opts.tiles.is_empty() { vec![bundled_tiles()] } else { opts.tiles.clone() };
+    let tile_files = crate::ops::ingest_als::expand_inputs(&inputs)?;
+    if tile_files.is_empty() {
         return Err(Error::Usage("--als: no LAS/LAZ file".into()));
     }
     if opts.passes_per_tile == 0 || opts.passes_per_tile > 64 {
@@ -123,15 +134,15 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
         return Err(Error::file(&opts.out, "already holds a world (truth.json or gedi/); use --force to replace it"));
     }
 
-    let tiles = opts.tiles.iter().map(|p| read_tile(p, opts.default_epsg)).collect::<Result<Vec<_>>>()?;
-    let physics = opts.effects.physics(&Physics::nominal());
+    let tiles = tile_files.iter().map(|p| read_tile(p, opts.default_epsg)).collect::<Result<Vec<_>>>()?;
+    let physics = effects.physics(&Physics::nominal());
     // Keep 2σ_f of ALS around every true and reported footprint centre, plus a metre.
     let margin = 2.0 * f64::from(physics.sim.fsigma).max(NOMINAL_FSIGMA_M) + 1.0;
     let settings = PlanSettings {
         passes_per_tile: opts.passes_per_tile,
         track_offset_sigma_m: opts.track_offset_sigma_m,
         margin_m: margin,
-        extra_offset: opts.effects.extra_offset(),
+        extra_offset: effects.extra_offset(),
     };
     let extents: Vec<Extent> = tiles.iter().map(|t| t.extent).collect();
     let layout = plan(&extents, &settings, opts.seed);
@@ -166,7 +177,7 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
     let mut shots_dropped = Vec::new();
     let mut track_counts = vec![0usize; layout.tracks.len()];
     let mut processor = L2aRunner::default();
-    let factor = opts.effects.noise_sigma_factor();
+    let factor = effects.noise_sigma_factor();
     for (i, ps) in layout.shots.iter().enumerate() {
         let track = &layout.tracks[ps.track];
         let tile = &tiles[track.tile];
@@ -210,7 +221,7 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
             },
         };
         let outcome = match &sims[i] {
-            Some(Ok(fp)) => make_shot(fp, &physics, &opts.effects, &spec, &mut processor).map_err(|e| e.to_string()),
+            Some(Ok(fp)) => make_shot(fp, &physics, &effects, &spec, &mut processor).map_err(|e| e.to_string()),
             Some(Err(reason)) => Err(format!("simulation skipped: {reason:?}")),
             None => Err("not simulated".to_string()),
         };
@@ -278,9 +289,9 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
 
     let truth = Truth {
         format: TRUTH_FORMAT.to_string(),
-        effect: opts.effects.name(),
+        effect: effects.name(),
         effect_spec: opts.effect_spec.clone(),
-        effects: opts.effects.effects.iter().map(PlantedEffect::of).collect(),
+        effects: effects.effects.iter().map(PlantedEffect::of).collect(),
         magnitude: opts.magnitude,
         params_given: opts.params.clone(),
         seed: opts.seed,
@@ -296,7 +307,7 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
             dataset: "geophys_corr/geoid".to_string(),
             relation: "GEDI elevation = ALS height (IGN69) + N + datum_dz_m".to_string(),
         },
-        datum_dz_m: opts.effects.vertical_offset_m(),
+        datum_dz_m: effects.vertical_offset_m(),
         noise: NoiseTruth {
             noise_sigma_factor: factor,
             median_noise_stddev_corrected: [
@@ -313,7 +324,7 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
             track_offset_sigma_m: opts.track_offset_sigma_m,
             clip_sigmas: 2.5,
         },
-        ground_detection_offset_m: (1..=6u8).map(|a| opts.effects.ground_offset_m(a)).collect(),
+        ground_detection_offset_m: (1..=6u8).map(|a| effects.ground_offset_m(a)).collect(),
         margin_m: margin,
         n_shots: shots_written.len(),
         n_dropped: shots_dropped.len(),
