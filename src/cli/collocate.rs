@@ -14,27 +14,27 @@ use super::reporters::{cpu_seconds, peak_rss_mb, Bars};
 pub struct CollocateArgs {
     /// Dataset directory with ingested shots (with L1B waveforms) and ALS.
     #[arg(long)]
-    pub dataset: PathBuf,
+    dataset: PathBuf,
     /// beam: each beam (its ground track) cut into segments; granule (alias: track): all beams of
     /// a granule share an offset per along-track segment; shot: one offset per shot from it and
     /// its neighbours.
     #[arg(long, value_enum, default_value = "beam")]
-    pub level: LevelArg,
+    level: LevelArg,
     /// Longest segment: shots (beam level) or along-track shot steps (granule level).
     #[arg(long, default_value_t = 40)]
-    pub segment: usize,
+    segment: usize,
     /// Largest horizontal shift searched (m).
     #[arg(long, default_value_t = 10.0)]
-    pub max_shift: f64,
+    max_shift: f64,
     /// Horizontal grid step (m).
     #[arg(long, default_value_t = 1.0)]
-    pub step: f64,
+    step: f64,
     /// Fewest shots of a segment: shorter runs are reported and not solved (1: solve every run).
     #[arg(long, default_value_t = gedisim::kernels::collocate::segments::MIN_SEGMENT)]
-    pub min_segment: usize,
+    min_segment: usize,
     /// Print wall time and peak memory at the end.
     #[arg(long)]
-    pub stats: bool,
+    stats: bool,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]

@@ -14,19 +14,19 @@ use super::run::print_run;
 pub struct DemoArgs {
     /// Output folder: world/ (tiles, granules, truth.json) and dataset/ (tables, report/).
     #[arg(long, default_value = "gedisim-demo")]
-    pub out: PathBuf,
+    out: PathBuf,
     /// Effect withheld from the simulation and planted in the generated granules (see `scenario`).
     #[arg(long, default_value = "ground_detection")]
-    pub effect: String,
+    effect: String,
     /// Seed of the generated granules.
     #[arg(long, default_value_t = 1)]
-    pub seed: u64,
+    seed: u64,
     /// Granules (passes) crossing each tile.
     #[arg(long, default_value_t = 8)]
-    pub passes: usize,
+    passes: usize,
     /// Replace a demo of another effect or seed in --out.
     #[arg(long)]
-    pub force: bool,
+    force: bool,
 }
 
 pub fn demo(a: DemoArgs) -> Result<()> {

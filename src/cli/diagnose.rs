@@ -14,10 +14,10 @@ use super::run::{print_ingest_and_collocation, ChainArgs};
 pub struct DiagnoseArgs {
     /// A dataset after `gedisim run` (or at least `ingest als`, `ingest gedi`; collocated here if it has no offsets).
     #[arg(long, conflicts_with_all = ["als", "l1b", "l2a"])]
-    pub dataset: Option<PathBuf>,
+    dataset: Option<PathBuf>,
     /// ALS tiles (files or folders): with --l1b and --l2a, the whole chain into <out>/dataset.
     #[arg(long, num_args = 1.., requires_all = ["l1b", "l2a"])]
-    pub als: Vec<PathBuf>,
+    als: Vec<PathBuf>,
     /// L1B granules (files or folders).
     #[arg(long, num_args = 1..)]
     l1b: Vec<PathBuf>,
@@ -25,13 +25,13 @@ pub struct DiagnoseArgs {
     #[arg(long, num_args = 1..)]
     l2a: Vec<PathBuf>,
     #[command(flatten)]
-    pub chain: ChainArgs,
+    chain: ChainArgs,
     /// Output directory (diagnosis.json, tables, figures).
     #[arg(long)]
-    pub out: PathBuf,
+    out: PathBuf,
     /// Try only these effects (comma-separated; default: every effect the diagnosis fits).
     #[arg(long, value_delimiter = ',')]
-    pub effects: Vec<String>,
+    effects: Vec<String>,
 }
 
 pub fn diagnose(a: DiagnoseArgs) -> Result<()> {

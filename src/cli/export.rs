@@ -10,13 +10,13 @@ use gedisim::Result;
 pub struct ExportGeoArgs {
     /// Dataset directory.
     #[arg(long)]
-    pub dataset: PathBuf,
+    dataset: PathBuf,
     /// Table to export: shots or results.
     #[arg(long)]
-    pub table: String,
+    table: String,
     /// Output file (.parquet).
     #[arg(long)]
-    pub out: PathBuf,
+    out: PathBuf,
 }
 
 pub fn export_geoparquet(a: ExportGeoArgs) -> Result<()> {

@@ -15,19 +15,19 @@ use super::reporters::{peak_rss_mb, Bars};
 pub struct IngestAlsArgs {
     /// LAS/LAZ files, or folders holding them.
     #[arg(required = true)]
-    pub inputs: Vec<PathBuf>,
+    inputs: Vec<PathBuf>,
     /// Dataset directory (created if needed).
     #[arg(long)]
-    pub out: PathBuf,
+    out: PathBuf,
     /// Keep noise (7, 18) and IGN artefact/virtual classes (64–67).
     #[arg(long)]
-    pub keep_all_classes: bool,
+    keep_all_classes: bool,
     /// EPSG code of tiles that carry no CRS record.
     #[arg(long)]
-    pub epsg: Option<u32>,
+    epsg: Option<u32>,
     /// Print wall time, points/s and peak memory at the end.
     #[arg(long)]
-    pub stats: bool,
+    stats: bool,
 }
 
 #[derive(Args)]
@@ -40,26 +40,26 @@ pub struct IngestGediArgs {
     l2a: Vec<PathBuf>,
     /// Dataset directory (created if needed).
     #[arg(long)]
-    pub out: PathBuf,
+    out: PathBuf,
     /// Projected CRS of the shots' x, y (default: the dataset's ALS CRS, else 2154).
     #[arg(long)]
-    pub epsg: Option<u32>,
+    epsg: Option<u32>,
     /// Geoid offset N (m, ellipsoid − orthometric) for every shot, instead of each shot's L1B geoid.
     #[arg(long, allow_hyphen_values = true)]
-    pub geoid_offset: Option<f64>,
+    geoid_offset: Option<f64>,
     /// Fail when a shot of a paired granule is in only one of L1B and L2A (default: keep it, warn).
     #[arg(long)]
-    pub strict_join: bool,
+    strict_join: bool,
 }
 
 #[derive(Args)]
 pub struct IngestStrataArgs {
     /// Corine Land Cover GeoTIFF in EPSG:3035 (.tif), or a CSV with columns shot_number, forest_type (.csv).
     #[arg(long)]
-    pub landcover: PathBuf,
+    landcover: PathBuf,
     /// Dataset directory (with a shots table for a raster).
     #[arg(long)]
-    pub dataset: PathBuf,
+    dataset: PathBuf,
 }
 
 pub fn ingest_als(a: IngestAlsArgs) -> Result<()> {

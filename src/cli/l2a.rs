@@ -13,10 +13,10 @@ pub struct L2aArgs {
     l1b: PathBuf,
     /// Output Parquet file: one row per shot × algorithm.
     #[arg(long)]
-    pub out: PathBuf,
+    out: PathBuf,
     /// Algorithms to run, e.g. 1,3.
     #[arg(long, value_delimiter = ',', default_value = "1,2,3,4,5,6")]
-    pub algorithms: Vec<u8>,
+    algorithms: Vec<u8>,
 }
 
 pub fn l2a(a: L2aArgs) -> Result<()> {

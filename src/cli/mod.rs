@@ -41,7 +41,7 @@ use sql::SqlArgs;
 )]
 pub struct Cli {
     #[command(subcommand)]
-    pub command: Command,
+    command: Command,
 }
 
 #[derive(Subcommand)]
@@ -66,7 +66,8 @@ pub enum Command {
     /// (only new granules are processed on a re-run).
     Run(RunArgs),
     /// The whole study on the bundled LiDAR HD tiles with generated GEDI granules: scenario,
-    /// run, report; prints the headline tables and the path of report.html.
+    /// run, report, diagnose; prints the headline tables, the path of report.html and the
+    /// diagnosis.
     Demo(DemoArgs),
     /// Build a test world: real ALS tiles + pseudo-real GEDI L1B/L2A granules with one withheld
     /// effect, and truth.json (docs/scenario.md).

@@ -12,10 +12,10 @@ use gedisim::Result;
 pub struct ReportArgs {
     /// Dataset directory (with a results table).
     #[arg(long)]
-    pub dataset: PathBuf,
+    dataset: PathBuf,
     /// Output directory (default <dataset>/report).
     #[arg(long)]
-    pub out: Option<PathBuf>,
+    out: Option<PathBuf>,
 }
 
 pub fn report(a: ReportArgs) -> Result<()> {

@@ -27,7 +27,7 @@ pub struct ChainArgs {
 pub struct RunArgs {
     /// LAS/LAZ tiles or folders (may be left out once the dataset holds the tiles).
     #[arg(long, num_args = 1..)]
-    pub als: Vec<PathBuf>,
+    als: Vec<PathBuf>,
     /// GEDI L1B files or folders.
     #[arg(long, num_args = 1..)]
     l1b: Vec<PathBuf>,
@@ -35,23 +35,23 @@ pub struct RunArgs {
     #[arg(long, num_args = 1..)]
     l2a: Vec<PathBuf>,
     #[command(flatten)]
-    pub chain: ChainArgs,
+    chain: ChainArgs,
     /// Dataset directory (created if needed).
     #[arg(long)]
-    pub out: PathBuf,
+    out: PathBuf,
     /// Keep shots at most this many days before the start or after the end of the ALS acquisition
     /// of their footprint (not applied where the tiles carry no date).
     #[arg(long, allow_hyphen_values = true, default_value_t = gedisim::kernels::study::select::DEFAULT_MAX_DAYS_APART)]
-    pub max_days_apart: f64,
+    max_days_apart: f64,
     /// Collocation level of new granules (see `collocate`).
     #[arg(long, value_enum, default_value = "beam")]
-    pub level: LevelArg,
+    level: LevelArg,
     /// Longest collocation segment (see `collocate`).
     #[arg(long, default_value_t = 40)]
-    pub segment: usize,
+    segment: usize,
     /// Fewest shots of a collocation segment (see `collocate`; 1: solve every run).
     #[arg(long, default_value_t = gedisim::kernels::collocate::segments::MIN_SEGMENT)]
-    pub min_segment: usize,
+    min_segment: usize,
 }
 
 pub fn run_command(a: RunArgs) -> Result<()> {

@@ -11,37 +11,37 @@ pub struct ScenarioArgs {
     /// Withheld effect: none, geolocation, datum, weighting, pulse, footprint, noise,
     /// canopy_change, occlusion, ground_detection, or a pair such as datum+pulse.
     #[arg(long)]
-    pub effect: String,
+    effect: String,
     /// Scale of the main parameter's departure from nominal (1 = the realistic default).
     #[arg(long, allow_hyphen_values = true)]
-    pub magnitude: Option<f64>,
+    magnitude: Option<f64>,
     /// Effect parameter as key=value (repeatable), e.g. --param dz_m=0.8; effect.key for a pair.
     #[arg(long = "param", value_name = "KEY=VALUE")]
-    pub params: Vec<String>,
+    params: Vec<String>,
     /// Seed of every random draw (same seed, same granules).
     #[arg(long, default_value_t = 1)]
-    pub seed: u64,
+    seed: u64,
     /// LAS/LAZ files or folders (default: the bundled tests/data/als tiles).
     #[arg(long, num_args = 1..)]
-    pub als: Vec<PathBuf>,
+    als: Vec<PathBuf>,
     /// Output folder: als/, gedi/, truth.json.
     #[arg(long)]
-    pub out: PathBuf,
+    out: PathBuf,
     /// Granules (passes, eight beams each) crossing each tile.
     #[arg(long, default_value_t = 8)]
-    pub passes: usize,
+    passes: usize,
     /// Nominal geoid height N (m) stored in geophys_corr/geoid.
     #[arg(long, allow_hyphen_values = true, default_value_t = gedisim::ops::scenario::DEFAULT_GEOID_M)]
-    pub geoid: f64,
+    geoid: f64,
     /// RMS per axis of the random horizontal offset of each track (m).
     #[arg(long, default_value_t = 3.0)]
-    pub offset_sigma: f64,
+    offset_sigma: f64,
     /// CRS of tiles that carry none.
     #[arg(long, default_value_t = 2154)]
-    pub epsg: u32,
+    epsg: u32,
     /// Replace a world already in --out.
     #[arg(long)]
-    pub force: bool,
+    force: bool,
 }
 
 pub fn scenario(a: ScenarioArgs) -> Result<()> {

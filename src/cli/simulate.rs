@@ -13,44 +13,44 @@ use super::reporters::{peak_rss_mb, Bars};
 pub struct SimulateArgs {
     /// LAS/LAZ file (direct mode).
     #[arg(long, requires_all = ["footprints", "out"], conflicts_with = "dataset")]
-    pub als: Option<PathBuf>,
+    als: Option<PathBuf>,
     /// CSV with a header naming id, x, y (direct mode; in dataset mode, footprints to simulate
     /// instead of the ingested shots, e.g. inventory plots).
     #[arg(long)]
-    pub footprints: Option<PathBuf>,
+    footprints: Option<PathBuf>,
     /// Output Parquet file (direct mode; dataset mode with --footprints, default
     /// <dataset>/sim/<CSV name>.parquet).
     #[arg(long)]
-    pub out: Option<PathBuf>,
+    out: Option<PathBuf>,
     /// Dataset directory: simulate every ingested shot into <dataset>/sim/shots.parquet (or the
     /// --footprints) from the ingested ALS points.
     #[arg(long)]
-    pub dataset: Option<PathBuf>,
+    dataset: Option<PathBuf>,
     /// gedirat reproduces Hancock's gediRat exactly (batch-dependent bin grid, every point of
     /// every class); default fixes its slips.
     #[arg(long, value_enum, default_value = "default")]
-    pub profile: ProfileArg,
+    profile: ProfileArg,
     /// Pulse: `gaussian` (FWHM 15 ns unless --psigma) or a two-column pulse file (range m, amplitude).
     #[arg(long, default_value = "gaussian")]
-    pub pulse: String,
+    pulse: String,
     /// Turn off ALS density normalisation.
     #[arg(long)]
-    pub no_norm: bool,
+    no_norm: bool,
     /// Footprint Gaussian σ (m).
     #[arg(long, default_value_t = 5.5)]
-    pub fsigma: f32,
+    fsigma: f32,
     /// Gaussian pulse σ (m) instead of the 15 ns FWHM.
     #[arg(long)]
-    pub psigma: Option<f32>,
+    psigma: Option<f32>,
     /// Convolve each return with the pulse while binning instead of after.
     #[arg(long)]
-    pub pulse_before: bool,
+    pulse_before: bool,
     /// Direct mode with the default profile: keep the classes that ingest drops (7, 18, 64–67).
     #[arg(long)]
-    pub keep_all_classes: bool,
+    keep_all_classes: bool,
     /// Print wall time, waveforms/s and peak memory at the end.
     #[arg(long)]
-    pub stats: bool,
+    stats: bool,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]

@@ -10,15 +10,15 @@ use gedisim::{Error, Result};
 pub struct SqlArgs {
     /// Dataset directory.
     #[arg(long)]
-    pub dataset: PathBuf,
+    dataset: PathBuf,
     /// The SQL statement (or use -f).
-    pub query: Option<String>,
+    query: Option<String>,
     /// File holding the SQL statement.
     #[arg(short = 'f', long = "file")]
-    pub file: Option<PathBuf>,
+    file: Option<PathBuf>,
     /// Write the result to this Parquet or CSV file instead of printing it.
     #[arg(long)]
-    pub out: Option<PathBuf>,
+    out: Option<PathBuf>,
 }
 
 pub fn sql(a: SqlArgs) -> Result<()> {

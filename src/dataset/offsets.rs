@@ -18,7 +18,7 @@ pub struct OffsetRow {
     /// `<granule>:<beam or ALL>:<first shot number>` (at the shot level, the shot itself).
     pub segment_id: String,
     pub granule: String,
-    /// Beam group name, or `ALL` at the track level.
+    /// Beam group name, or `ALL` at the granule level.
     pub beam: String,
     /// `beam`, `track` or `shot`.
     pub level: String,
