@@ -278,14 +278,18 @@ fn list_granules(ds: &Dataset) -> Result<Vec<GranuleFile>> {
 
 /// The first value of string column `column` of a Parquet file.
 fn first_string(path: &Path, column: &str) -> Result<Option<String>> {
-    let mut first = None;
-    read::for_each_batch(path, Some(&[column]), None, |c| {
-        if first.is_none() && c.num_rows() > 0 {
-            first = c.string(column, 0)?;
+    // One row of one column: the file's first batch of one row, not the whole column.
+    let builder = read::open(path)?;
+    let mask = parquet::arrow::ProjectionMask::columns(builder.parquet_schema(), [column]);
+    let reader =
+        builder.with_projection(mask).with_batch_size(1).with_limit(1).build().map_err(|e| Error::table(path, e))?;
+    for b in reader {
+        let b = b.map_err(|e| Error::table(path, e))?;
+        if b.num_rows() > 0 {
+            return read::Columns::new(path, &b).string(column, 0);
         }
-        Ok(())
-    })?;
-    Ok(first)
+    }
+    Ok(None)
 }
 
 /// Collocate the granules never collocated (or re-ingested since), merging their segments into
