@@ -36,7 +36,7 @@ fn main_param(effect: &str) -> (&'static str, f64) {
         "canopy_change" => ("fraction", 0.0),
         "occlusion" => ("gain", 0.0),
         "weighting" => ("rho_ground_over_veg", 1.0),
-        "pulse" => ("pulse_sigma_m", 0.955),
+        "pulse" => ("pulse_sigma_m", 0.0),
         "footprint" => ("fsigma_m", 5.5),
         "noise" => ("noise_sigma_factor", 1.0),
         _ => ("shot_sigma_m", 0.0),

@@ -17,15 +17,12 @@ fn max_relative_difference(points: &sim::AlsPoints, centre: (f64, f64), offsets:
     let cfg = CollocateConfig::new(10.0, 1.0).unwrap();
     let model = CollocateConfig::model();
     let cand: Vec<u32> = (0..points.len() as u32).collect();
-    let waves =
-        offset_waves(&points.x, &points.y, &points.z, &cand, centre, &cfg.grid, &model).expect("points contribute");
+    let waves = offset_waves(&points.x, &points.y, &points.z, &cand, centre, &cfg.grid, &model, &model.pulse)
+        .expect("points contribute");
     let mut worst = 0f64;
     for &(i, j) in offsets {
-        let fp = Footprint {
-            id: format!("{i},{j}"),
-            x: centre.0 + cfg.grid.offset(i) + nudge,
-            y: centre.1 + cfg.grid.offset(j),
-        };
+        let fp =
+            Footprint::at(format!("{i},{j}"), centre.0 + cfg.grid.offset(i) + nudge, centre.1 + cfg.grid.offset(j));
         let brute = sim::simulate(points, &[fp], &model).unwrap().remove(0).expect("simulated");
         let b = &brute.get(Weighting::Count).wave;
         // Brute-force bin k is labelled by its centre z0 − k·dz: absolute bin round(label/dz − ½).

@@ -54,7 +54,7 @@ fn footprints(tile: &str) -> Vec<Footprint> {
         .skip(1)
         .map(|l| {
             let c: Vec<&str> = l.split(',').collect();
-            Footprint { id: c[0].to_string(), x: c[1].parse().unwrap(), y: c[2].parse().unwrap() }
+            Footprint::at(c[0], c[1].parse().unwrap(), c[2].parse().unwrap())
         })
         .collect()
 }

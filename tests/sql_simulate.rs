@@ -28,10 +28,10 @@ fn dataset() -> (tempfile::TempDir, Dataset, Vec<Footprint>) {
     for i in 0..4 {
         for j in 0..3 {
             let id = 19_640_500_100_108_424u64 + (i * 3 + j) as u64;
-            fps.push(Footprint { id: id.to_string(), x: 368500.0 + 18.0 * i as f64, y: 6807430.0 + 22.0 * j as f64 });
+            fps.push(Footprint::at(id.to_string(), 368500.0 + 18.0 * i as f64, 6807430.0 + 22.0 * j as f64));
         }
     }
-    fps.push(Footprint { id: "19640500100109999".into(), x: 360000.0, y: 6800000.0 });
+    fps.push(Footprint::at("19640500100109999", 360000.0, 6800000.0));
     let schema = Arc::new(Schema::new(vec![
         Field::new("shot_number", DataType::UInt64, false),
         Field::new("x", DataType::Float64, true),

@@ -9,6 +9,7 @@ use gedisim::dataset::Dataset;
 use gedisim::Result;
 
 use super::reporters::{cpu_seconds, peak_rss_mb, Bars};
+use super::simulate::PulseArgs;
 
 #[derive(Args)]
 pub struct CollocateArgs {
@@ -32,6 +33,8 @@ pub struct CollocateArgs {
     /// Fewest shots of a segment: shorter runs are reported and not solved (1: solve every run).
     #[arg(long, default_value_t = gedisim::kernels::collocate::segments::MIN_SEGMENT)]
     min_segment: usize,
+    #[command(flatten)]
+    pulse: PulseArgs,
     /// Print wall time and peak memory at the end.
     #[arg(long)]
     stats: bool,
@@ -56,6 +59,7 @@ pub fn collocate(a: CollocateArgs) -> Result<()> {
         max_shift: a.max_shift,
         step: a.step,
         min_segment: a.min_segment,
+        pulse: a.pulse.model("recorded", None),
     };
     let report = gedisim::ops::collocate::collocate(&ds, &opts, &Bars::new())?;
     for s in &report.short_runs {

@@ -9,6 +9,7 @@ use gedisim::{Error, Result};
 
 use super::reporters::Bars;
 use super::run::{print_ingest_and_collocation, ChainArgs};
+use super::simulate::PulseArgs;
 
 #[derive(Args)]
 pub struct DiagnoseArgs {
@@ -32,6 +33,8 @@ pub struct DiagnoseArgs {
     /// Try only these effects (comma-separated; default: every effect the diagnosis fits).
     #[arg(long, value_delimiter = ',')]
     effects: Vec<String>,
+    #[command(flatten)]
+    pulse: PulseArgs,
 }
 
 pub fn diagnose(a: DiagnoseArgs) -> Result<()> {
@@ -41,7 +44,7 @@ pub fn diagnose(a: DiagnoseArgs) -> Result<()> {
         Some(d) => DiagnoseInput::Dataset(d),
         None if a.als.is_empty() => return Err(Error::Usage("give --dataset, or --als with --l1b and --l2a".into())),
         // The first half of `gedisim run`, with the diagnosis's per-beam collocation.
-        None => DiagnoseInput::Chain(gedisim::ops::run::RunOptions {
+        None => DiagnoseInput::Chain(Box::new(gedisim::ops::run::RunOptions {
             als: a.als,
             l1b: a.l1b,
             l2a: a.l2a,
@@ -49,9 +52,10 @@ pub fn diagnose(a: DiagnoseArgs) -> Result<()> {
             epsg: a.chain.epsg,
             geoid_offset: a.chain.geoid_offset,
             ..gedisim::ops::run::RunOptions::new(&a.out.join("dataset"))
-        }),
+        })),
     };
-    let r = gedisim::ops::diagnose::diagnose(input, &a.out, &a.effects, &Bars::new())?;
+    let pulse = a.pulse.model("recorded", None);
+    let r = gedisim::ops::diagnose::diagnose(input, &a.out, &a.effects, &pulse, &Bars::new())?;
     if let Some(chain) = &r.chain {
         print_ingest_and_collocation(chain);
     }

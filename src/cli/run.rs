@@ -52,6 +52,9 @@ pub struct RunArgs {
     /// Fewest shots of a collocation segment (see `collocate`; 1: solve every run).
     #[arg(long, default_value_t = gedisim::kernels::collocate::segments::MIN_SEGMENT)]
     min_segment: usize,
+    // The collocation's transmit pulse: the study's simulation keeps its 15 ns Gaussian.
+    #[command(flatten)]
+    pulse: super::simulate::PulseArgs,
 }
 
 pub fn run_command(a: RunArgs) -> Result<()> {
@@ -68,6 +71,7 @@ pub fn run_command(a: RunArgs) -> Result<()> {
             level: collocate_level(a.level),
             segment: a.segment,
             min_segment: a.min_segment,
+            pulse: a.pulse.model("recorded", None),
             ..CollocateOptions::default()
         },
         rules: gedisim::kernels::study::select::StudyRules { max_days_apart: a.max_days_apart, ..Default::default() },

@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use clap::Args;
 
+use gedisim::kernels::sim::PulseModel;
 use gedisim::{Error, Result};
 
 use super::reporters::{peak_rss_mb, Bars};
@@ -30,9 +31,8 @@ pub struct SimulateArgs {
     /// every class); default fixes its slips.
     #[arg(long, value_enum, default_value = "default")]
     profile: ProfileArg,
-    /// Pulse: `gaussian` (FWHM 15 ns unless --psigma) or a two-column pulse file (range m, amplitude).
-    #[arg(long, default_value = "gaussian")]
-    pulse: String,
+    #[command(flatten)]
+    pulse: PulseArgs,
     /// Turn off ALS density normalisation.
     #[arg(long)]
     no_norm: bool,
@@ -53,6 +53,30 @@ pub struct SimulateArgs {
     stats: bool,
 }
 
+/// The transmit pulse of a command (docs/pulse.md); each command has its own default.
+#[derive(Args)]
+pub struct PulseArgs {
+    /// Transmit pulse: `gaussian` (15 ns FWHM, the study's), `recorded` (each shot's L1B
+    /// txwaveform; positions without a shot use the mean recorded pulse) or a two-column pulse
+    /// file (range m, amplitude) [default: recorded for collocate and diagnose, gaussian otherwise].
+    #[arg(long)]
+    pulse: Option<String>,
+    /// Point of a recorded pulse that lands on the reflecting surface: gaussian-fit (L1B tx_gloc),
+    /// centroid or peak.
+    #[arg(long, default_value = "gaussian-fit", value_parser = REFERENCES)]
+    pulse_reference: String,
+}
+
+const REFERENCES: [&str; 3] = ["gaussian-fit", "centroid", "peak"];
+
+impl PulseArgs {
+    /// The pulse model, `default` (`gaussian` or `recorded`) when --pulse is not given.
+    pub fn model(&self, default: &str, psigma: Option<f32>) -> PulseModel {
+        let reference = self.pulse_reference.parse().unwrap_or_default();
+        PulseModel::parse(self.pulse.as_deref().unwrap_or(default), psigma, reference)
+    }
+}
+
 #[derive(Clone, Copy, clap::ValueEnum)]
 pub enum ProfileArg {
     Gedirat,
@@ -61,7 +85,7 @@ pub enum ProfileArg {
 
 pub fn simulate(a: SimulateArgs) -> Result<()> {
     use gedisim::kernels::sim::Profile;
-    use gedisim::ops::simulate::{PulseChoice, SimulateOptions, Source};
+    use gedisim::ops::simulate::{SimulateOptions, Source};
     let source = match (a.dataset, a.als) {
         (Some(dataset), _) => Source::Dataset { dataset, footprints: a.footprints, out: a.out },
         (None, Some(als)) => {
@@ -83,10 +107,7 @@ pub fn simulate(a: SimulateArgs) -> Result<()> {
         fsigma: a.fsigma,
         normalise_density: !a.no_norm,
         pulse_before: a.pulse_before,
-        pulse: match a.pulse.as_str() {
-            "gaussian" => PulseChoice::Gaussian(a.psigma),
-            file => PulseChoice::File(PathBuf::from(file)),
-        },
+        pulse: a.pulse.model("gaussian", a.psigma),
     };
     let start = Instant::now();
     let r = gedisim::ops::simulate::simulate(&opts, &Bars::new())?;

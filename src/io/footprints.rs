@@ -43,7 +43,7 @@ pub fn read_footprints_csv(path: &Path) -> Result<Vec<Footprint>> {
         if !seen.insert(id.clone()) {
             return Err(Error::field(path, "id", format!("line {}: duplicate id `{id}`", lineno + 1)));
         }
-        out.push(Footprint { id, x: num(cx, "x")?, y: num(cy, "y")? });
+        out.push(Footprint::at(id, num(cx, "x")?, num(cy, "y")?));
     }
     Ok(out)
 }
@@ -58,7 +58,7 @@ mod tests {
         let f = dir.path().join("fp.csv");
         std::fs::write(&f, "x,id,y,extra\n1.5,a,2.5,z\n3,b,4,z\n").unwrap();
         let fps = read_footprints_csv(&f).unwrap();
-        assert_eq!(fps[1], Footprint { id: "b".into(), x: 3.0, y: 4.0 });
+        assert_eq!(fps[1], Footprint::at("b", 3.0, 4.0));
         std::fs::write(&f, "id,x,y\na,1,nan\n").unwrap();
         let e = read_footprints_csv(&f).unwrap_err().to_string();
         assert!(e.contains("fp.csv") && e.contains("y"), "{e}");

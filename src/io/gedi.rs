@@ -404,3 +404,20 @@ impl L2aBeam {
         valid.then_some((lat, lon))
     }
 }
+
+/// Every shot's raw transmit record (`txwaveform`) of an L1B file, with its beam's type
+/// (`true` = full power, from the beam name); beams without transmit records give none.
+pub fn read_transmit_records(path: &Path) -> Result<Vec<(bool, Vec<f32>)>> {
+    let g = open_product(path, Product::L1b)?;
+    let mut out = Vec::new();
+    for name in g.beams()? {
+        let Some(b) = g.beam(&name)? else { continue };
+        let shots = b.shot_numbers()?;
+        let full_power =
+            crate::kernels::gedi::BeamType::from_name(&name) == Some(crate::kernels::gedi::BeamType::FullPower);
+        if let Some(tx) = read_waveforms(&b, &shots, "txwaveform", "tx")? {
+            out.extend((0..shots.len()).map(|i| (full_power, tx.get(i).to_vec())));
+        }
+    }
+    Ok(out)
+}

@@ -11,6 +11,7 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use arrow::array::{Array, AsArray};
 use arrow::datatypes::{Float64Type, UInt32Type, UInt64Type, UInt8Type};
@@ -23,6 +24,7 @@ use crate::error::{Error, Result};
 use crate::kernels::collocate::profile::{real_profile, ProfileError};
 use crate::kernels::collocate::segments::{plan, Level, SegmentPlan, Slot, MIN_SEGMENT};
 use crate::kernels::collocate::{collocate_unit, CollocateConfig, PointCloud, ShotInput};
+use crate::kernels::sim::{Pulse, PulseModel, PulseReference};
 use crate::ops::progress::{Progress, Step};
 
 /// Options of `gedisim collocate`.
@@ -39,11 +41,21 @@ pub struct CollocateOptions {
     /// Fewest shots (beam) or steps (granule) of a segment ([`MIN_SEGMENT`] by default); a
     /// shorter run is reported and not solved. 1 solves every run, however short.
     pub min_segment: usize,
+    /// The pulse the ALS waveforms are simulated with: by default each shot's recorded pulse, so
+    /// that the vertical offset refers to the pulse's reference point, not its peak (docs/pulse.md).
+    pub pulse: PulseModel,
 }
 
 impl Default for CollocateOptions {
     fn default() -> Self {
-        CollocateOptions { level: Level::Beam, segment: 40, max_shift: 10.0, step: 1.0, min_segment: MIN_SEGMENT }
+        CollocateOptions {
+            level: Level::Beam,
+            segment: 40,
+            max_shift: 10.0,
+            step: 1.0,
+            min_segment: MIN_SEGMENT,
+            pulse: PulseModel::Recorded(PulseReference::default()),
+        }
     }
 }
 
@@ -128,7 +140,12 @@ impl<'a> Collocation<'a> {
         if opts.segment == 0 {
             return Err(Error::Usage("--segment must be at least 1".into()));
         }
-        let cfg = CollocateConfig::new(opts.max_shift, opts.step)?;
+        let mut cfg = CollocateConfig::new(opts.max_shift, opts.step)?;
+        match &opts.pulse {
+            PulseModel::Gaussian(Some(s)) => cfg.model.pulse = Pulse::gaussian(*s, cfg.model.res as f32)?,
+            PulseModel::File(path) => cfg.model.pulse = crate::io::pulse::read_pulse_file(path)?,
+            PulseModel::Gaussian(None) | PulseModel::Recorded(_) => {}
+        }
         cfg.validate()?;
         let als = AlsTable::open(ds)?;
         let files = match files {
@@ -213,12 +230,21 @@ impl<'a> Collocation<'a> {
     ) -> Result<Vec<OffsetRow>> {
         let mut skip = |reason: &str| *skipped.entry(reason.to_string()).or_default() += 1;
         let support = support_of(&unit.plans);
-        let waves = read_waveforms(&g.path, support.iter().map(|&i| g.shots[i].row))?;
+        let recorded = match self.opts.pulse {
+            PulseModel::Recorded(r) => Some(r),
+            _ => None,
+        };
+        let waves = read_waveforms(&g.path, support.iter().map(|&i| g.shots[i].row), recorded.is_some())?;
         // The shots whose real waveform is usable, in the kernel's numbering.
         let mut inputs = Vec::new();
         let mut kernel_index = vec![None; g.shots.len()];
-        for (&i, wave) in support.iter().zip(waves) {
+        for (&i, (wave, tx)) in support.iter().zip(waves) {
             let s = &g.shots[i];
+            // A shot without a usable transmit record keeps the Gaussian pulse.
+            let pulse = recorded
+                .zip(tx)
+                .and_then(|(r, tx)| crate::dataset::shots::recorded_pulse(&tx, r, self.cfg.model.res))
+                .map(Arc::new);
             let Some(wave) = wave else {
                 skip("no_waveform");
                 continue;
@@ -226,7 +252,7 @@ impl<'a> Collocation<'a> {
             match real_profile(&wave, s.z_top - s.geoid, s.z_bottom - s.geoid, self.cfg.model.res) {
                 Ok(real) => {
                     kernel_index[i] = Some(inputs.len());
-                    inputs.push((i, ShotInput { x: s.x, y: s.y, real }));
+                    inputs.push((i, ShotInput { x: s.x, y: s.y, real, pulse }));
                 }
                 Err(e) => skip(match e {
                     ProfileError::BadGeometry => "bad_waveform_geometry",
@@ -495,16 +521,24 @@ fn read_shot_records(path: &Path) -> Result<(String, Vec<ShotRecord>)> {
     Ok((granule.unwrap_or(stem), out))
 }
 
-/// Pass B: `rx_waveform` of the given rows (ascending) of one `shots/` file; `None` for a null.
-fn read_waveforms(path: &Path, rows: impl Iterator<Item = usize>) -> Result<Vec<Option<Vec<f32>>>> {
+/// Pass B: `rx_waveform` (and `tx_waveform` when `with_tx`) of the given rows (ascending) of one
+/// `shots/` file; `None` for a null.
+#[allow(clippy::type_complexity)]
+fn read_waveforms(
+    path: &Path,
+    rows: impl Iterator<Item = usize>,
+    with_tx: bool,
+) -> Result<Vec<(Option<Vec<f32>>, Option<Vec<f32>>)>> {
     let rows: Vec<usize> = rows.collect();
     if rows.is_empty() {
         return Ok(Vec::new());
     }
     let mut out = Vec::with_capacity(rows.len());
-    crate::dataset::read::for_each_batch(path, Some(&["rx_waveform"]), Some(&rows), |c| {
+    let columns: &[&str] = if with_tx { &["rx_waveform", "tx_waveform"] } else { &["rx_waveform"] };
+    crate::dataset::read::for_each_batch(path, Some(columns), Some(&rows), |c| {
         for i in 0..c.num_rows() {
-            out.push(c.f32_list("rx_waveform", i)?);
+            let tx = if with_tx { c.f32_list("tx_waveform", i)? } else { None };
+            out.push((c.f32_list("rx_waveform", i)?, tx));
         }
         Ok(())
     })?;

@@ -135,6 +135,12 @@ pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoRepor
     let report = crate::ops::report::run_report(&ds, None, progress)?;
     let headline = Headline::read(&report.dir)?;
     // The diagnosis of the world, told nothing about the withheld effect.
-    let diagnosis = crate::ops::diagnose::diagnose_dataset(&ds, &opts.out.join("diagnosis"), &[], progress)?;
+    let diagnosis = crate::ops::diagnose::diagnose_dataset(
+        &ds,
+        &opts.out.join("diagnosis"),
+        &[],
+        &crate::kernels::sim::PulseModel::Recorded(Default::default()),
+        progress,
+    )?;
     Ok(DemoReport { world, world_dir, run, report, headline, diagnosis })
 }

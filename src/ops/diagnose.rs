@@ -23,7 +23,7 @@ use crate::kernels::diagnose::json::{params, DiagnosisJson};
 use crate::kernels::diagnose::{self, Diagnosis, ShotCase};
 use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
 use crate::kernels::scenario::effects::ParamValue;
-use crate::kernels::sim::{self, Footprint, Weighting};
+use crate::kernels::sim::{self, Footprint, PulseModel, PulseReference, Weighting};
 use crate::kernels::study::classes;
 use crate::kernels::waveform::l2a::Noise;
 use crate::ops::collocate::{CollocateOptions, CollocateReport};
@@ -59,7 +59,10 @@ struct Pending {
 
 /// Read every usable shot of the dataset with its simulations, simulated as one
 /// [`Step::DiagnoseSimulate`].
-pub fn read_cases(ds: &Dataset, progress: &dyn Progress) -> Result<(Vec<ShotCase>, CaseReport)> {
+/// `pulse`: the shots' transmit pulse in the nominal chain (recorded, a file, or the Gaussian).
+pub fn read_cases(ds: &Dataset, pulse: &PulseModel, progress: &dyn Progress) -> Result<(Vec<ShotCase>, CaseReport)> {
+    let res = configs().0.res;
+    let pulses = ShotPulseSource::new(pulse, res)?;
     let mut report = CaseReport::default();
     let offsets = crate::dataset::offsets::read_offsets(ds)?;
     let forest = crate::dataset::strata::read_forest_types(ds)?;
@@ -68,7 +71,7 @@ pub fn read_cases(ds: &Dataset, progress: &dyn Progress) -> Result<(Vec<ShotCase
         .map_err(|e| Error::file(&dir, format!("no shots table ({e}): run `gedisim ingest gedi`")))?;
     let mut pending = Vec::new();
     for f in files {
-        read::for_each_batch(&f, None, None, |c| read_shots(c, &offsets, &forest, &mut pending, &mut report))?;
+        read::for_each_batch(&f, None, None, |c| read_shots(c, &offsets, &forest, &pulses, &mut pending, &mut report))?;
     }
     let mut segment_shots: HashMap<&str, usize> = HashMap::new();
     offsets.values().for_each(|o| *segment_shots.entry(o.segment_id.as_str()).or_default() += 1);
@@ -87,6 +90,7 @@ fn read_shots(
     c: read::Columns,
     offsets: &HashMap<u64, crate::dataset::offsets::AppliedOffset>,
     forest: &HashMap<u64, String>,
+    pulses: &ShotPulseSource,
     out: &mut Vec<Pending>,
     report: &mut CaseReport,
 ) -> Result<()> {
@@ -171,6 +175,7 @@ fn read_shots(
             algorithms,
             segment,
             collocation_dz,
+            pulse: pulses.of(&c, i)?,
             strata: Strata {
                 forest_type: forest.get(&shot).cloned().unwrap_or_else(|| classes::UNKNOWN.to_string()),
                 phenology: classes::phenology(value(leaf_off, i)).to_string(),
@@ -181,7 +186,7 @@ fn read_shots(
         };
         out.push(Pending {
             real,
-            footprint: Footprint { id: shot.to_string(), x: px + dx, y: py + dy },
+            footprint: Footprint::at(shot.to_string(), px + dx, py + dy),
             reported: (px, py),
             short_segment: false,
         });
@@ -225,7 +230,7 @@ fn recollocate(als: &AlsTable, pending: &[Pending], dz: f64) -> Result<HashMap<u
                 .filter_map(|p| {
                     let r = &p.real;
                     let real = real_profile(&r.wave, r.bin0, r.lastbin, cfg.model.res).ok()?;
-                    Some(ShotInput { x: p.reported.0, y: p.reported.1, real })
+                    Some(ShotInput { x: p.reported.0, y: p.reported.1, real, pulse: r.pulse.clone() })
                 })
                 .collect();
             (shots.as_slice(), inputs)
@@ -312,7 +317,7 @@ fn simulate_cases(
                     .map(|(k, &(x, y))| {
                         let is_light = k > 0 && !short;
                         let list = if is_light { &mut light } else { &mut full };
-                        list.push(Footprint { id: f.id.clone(), x, y });
+                        list.push(Footprint { id: f.id.clone(), x, y, pulse: f.pulse.clone() });
                         (is_light, list.len() - 1)
                     })
                     .collect(),
@@ -387,9 +392,54 @@ pub struct DiagnosisOutput {
 }
 
 /// Collocation of a dataset the diagnosis makes: per beam (the baseline's horizontal collocation),
-/// every run solved however short.
-pub const DIAGNOSIS_COLLOCATION: CollocateOptions =
-    CollocateOptions { level: Level::Beam, segment: 40, max_shift: 10.0, step: 1.0, min_segment: 1 };
+/// every run solved however short, with the diagnosis's pulse.
+pub fn diagnosis_collocation(pulse: &PulseModel) -> CollocateOptions {
+    CollocateOptions {
+        level: Level::Beam,
+        segment: 40,
+        max_shift: 10.0,
+        step: 1.0,
+        min_segment: 1,
+        pulse: pulse.clone(),
+    }
+}
+
+/// Where each shot's pulse in the nominal chain comes from.
+enum ShotPulseSource {
+    /// The study's Gaussian.
+    Gaussian,
+    /// The shot's `tx_waveform` at this reference point and bin size (m).
+    Recorded(PulseReference, f64),
+    /// One pulse for every shot.
+    Fixed(Arc<sim::Pulse>),
+}
+
+impl ShotPulseSource {
+    fn new(pulse: &PulseModel, res: f64) -> Result<ShotPulseSource> {
+        Ok(match pulse {
+            PulseModel::Gaussian(None) => ShotPulseSource::Gaussian,
+            PulseModel::Gaussian(Some(s)) => {
+                ShotPulseSource::Fixed(Arc::new(sim::Pulse::gaussian(*s, res as f32)?.resampled(res)))
+            }
+            PulseModel::Recorded(r) => ShotPulseSource::Recorded(*r, res),
+            PulseModel::File(path) => {
+                ShotPulseSource::Fixed(Arc::new(crate::io::pulse::read_pulse_file(path)?.resampled(res)))
+            }
+        })
+    }
+
+    /// The pulse of row `i` (`None`: the Gaussian, also for a shot without a usable record).
+    fn of(&self, c: &read::Columns, i: usize) -> Result<Option<Arc<sim::Pulse>>> {
+        Ok(match self {
+            ShotPulseSource::Gaussian => None,
+            ShotPulseSource::Fixed(p) => Some(p.clone()),
+            ShotPulseSource::Recorded(r, res) => c
+                .f32_list("tx_waveform", i)?
+                .and_then(|tx| crate::dataset::shots::recorded_pulse(&tx, *r, *res))
+                .map(Arc::new),
+        })
+    }
+}
 
 /// What `gedisim diagnose` reads.
 #[derive(Debug, Clone)]
@@ -399,7 +449,7 @@ pub enum DiagnoseInput {
     Dataset(PathBuf),
     /// The first half of `gedisim run` into `<out>/dataset` (its `out` and `collocate` are set
     /// here): tiles, granules and land cover ingested, collocated per beam.
-    Chain(RunOptions),
+    Chain(Box<RunOptions>),
 }
 
 /// What `gedisim diagnose` did.
@@ -418,12 +468,13 @@ pub fn diagnose(
     input: DiagnoseInput,
     out: &Path,
     effects: &[String],
+    pulse: &PulseModel,
     progress: &dyn Progress,
 ) -> Result<DiagnoseReport> {
     let (root, chain) = match input {
         DiagnoseInput::Dataset(root) => (root, None),
         DiagnoseInput::Chain(opts) => {
-            let opts = RunOptions { out: out.join("dataset"), collocate: DIAGNOSIS_COLLOCATION, ..opts };
+            let opts = RunOptions { out: out.join("dataset"), collocate: diagnosis_collocation(pulse), ..*opts };
             let report = crate::ops::run::ingest_and_collocate(&opts, progress)?;
             (opts.out, Some(report))
         }
@@ -432,9 +483,9 @@ pub fn diagnose(
     let collocated = if ds.has_table(tables::OFFSETS) {
         None
     } else {
-        Some(crate::ops::collocate::collocate(&ds, &DIAGNOSIS_COLLOCATION, progress)?)
+        Some(crate::ops::collocate::collocate(&ds, &diagnosis_collocation(pulse), progress)?)
     };
-    let output = diagnose_dataset(&ds, out, effects, progress)?;
+    let output = diagnose_dataset(&ds, out, effects, pulse, progress)?;
     Ok(DiagnoseReport { chain, collocated, output })
 }
 
@@ -445,6 +496,7 @@ pub fn diagnose_dataset(
     ds: &Dataset,
     out: &Path,
     effects: &[String],
+    pulse: &PulseModel,
     progress: &dyn Progress,
 ) -> Result<DiagnosisOutput> {
     let names: Vec<&str> = if effects.is_empty() {
@@ -462,7 +514,7 @@ pub fn diagnose_dataset(
             })
             .collect::<Result<_>>()?
     };
-    let (cases, report) = read_cases(ds, progress)?;
+    let (cases, report) = read_cases(ds, pulse, progress)?;
     if cases.len() < 4 {
         return Err(Error::file(
             ds.root().join(tables::SHOTS),
@@ -667,6 +719,18 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
         );
     }
     lines.push(place + ".");
+    if let Some(c) = &d.recorded_pulse {
+        lines.push(format!(
+            "Known physics first: each shot's recorded transmit pulse instead of the study's 15 ns Gaussian takes the \
+             held-out gap {:.2} → {:.2} m (shrink {:.0} %, 95 % CI {:.0} to {:.0} %); the effects below are ranked on \
+             top of it.",
+            c.before.mean_abs_bias,
+            c.after.mean_abs_bias,
+            100.0 * c.shrink,
+            100.0 * c.ci95[0],
+            100.0 * c.ci95[1]
+        ));
+    }
     if d.ranking.unexplained {
         let best = d.ranking.effects.first();
         lines.push(match best {
@@ -703,8 +767,13 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
                     t.held_out.before.mean_abs_bias, t.held_out.after.mean_abs_bias
                 ),
             };
+            let caveat = match (&t.at_bound, &t.equivalent) {
+                (_, Some(e)) => format!(" — equivalent to the simpler {}", e.name()),
+                (Some(b), None) => format!(" — fit on the edge of its range ({b}): the effect may not be this one"),
+                (None, None) => String::new(),
+            };
             lines.push(format!(
-                "{} {} ({}): {gap}, shrink {:.0} % (95 % CI {:.0}–{:.0} %).",
+                "{} {} ({}): {gap}, shrink {:.0} % (95 % CI {:.0}–{:.0} %){caveat}.",
                 if i == 0 { "Which:" } else { "  then" },
                 t.effect.name(),
                 params.join(", "),
@@ -712,6 +781,13 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
                 100.0 * t.held_out.ci95[0],
                 100.0 * t.held_out.ci95[1]
             ));
+            if i == 0 && !d.ranking.ambiguous_with.is_empty() {
+                lines.push(format!(
+                    "  ambiguous: {} explain(s) the gap as well within noise (paired 95 % interval of the shrink \
+                     difference contains 0).",
+                    d.ranking.ambiguous_with.join(", ")
+                ));
+            }
         }
     }
     lines

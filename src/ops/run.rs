@@ -468,7 +468,7 @@ fn plan_granule(ds: &Dataset, file: GranuleFile, inputs: &StudyInputs, rules: &S
             let (dx, dy) = offset.as_ref().map_or((0.0, 0.0), |o| (o.dx, o.dy));
             let (x, y) = (x + dx, y + dy);
             if inputs.als.covers(x, y, inputs.cover_radius) {
-                covered.push(CoveredShot { row, footprint: Footprint { id: sn.to_string(), x, y }, offset });
+                covered.push(CoveredShot { row, footprint: Footprint::at(sn.to_string(), x, y), offset });
             }
         }
         n += c.num_rows();

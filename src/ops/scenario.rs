@@ -4,6 +4,7 @@
 //! written under a temporary name and renamed when complete; truth.json is written last.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use chrono::{DateTime, TimeZone, Utc};
 
@@ -18,12 +19,12 @@ use crate::kernels::scenario::granules::{delta_time, granule_ids, is_leaf_off, G
 use crate::kernels::scenario::plan::{plan, Extent, PlanSettings};
 use crate::kernels::scenario::real::{self, ENERGY_LOG_SPREAD, NOISE_MEAN_SPREAD, NOISE_STDDEV_LOG_SPREAD};
 use crate::kernels::scenario::rng::Stream;
-use crate::kernels::scenario::shot::{make_shot, ShotSpec};
+use crate::kernels::scenario::shot::{draw_transmit, make_shot, ShotSpec, TX_STRETCH_SIGMA};
 use crate::kernels::scenario::truth::{
     finite, DroppedShot, GeoidTruth, GeolocationTruth, GranuleTruth, NoiseTruth, PlantedEffect, ShotTruthRecord,
     TileTruth, TrackTruth, TruePhysics, Truth, TRUTH_FORMAT,
 };
-use crate::kernels::sim::{self, Footprint};
+use crate::kernels::sim::{self, Footprint, PulseReference};
 use crate::kernels::waveform::forward::L2aRunner;
 use crate::kernels::waveform::l2a::Noise;
 
@@ -108,6 +109,27 @@ pub fn bundled_tiles() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/als")
 }
 
+/// The real L1B bundled with the source (`tests/data/gedi`): its transmit records are the
+/// library from which every scenario shot draws its pulse.
+pub fn bundled_l1b() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/gedi")
+}
+
+/// The transmit records of the bundled L1B, by beam type (`[coverage, full power]`).
+fn pulse_library() -> Result<[Vec<Vec<f32>>; 2]> {
+    let files = crate::ops::ingest_gedi::expand_granule_inputs(&[bundled_l1b()], "GEDI01_B")?;
+    let mut lib: [Vec<Vec<f32>>; 2] = [Vec::new(), Vec::new()];
+    for f in &files {
+        for (full_power, tx) in crate::io::gedi::read_transmit_records(f)? {
+            lib[usize::from(full_power)].push(tx);
+        }
+    }
+    if lib.iter().any(Vec::is_empty) {
+        return Err(Error::file(bundled_l1b(), "no transmit records of both beam types for the pulse library"));
+    }
+    Ok(lib)
+}
+
 /// Build the world and write it under `opts.out`.
 pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
     let effects =
@@ -151,6 +173,23 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
     let acquired: Vec<Option<DateTime<Utc>>> = tiles.iter().map(|t| t.acquired).collect();
     let granules = granule_ids(opts.seed, &acquired, opts.passes_per_tile);
 
+    // Each shot's transmit pulse, drawn from the real pulses of its laser type (docs/scenario.md).
+    let library = pulse_library()?;
+    let reference = PulseReference::default();
+    let extra_pulse = effects.extra_pulse_sigma();
+    let pulses: Vec<Option<(Vec<f32>, sim::Pulse)>> = layout
+        .shots
+        .iter()
+        .map(|ps| {
+            let track = &layout.tracks[ps.track];
+            let full_power = BeamType::from_name(track.beam) == Some(BeamType::FullPower);
+            let mut r = Stream::new(opts.seed, &["pulse", &track.id, &ps.along_index.to_string()]);
+            let lib = &library[usize::from(full_power)];
+            let pick = ((r.uniform() * lib.len() as f64) as usize).min(lib.len() - 1);
+            draw_transmit(&lib[pick], &mut r, reference, physics.sim.res)
+        })
+        .collect();
+
     // Simulate every tile's shots at their true positions with the true physics.
     let mut sims = vec![None; layout.shots.len()];
     for (t, tile) in tiles.iter().enumerate() {
@@ -160,7 +199,8 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
             .iter()
             .map(|&i| {
                 let s = &layout.shots[i];
-                Footprint { id: i.to_string(), x: s.x + s.dx, y: s.y + s.dy }
+                let pulse = pulses[i].as_ref().map(|(_, p)| Arc::new(p.broadened(extra_pulse)));
+                Footprint { pulse, ..Footprint::at(i.to_string(), s.x + s.dx, s.y + s.dy) }
             })
             .collect();
         let out = sim::simulate(&tile.points, &fps, &physics.sim).map_err(|e| Error::file(&tile.path, e))?;
@@ -212,6 +252,7 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
             below_ground_m: rec.below_ground_m + r.normal(),
             noise_seed: r.next_u64(),
             dem_error_m: 1.5 * r.normal(),
+            tx_waveform: pulses[i].as_ref().map(|(record, _)| record.clone()).unwrap_or_default(),
             land_cover: LandCover {
                 leaf_off_flag: u8::from(leaf_off),
                 leaf_off_doy: 305,
@@ -298,7 +339,11 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
         physics: TruePhysics {
             weighting: physics.weighting.name().to_string(),
             rho_ground_over_veg: physics.rho_ground_over_veg,
-            pulse_sigma_m: f64::from(physics.sim.pulse.sigma),
+            pulse: format!(
+                "recorded (real L1B transmit pulses of the shot's laser, stretched 1 ± {TX_STRETCH_SIGMA}; \
+                 reference {reference})"
+            ),
+            extra_pulse_sigma_m: extra_pulse,
             fsigma_m: f64::from(physics.sim.fsigma),
             profile: "default".to_string(),
         },

@@ -11,7 +11,7 @@ use crate::dataset::offsets::AppliedOffset;
 use crate::dataset::sim::{sim_batch, sim_metadata, sim_schema};
 use crate::dataset::{self, tables, AtomicParquet, Dataset};
 use crate::error::{Error, Result};
-use crate::kernels::sim::{self, AlsPoints, Footprint, Profile, PulseTiming, SimConfig, Weighting};
+use crate::kernels::sim::{self, AlsPoints, Footprint, Profile, PulseModel, PulseTiming, SimConfig, Weighting};
 use crate::ops::progress::{Progress, Step};
 
 /// What `gedisim simulate` reads and where it writes.
@@ -26,15 +26,6 @@ pub enum Source {
     Dataset { dataset: PathBuf, footprints: Option<PathBuf>, out: Option<PathBuf> },
 }
 
-/// The pulse of a simulation.
-#[derive(Debug, Clone, PartialEq)]
-pub enum PulseChoice {
-    /// Gaussian of σ (m), or the 15 ns FWHM when `None`.
-    Gaussian(Option<f32>),
-    /// A two-column pulse file (range m, amplitude).
-    File(PathBuf),
-}
-
 /// Options of `gedisim simulate`.
 #[derive(Debug, Clone)]
 pub struct SimulateOptions {
@@ -45,7 +36,7 @@ pub struct SimulateOptions {
     pub normalise_density: bool,
     /// Convolve each return with the pulse while binning instead of after.
     pub pulse_before: bool,
-    pub pulse: PulseChoice,
+    pub pulse: PulseModel,
 }
 
 /// What `gedisim simulate` did.
@@ -65,9 +56,11 @@ pub fn sim_config(opts: &SimulateOptions) -> Result<SimConfig> {
         cfg.pulse_timing = PulseTiming::BeforeBinning;
     }
     cfg.pulse = match &opts.pulse {
-        PulseChoice::Gaussian(Some(s)) => sim::Pulse::gaussian(*s, cfg.res as f32)?,
-        PulseChoice::Gaussian(None) => cfg.pulse,
-        PulseChoice::File(path) => crate::io::pulse::read_pulse_file(path)?,
+        PulseModel::Gaussian(Some(s)) => sim::Pulse::gaussian(*s, cfg.res as f32)?,
+        // Recorded pulses are attached to each footprint (`attach_recorded_pulses`); the Gaussian
+        // stays for a footprint that gets none.
+        PulseModel::Gaussian(None) | PulseModel::Recorded(_) => cfg.pulse,
+        PulseModel::File(path) => crate::io::pulse::read_pulse_file(path)?,
     };
     Ok(cfg)
 }
@@ -80,7 +73,8 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
     let ((simulated, skipped), out) = match &opts.source {
         Source::Dataset { dataset, footprints, out } => {
             let ds = Dataset::open(dataset)?;
-            let (footprints, dest) = match footprints {
+            let from_csv = footprints.is_some();
+            let (mut footprints, dest) = match footprints {
                 Some(csv) => {
                     let stem = csv.file_stem().and_then(|s| s.to_str()).unwrap_or("footprints");
                     let dest = match out {
@@ -92,11 +86,39 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
                 None if out.is_some() => return Err(Error::Usage("--out in dataset mode needs --footprints".into())),
                 None => (crate::dataset::shots::shot_footprints(&ds)?, ds.table_file(tables::SIM, "shots")?),
             };
+            if let PulseModel::Recorded(reference) = opts.pulse {
+                let pulses = crate::dataset::shots::shot_pulses(&ds, reference, cfg.res)?;
+                let mean = attach_recorded_pulses(&mut footprints, &pulses).ok_or_else(|| {
+                    Error::file(
+                        ds.root(),
+                        "--pulse recorded: no shot of the dataset has a usable transmit waveform (tx_waveform)",
+                    )
+                })?;
+                if let Some(note) = pulses.note() {
+                    progress.note(&note);
+                }
+                // Positions without a shot (a footprint CSV) use the mean pulse: written beside the output.
+                if from_csv {
+                    let file = dest.with_extension("pulse.txt");
+                    let text = mean.to_text(&format!(
+                        "mean recorded GEDI transmit pulse of {} shots, reference {reference}; \
+                         x = range (m) after the reference point, y = weight",
+                        pulses.by_shot.len()
+                    ));
+                    dataset::write_atomic(&file, text.as_bytes())?;
+                    progress.note(&format!("mean recorded pulse written to {}", file.display()));
+                }
+            }
             progress.start(Step::Simulate, footprints.len() as u64);
             let r = simulate_on_dataset(&ds, footprints, &cfg, profile, &dest, progress);
             progress.finish();
             (r?, dest)
         }
+        Source::Direct { .. } if matches!(opts.pulse, PulseModel::Recorded(_)) => return Err(Error::Usage(
+            "--pulse recorded needs the shots of a dataset (--dataset); in direct mode give a pulse file, e.g. the \
+                 mean recorded pulse that `simulate --dataset … --footprints … --pulse recorded` writes"
+                .into(),
+        )),
         Source::Direct { als, footprints, out, keep_all_classes } => {
             let footprints = crate::io::footprints::read_footprints_csv(footprints)?;
             let mut points = crate::io::las::read_points(als)?;
@@ -107,6 +129,20 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
         }
     };
     Ok(SimulateReport { simulated, skipped, out })
+}
+
+/// Give every shot footprint its recorded pulse and every other footprint (no shot, or a shot
+/// without a usable record) the mean of them; returns that mean, `None` when no shot has a pulse.
+pub fn attach_recorded_pulses(
+    footprints: &mut [(Footprint, Option<AppliedOffset>)],
+    pulses: &crate::dataset::shots::ShotPulses,
+) -> Option<std::sync::Arc<sim::Pulse>> {
+    let mean = std::sync::Arc::new(pulses.mean()?);
+    for (f, _) in footprints.iter_mut() {
+        let own = f.id.parse::<u64>().ok().and_then(|sn| pulses.by_shot.get(&sn));
+        f.pulse = Some(own.cloned().unwrap_or_else(|| mean.clone()));
+    }
+    Some(mean)
 }
 
 /// Keep only the points whose class the ingest keeps (so that direct mode with the `default`

@@ -67,7 +67,7 @@ pub fn write_planted_l1b(ds: &Dataset, beams: &[PlantedBeam], plant: &Plant, des
         let truth: Vec<Footprint> = reported
             .iter()
             .enumerate()
-            .map(|(k, &(x, y))| Footprint { id: k.to_string(), x: x + plant.shift.0, y: y + plant.shift.1 })
+            .map(|(k, &(x, y))| Footprint::at(k.to_string(), x + plant.shift.0, y + plant.shift.1))
             .collect();
         let half = 20.0;
         let boxes: Vec<BBox> = truth.iter().map(|f| [f.x - half, f.y - half, f.x + half, f.y + half]).collect();

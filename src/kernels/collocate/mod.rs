@@ -25,7 +25,7 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::kernels::sim::index::CellGrid;
-use crate::kernels::sim::{Profile, SimConfig};
+use crate::kernels::sim::{Profile, Pulse, SimConfig};
 
 use correlation::{LagWindow, SimulatedProfiles};
 use profile::GridProfile;
@@ -204,6 +204,15 @@ pub struct ShotInput {
     pub y: f64,
     /// Denoised real waveform on orthometric heights ([`profile::real_profile`]).
     pub real: GridProfile,
+    /// The shot's recorded transmit pulse (at the model's bin size); `None` = the model's pulse.
+    pub pulse: Option<std::sync::Arc<Pulse>>,
+}
+
+impl ShotInput {
+    /// The pulse the shot's waveforms are simulated with.
+    pub fn pulse<'a>(&'a self, cfg: &'a CollocateConfig) -> &'a Pulse {
+        self.pulse.as_deref().unwrap_or(&cfg.model.pulse)
+    }
 }
 
 /// Why a shot with a usable waveform took no part in a segment.
@@ -409,8 +418,8 @@ fn rasterise(
         return Err(ShotSkip::PartlyCovered { covered_fraction });
     }
     let cand = candidates(cloud, index, centre, cfg.support_half_width());
-    let waves =
-        offset_waves(&cloud.x, &cloud.y, &cloud.z, &cand, centre, &cfg.grid, &cfg.model).map_err(|e| match e {
+    let waves = offset_waves(&cloud.x, &cloud.y, &cloud.z, &cand, centre, &cfg.grid, &cfg.model, shot.pulse(cfg))
+        .map_err(|e| match e {
             RasterError::NoReturns => ShotSkip::NoPoints,
             RasterError::HeightRange => ShotSkip::HeightRange,
         })?;
@@ -431,7 +440,8 @@ fn shot_surface(
 ) -> Option<Vec<f32>> {
     let centre = (shot.x, shot.y);
     let cand = candidates(cloud, index, centre, cfg.support_half_width());
-    let waves = offset_waves(&cloud.x, &cloud.y, &cloud.z, &cand, centre, &cfg.grid, &cfg.model).ok()?;
+    let waves =
+        offset_waves(&cloud.x, &cloud.y, &cloud.z, &cand, centre, &cfg.grid, &cfg.model, shot.pulse(cfg)).ok()?;
     Some(SimulatedProfiles::new(waves).correlate(&shot.real, window))
 }
 

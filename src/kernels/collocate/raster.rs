@@ -14,7 +14,7 @@
 //! `tests/collocate.rs` checks it against [`crate::kernels::sim::simulate`].
 
 use crate::kernels::sim::footprint::{footprint_weight, I_THRESH};
-use crate::kernels::sim::{absolute_bin, tap_offsets, SimConfig};
+use crate::kernels::sim::{absolute_bin, tap_offsets, Pulse, SimConfig};
 
 use super::OffsetGrid;
 
@@ -116,7 +116,8 @@ fn gaussian_ladder(e: f64, s: f64, two_var: f64, q: f64, out: &mut [f32]) {
 
 /// Builds the waveforms of every offset of `grid` around (x0, y0) from the returns `candidates`
 /// (indices into `x`, `y`, `z`; returns beyond the support are ignored), with the footprint,
-/// bin size and pulse of `model`.
+/// bin size of `model` and `pulse` (the shot's own, or the model's).
+#[allow(clippy::too_many_arguments)]
 pub fn offset_waves(
     x: &[f64],
     y: &[f64],
@@ -125,6 +126,7 @@ pub fn offset_waves(
     (x0, y0): (f64, f64),
     grid: &OffsetGrid,
     model: &SimConfig,
+    pulse: &Pulse,
 ) -> Result<OffsetWaves, RasterError> {
     let n = grid.n();
     let n_off = n * n;
@@ -209,12 +211,12 @@ pub fn offset_waves(
 
     // Pulse convolution on the absolute grid: the simulator's tap j moves a bin's energy
     // `offsets[j]` bins up (its bins count downwards: out[i] = Σⱼ in[i + offⱼ]·yⱼ).
-    let offsets = tap_offsets(&model.pulse, model);
+    let offsets = tap_offsets(pulse, model);
     let (omin, omax) = (*offsets.iter().min().unwrap_or(&0), *offsets.iter().max().unwrap_or(&0));
     // Row r of the output is absolute bin lo + omin + r.
     let rows = raw_rows + (omax - omin) as usize;
     let mut out = vec![0f32; rows * n_off];
-    for (&o, &yj) in offsets.iter().zip(&model.pulse.y) {
+    for (&o, &yj) in offsets.iter().zip(&pulse.y) {
         // Input row r (bin lo + r) lands on bin lo + r + o, i.e. output row r + o − omin.
         let shift = (o - omin) as usize;
         for r in 0..raw_rows {
@@ -263,7 +265,7 @@ mod tests {
         let mut model = SimConfig::new(Profile::Default);
         model.normalise_density = false;
         let grid = OffsetGrid::new(1.0, 1.0).unwrap();
-        let w = offset_waves(&[0.0], &[0.0], &[10.0], &[0], (0.0, 0.0), &grid, &model).unwrap();
+        let w = offset_waves(&[0.0], &[0.0], &[10.0], &[0], (0.0, 0.0), &grid, &model, &model.pulse).unwrap();
         assert_eq!(w.n_offsets, 9);
         let centre = w.column(4);
         let peak = centre.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).unwrap().0;
@@ -272,10 +274,11 @@ mod tests {
         let corner = w.column(0);
         assert!(corner[peak] < centre[peak] && corner[peak] > 0.0);
         assert_eq!(
-            offset_waves(&[100.0], &[0.0], &[10.0], &[0], (0.0, 0.0), &grid, &model),
+            offset_waves(&[100.0], &[0.0], &[10.0], &[0], (0.0, 0.0), &grid, &model, &model.pulse),
             Err(RasterError::NoReturns)
         );
-        let far = offset_waves(&[0.0, 0.0], &[0.0, 0.0], &[10.0, 5000.0], &[0, 1], (0.0, 0.0), &grid, &model);
+        let far =
+            offset_waves(&[0.0, 0.0], &[0.0, 0.0], &[10.0, 5000.0], &[0, 1], (0.0, 0.0), &grid, &model, &model.pulse);
         assert_eq!(far, Err(RasterError::HeightRange));
     }
 }

@@ -52,6 +52,9 @@ pub struct RealShot {
     /// Vertical offset of the shot's collocation segment (`offsets.dz`: GEDI − N − ALS, m, from
     /// the cross-correlation of whole waveforms), when collocated.
     pub collocation_dz: Option<f64>,
+    /// The shot's recorded transmit pulse on the simulation's bins (`SimShot::dz`), placed at its
+    /// reference point (docs/pulse.md); `None` = the study's Gaussian.
+    pub pulse: Option<std::sync::Arc<crate::kernels::sim::Pulse>>,
 }
 
 /// Strata labels of one shot for the "where" decomposition.

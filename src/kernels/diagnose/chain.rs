@@ -20,7 +20,7 @@ use crate::kernels::scenario::effects::{
     Effect, GeoLevel, WaveParts, WeightMethod, NOMINAL_FSIGMA_M, NOMINAL_PULSE_SIGMA_M,
 };
 use crate::kernels::scenario::EffectSet;
-use crate::kernels::sim::Weighting;
+use crate::kernels::sim::{Pulse, Weighting};
 use crate::kernels::waveform::forward::{forward, signal_span, L2aRunner, RecordWindow};
 use crate::kernels::waveform::l2a::Noise;
 use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
@@ -30,6 +30,9 @@ use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Model {
     pub effects: Vec<Effect>,
+    /// Simulate with the study's 15 ns Gaussian pulse instead of each shot's recorded transmit
+    /// pulse (`RealShot::pulse`; shots without one always use the Gaussian).
+    pub gaussian_pulse: bool,
     /// Site index (`SimShot::sites`) of a shot, by shot number; absent = the collocated position.
     pub placement: Arc<HashMap<u64, usize>>,
 }
@@ -39,12 +42,17 @@ impl Model {
     pub fn with(&self, e: Effect) -> Model {
         let mut effects = self.effects.clone();
         effects.push(e);
-        Model { effects, placement: self.placement.clone() }
+        Model { effects, placement: self.placement.clone(), gaussian_pulse: self.gaussian_pulse }
     }
 
     /// These effects with the placement of `other`.
     pub fn placed_as(&self, other: &Model) -> Model {
-        Model { effects: self.effects.clone(), placement: other.placement.clone() }
+        Model { effects: self.effects.clone(), placement: other.placement.clone(), gaussian_pulse: self.gaussian_pulse }
+    }
+
+    /// The nominal chain with the study's Gaussian pulse instead of the recorded ones.
+    pub fn gaussian() -> Model {
+        Model { gaussian_pulse: true, ..Model::default() }
     }
 
     /// The site at which this model simulates `case`.
@@ -76,13 +84,23 @@ impl Model {
             .unwrap_or(NOMINAL_FSIGMA_M)
     }
 
-    /// Effective pulse σ (m, range).
-    pub fn pulse_sigma(&self) -> f64 {
+    /// σ (m, range) of the system response beyond the transmit pulse (the `pulse` effect; 0 without).
+    pub fn extra_pulse_sigma(&self) -> f64 {
         self.effects
             .iter()
             .rev()
             .find_map(|e| if let Effect::Pulse { pulse_sigma_m } = e { Some(*pulse_sigma_m) } else { None })
-            .unwrap_or(NOMINAL_PULSE_SIGMA_M)
+            .unwrap_or(0.0)
+    }
+
+    /// `x` (bins of `dz`) convolved with the model's pulse: the shot's recorded `pulse` (at `dz`)
+    /// then the extra Gaussian, or one Gaussian of the nominal σ and the extra σ in quadrature.
+    pub fn apply_pulse(&self, x: &[f64], pulse: Option<&Pulse>, dz: f64) -> Vec<f64> {
+        let extra = self.extra_pulse_sigma();
+        match pulse.filter(|p| !self.gaussian_pulse && (f64::from(p.res) - dz).abs() < 1e-6) {
+            Some(p) => gaussian_blur(&p.convolve_same(x), extra, dz),
+            None => gaussian_blur(x, NOMINAL_PULSE_SIGMA_M.hypot(extra), dz),
+        }
     }
 
     /// Weighting and ρg/ρv.
@@ -177,17 +195,17 @@ pub fn gaussian_blur(x: &[f64], sigma: f64, dz: f64) -> Vec<f64> {
 /// (bins of the site's grid), with the canopy effects applied after the pulse as in the world
 /// generator.
 pub fn simulated_wave(case: &ShotCase, model: &Model) -> Vec<f64> {
-    simulated_wave_at(case.sim.dz, model.site(case), model)
+    simulated_wave_at(case.sim.dz, model.site(case), model, case.real.pulse.as_deref())
 }
 
-/// The noise-free simulated waveform at `site` (bins of `dz` from `site.z0`).
-pub fn simulated_wave_at(dz: f64, site: &Site, model: &Model) -> Vec<f64> {
+/// The noise-free simulated waveform at `site` (bins of `dz` from `site.z0`) with the shot's
+/// recorded `pulse`, if any.
+pub fn simulated_wave_at(dz: f64, site: &Site, model: &Model, pulse: Option<&Pulse>) -> Vec<f64> {
     let (w, rho) = model.weighting();
     let (ground, canopy) = parts_at(site, w, model.fsigma());
-    let sigma = model.pulse_sigma();
     let mut parts = WaveParts {
-        ground: gaussian_blur(&ground, sigma, dz),
-        canopy: gaussian_blur(&canopy, sigma, dz),
+        ground: model.apply_pulse(&ground, pulse, dz),
+        canopy: model.apply_pulse(&canopy, pulse, dz),
         z0: site.z0,
         dz,
         ground_z: site.als_ground,
@@ -257,7 +275,8 @@ pub fn reposition(cases: &[&ShotCase], model: &Model) -> Model {
                     if s.variants.is_empty() {
                         f64::NAN
                     } else {
-                        correlation(c, model, &simulated_wave_at(c.sim.dz, s, model), s.z0, c.sim.dz)
+                        let wave = simulated_wave_at(c.sim.dz, s, model, c.real.pulse.as_deref());
+                        correlation(c, model, &wave, s.z0, c.sim.dz)
                     }
                 })
                 .collect()
@@ -293,7 +312,7 @@ pub fn reposition(cases: &[&ShotCase], model: &Model) -> Model {
             placement.insert(s, best);
         }
     }
-    Model { effects: model.effects.clone(), placement: Arc::new(placement) }
+    Model { placement: Arc::new(placement), ..model.clone() }
 }
 
 /// The GEDI-processed simulation of `case` under `model`: one entry per algorithm a1..a6
@@ -388,8 +407,10 @@ fn wave_between(case: &ShotCase, model: &Model, target: (f64, f64)) -> Option<(V
     if !(total > 0.0) {
         return None;
     }
-    let waves: Vec<(f64, f64, Vec<f64>)> =
-        near.iter().map(|(w, s)| (w / total, s.z0, simulated_wave_at(dz, s, model))).collect();
+    let waves: Vec<(f64, f64, Vec<f64>)> = near
+        .iter()
+        .map(|(w, s)| (w / total, s.z0, simulated_wave_at(dz, s, model, case.real.pulse.as_deref())))
+        .collect();
     let top = waves.iter().map(|(_, z0, _)| *z0).fold(f64::NEG_INFINITY, f64::max);
     let len = waves.iter().map(|(_, z0, v)| ((top - z0) / dz).round() as usize + v.len()).max()?;
     let mut out = vec![0.0; len];
@@ -470,7 +491,7 @@ mod tests {
         sites.extend(site_grid().into_iter().map(site));
         let sim = Arc::new(SimShot { dz: GEDI_BIN_M, sites, short_segment: false, rh_nominal: vec![0.0; RH_LEN] });
         let wave: Vec<f32> =
-            simulated_wave_at(GEDI_BIN_M, &site(truth), &Model::default()).iter().map(|&v| v as f32).collect();
+            simulated_wave_at(GEDI_BIN_M, &site(truth), &Model::default(), None).iter().map(|&v| v as f32).collect();
         let real = RealShot {
             shot_number: shot,
             track: "g/BEAM0000".into(),
@@ -487,6 +508,7 @@ mod tests {
             strata: Strata::default(),
             segment: segment.into(),
             collocation_dz: None,
+            pulse: None,
         };
         ShotCase { real, sim, mismatch: [false; N_ALGORITHMS] }
     }
@@ -518,11 +540,11 @@ mod tests {
         let c = case(1, "s", (0.0, 0.0));
         let m = Model::default();
         let at = |x: f64, y: f64| wave_between(&c, &m, (x, y)).unwrap();
-        let node = simulated_wave_at(GEDI_BIN_M, &site((2.0, -2.0)), &m);
+        let node = simulated_wave_at(GEDI_BIN_M, &site((2.0, -2.0)), &m, None);
         let (w, z0) = at(2.0, -2.0);
         assert_eq!(z0, 140.0);
         assert!(w.iter().zip(&node).all(|(a, b)| (a - b).abs() < 1e-12));
-        let right = simulated_wave_at(GEDI_BIN_M, &site((4.0, -2.0)), &m);
+        let right = simulated_wave_at(GEDI_BIN_M, &site((4.0, -2.0)), &m, None);
         let (mid, _) = at(3.0, -2.0);
         assert!(mid.iter().zip(node.iter().zip(&right)).all(|(v, (a, b))| (v - 0.5 * (a + b)).abs() < 1e-12));
     }
@@ -534,6 +556,6 @@ mod tests {
             .with(Effect::Weighting { method: WeightMethod::Int, rho_ground_over_veg: 0.5 });
         assert_eq!(m.fsigma(), 7.0);
         assert_eq!(m.weighting(), (Weighting::Int, 0.5));
-        assert_eq!(m.pulse_sigma(), NOMINAL_PULSE_SIGMA_M);
+        assert_eq!(m.extra_pulse_sigma(), 0.0);
     }
 }

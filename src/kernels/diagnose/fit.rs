@@ -11,7 +11,7 @@ use super::chain::{null_cases, predict, real_products, reposition, Model, Scratc
 use super::gap::GapSums;
 use super::profile::{self, ShotProfile};
 use crate::kernels::gedi::N_ALGORITHMS;
-use crate::kernels::scenario::effects::{Effect, GeoLevel, WeightMethod, NOMINAL_PULSE_SIGMA_M};
+use crate::kernels::scenario::effects::{Effect, GeoLevel, WeightMethod};
 
 /// The effects the diagnosis fits: every effect of the registry, in its order.
 pub const FITTED_EFFECTS: [&str; 9] = crate::kernels::scenario::effects::EFFECT_NAMES;
@@ -231,8 +231,7 @@ fn fit_placed(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
             Some(Effect::Noise { noise_sigma_factor: median(ratios)? })
         }
         "pulse" => {
-            let grid = [0.4, 0.6, NOMINAL_PULSE_SIGMA_M, 1.25, 1.6, 2.0, 2.5, 3.1, 3.8];
-            let (x, _) = minimise(&mut |s| obj(Effect::Pulse { pulse_sigma_m: s }), &grid, 8);
+            let (x, _) = minimise(&mut |s| obj(Effect::Pulse { pulse_sigma_m: s }), &PULSE_GRID, 8);
             Some(Effect::Pulse { pulse_sigma_m: x })
         }
         "footprint" => {
@@ -240,8 +239,7 @@ fn fit_placed(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
             Some(Effect::Footprint { fsigma_m: x })
         }
         "weighting" => {
-            let grid: Vec<f64> =
-                [0.25, 0.4, 0.6, 0.8, 1.0, 1.25, 1.6, 2.2, 3.0, 4.0].iter().map(|r: &f64| r.ln()).collect();
+            let grid: Vec<f64> = RHO_GRID.iter().map(|r: &f64| r.ln()).collect();
             [WeightMethod::Ratio, WeightMethod::Frac, WeightMethod::Int]
                 .into_iter()
                 .map(|method| {
@@ -252,18 +250,74 @@ fn fit_placed(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
                 .min_by(|a, b| a.1.total_cmp(&b.1))
                 .map(|(e, _)| e)
         }
-        "canopy_change" => two_parameter(
-            &[2.0, 3.0, 4.0, 6.0, 8.0, 10.0, 12.0, 15.0, 18.0, 22.0, 27.0],
-            &[-0.9, -0.4, -0.1, 0.1, 0.3, 0.5, 0.7, 0.9],
-            &|h, f| obj(Effect::CanopyChange { height_m: h, fraction: f }),
-        )
+        "canopy_change" => two_parameter(&CANOPY_HEIGHTS, &CANOPY_FRACTIONS, &|h, f| {
+            obj(Effect::CanopyChange { height_m: h, fraction: f })
+        })
         .map(|(h, f)| Effect::CanopyChange { height_m: h, fraction: f }),
-        "occlusion" => two_parameter(
-            &[1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 13.0, 16.0],
-            &[-0.8, -0.4, 0.0, 0.3, 0.6, 1.0, 1.6, 2.5],
-            &|h, g| obj(Effect::Occlusion { height_m: h, gain: g }),
-        )
-        .map(|(h, g)| Effect::Occlusion { height_m: h, gain: g }),
+        "occlusion" => {
+            two_parameter(&OCCLUSION_HEIGHTS, &OCCLUSION_GAINS, &|h, g| obj(Effect::Occlusion { height_m: h, gain: g }))
+                .map(|(h, g)| Effect::Occlusion { height_m: h, gain: g })
+        }
+        _ => None,
+    }
+}
+
+/// σ (m) of a response beyond the transmit pulse: 0 (none) is its lower bound.
+pub const PULSE_GRID: [f64; 10] = [0.0, 0.3, 0.6, 0.9, 1.2, 1.6, 2.0, 2.5, 3.1, 3.8];
+/// ρ_ground/ρ_veg, both directions of 1.
+pub const RHO_GRID: [f64; 10] = [0.25, 0.4, 0.6, 0.8, 1.0, 1.25, 1.6, 2.2, 3.0, 4.0];
+/// Canopy change: heights (m) and fractions (loss > 0, gain < 0).
+pub const CANOPY_HEIGHTS: [f64; 11] = [2.0, 3.0, 4.0, 6.0, 8.0, 10.0, 12.0, 15.0, 18.0, 22.0, 27.0];
+pub const CANOPY_FRACTIONS: [f64; 8] = [-0.9, -0.4, -0.1, 0.1, 0.3, 0.5, 0.7, 0.9];
+/// Occlusion: band tops (m) and gains (more understorey > 0, less < 0).
+pub const OCCLUSION_HEIGHTS: [f64; 10] = [1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 13.0, 16.0];
+pub const OCCLUSION_GAINS: [f64; 8] = [-0.8, -0.4, 0.0, 0.3, 0.6, 1.0, 1.6, 2.5];
+
+/// The parameter of a fitted effect that sits on a bound of its search range (within 2 % of the
+/// range), as `name = value (lower|upper bound)`: the fit wanted to go further, so the effect
+/// does not describe the gap with a value it can take (docs/diagnosis.md, identifiability).
+pub fn at_bound(e: &Effect) -> Option<String> {
+    let check = |name: &str, v: f64, grid: &[f64]| -> Option<String> {
+        let (lo, hi) = (grid[0], grid[grid.len() - 1]);
+        let tol = 0.02 * (hi - lo);
+        if v <= lo + tol {
+            Some(format!("{name} = {v:.3} (lower bound)"))
+        } else if v >= hi - tol {
+            Some(format!("{name} = {v:.3} (upper bound)"))
+        } else {
+            None
+        }
+    };
+    let ln = |g: &[f64]| g.iter().map(|v: &f64| v.ln()).collect::<Vec<f64>>();
+    match *e {
+        Effect::Pulse { pulse_sigma_m } => check("pulse_sigma_m", pulse_sigma_m, &PULSE_GRID),
+        Effect::Footprint { fsigma_m } => check("fsigma_m", fsigma_m, &FSIGMA_GRID),
+        Effect::Weighting { rho_ground_over_veg, .. } => {
+            check("rho_ground_over_veg", rho_ground_over_veg.ln(), &ln(&RHO_GRID))
+                .map(|_| format!("rho_ground_over_veg = {rho_ground_over_veg:.3} (bound)"))
+        }
+        Effect::CanopyChange { height_m, fraction } => {
+            check("height_m", height_m, &CANOPY_HEIGHTS).or_else(|| check("fraction", fraction, &CANOPY_FRACTIONS))
+        }
+        Effect::Occlusion { height_m, gain } => {
+            check("height_m", height_m, &OCCLUSION_HEIGHTS).or_else(|| check("gain", gain, &OCCLUSION_GAINS))
+        }
+        _ => None,
+    }
+}
+
+/// The simpler effect a fitted effect is equivalent to: a canopy change from the lowest height of
+/// its range scales (nearly) all canopy energy by 1 − fraction, and so does an occlusion up to
+/// the top of its range by 1 + gain — which is `weighting` with ρ_ground/ρ_veg = 1/that factor.
+pub fn simpler_equivalent(e: &Effect) -> Option<Effect> {
+    let whole = |factor: f64| {
+        (factor > 0.0).then(|| Effect::Weighting { method: WeightMethod::Ratio, rho_ground_over_veg: 1.0 / factor })
+    };
+    match *e {
+        Effect::CanopyChange { height_m, fraction } if height_m <= CANOPY_HEIGHTS[0] + 0.5 => whole(1.0 - fraction),
+        Effect::Occlusion { height_m, gain } if height_m >= OCCLUSION_HEIGHTS[OCCLUSION_HEIGHTS.len() - 1] - 0.5 => {
+            whole(1.0 + gain)
+        }
         _ => None,
     }
 }
@@ -301,6 +355,21 @@ fn two_parameter(heights: &[f64], strengths: &[f64], f: &dyn Fn(f64, f64) -> f64
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bounds_and_equivalences_are_recognised() {
+        assert!(at_bound(&Effect::Footprint { fsigma_m: 3.5 }).unwrap().contains("lower bound"));
+        assert!(at_bound(&Effect::Footprint { fsigma_m: 10.0 }).unwrap().contains("upper bound"));
+        assert_eq!(at_bound(&Effect::Footprint { fsigma_m: 4.2 }), None);
+        assert!(at_bound(&Effect::Pulse { pulse_sigma_m: 0.0 }).is_some());
+        let w = |rho| Effect::Weighting { method: WeightMethod::Int, rho_ground_over_veg: rho };
+        assert!(at_bound(&w(4.0)).is_some() && at_bound(&w(0.25)).is_some() && at_bound(&w(1.3)).is_none());
+        assert_eq!(at_bound(&Effect::Datum { dz_m: 100.0 }), None);
+        let gain = simpler_equivalent(&Effect::CanopyChange { height_m: 2.0, fraction: -0.25 }).unwrap();
+        assert_eq!(gain, Effect::Weighting { method: WeightMethod::Ratio, rho_ground_over_veg: 0.8 });
+        assert!(simpler_equivalent(&Effect::Occlusion { height_m: 16.0, gain: 0.25 }).is_some());
+        assert_eq!(simpler_equivalent(&Effect::Occlusion { height_m: 5.0, gain: 0.25 }), None);
+    }
 
     #[test]
     fn minimise_finds_a_parabola_minimum_between_grid_points() {

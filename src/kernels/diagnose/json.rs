@@ -25,6 +25,11 @@ pub struct DiagnosisJson {
     /// The greedy ladder of combined causes.
     pub ladder: Vec<TrialJson>,
     pub unexplained: bool,
+    /// Effects that explain as well as the first within noise (paired bootstrap of the shrink
+    /// difference): the first is then not a confident answer.
+    pub ambiguous_with: Vec<String>,
+    /// Known physics modelled before any effect is ranked (the recorded transmit pulse).
+    pub known_physics: Vec<KnownPhysicsJson>,
     #[serde(rename = "where")]
     pub where_: WhereJson,
     pub shots: ShotsJson,
@@ -69,6 +74,25 @@ pub struct TrialJson {
     pub held_out: HeldOut,
     /// Parameters fitted on each fold's calibration set.
     pub fold_params: Vec<Option<Params>>,
+    /// The fitted parameter on a bound of its range (`name = value (… bound)`), if any.
+    pub at_bound: Option<String>,
+    /// The simpler effect the fitted one is equivalent to, if any.
+    pub equivalent_to: Option<EquivalentJson>,
+}
+
+/// A simpler effect with its parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EquivalentJson {
+    pub name: String,
+    pub params: Params,
+}
+
+/// A step of known physics: the gap before (without it) and after (with it), held out.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct KnownPhysicsJson {
+    pub name: String,
+    pub description: String,
+    pub held_out: HeldOut,
 }
 
 /// The held-out comparison ([`Comparison`]).
@@ -253,6 +277,11 @@ impl TrialJson {
             params: params(&t.effect),
             held_out: HeldOut::of(&t.held_out),
             fold_params: t.fold_effects.iter().map(|e| e.as_ref().map(params)).collect(),
+            at_bound: t.at_bound.clone(),
+            equivalent_to: t
+                .equivalent
+                .as_ref()
+                .map(|e| EquivalentJson { name: e.name().to_string(), params: params(e) }),
         }
     }
 }
@@ -283,6 +312,18 @@ impl DiagnosisJson {
             effects: d.ranking.effects.iter().map(TrialJson::of).collect(),
             ladder: d.ranking.ladder.iter().map(TrialJson::of).collect(),
             unexplained: d.ranking.unexplained,
+            ambiguous_with: d.ranking.ambiguous_with.clone(),
+            known_physics: d
+                .recorded_pulse
+                .iter()
+                .map(|c| KnownPhysicsJson {
+                    name: "recorded_pulse".into(),
+                    description: "the study's 15 ns Gaussian pulse (before) against each shot's recorded L1B transmit \
+                                  pulse (after), everything else nominal"
+                        .into(),
+                    held_out: HeldOut::of(c),
+                })
+                .collect(),
             where_: WhereJson {
                 percentiles: w
                     .percentiles

@@ -36,6 +36,10 @@ pub struct Diagnosis {
     pub n_tracks: usize,
     /// (shot, algorithm) pairs left out as ground mismatches.
     pub mismatched: usize,
+    /// Known physics before any effect: the study's Gaussian pulse (before) against each shot's
+    /// recorded transmit pulse (after, the nominal chain), held out like an effect; `None` when
+    /// no shot has a recorded pulse.
+    pub recorded_pulse: Option<rank::Comparison>,
 }
 
 /// Diagnose `cases` with the effects `names` (normally [`fit::FITTED_EFFECTS`]); `on_step` hears
@@ -52,7 +56,22 @@ pub fn diagnose(mut cases: Vec<ShotCase>, names: &[&str], on_step: &dyn Fn(&str)
         None => fit::total(&rank::State::nominal(&folds).gaps).metrics(),
     };
     let n_replaceable = cases.iter().filter(|c| c.sim.short_segment && c.sim.sites.len() > 1).count();
-    Diagnosis { where_, nominal, ranking, n_shots: cases.len(), n_replaceable, n_tracks: folds.n_tracks, mismatched }
+    let recorded_pulse = cases.iter().any(|c| c.real.pulse.is_some()).then(|| {
+        on_step("known physics: recorded transmit pulse");
+        let gaussian = chain::Model::gaussian();
+        let before = folds.held_out(&[gaussian.clone(), gaussian]);
+        rank::compare(&folds, &before, &rank::State::nominal(&folds).gaps, "recorded pulse")
+    });
+    Diagnosis {
+        where_,
+        nominal,
+        ranking,
+        n_shots: cases.len(),
+        n_replaceable,
+        n_tracks: folds.n_tracks,
+        mismatched,
+        recorded_pulse,
+    }
 }
 
 /// A pair is a ground mismatch when its ground difference (real − nominal chain) lies more than

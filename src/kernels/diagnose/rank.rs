@@ -282,10 +282,48 @@ fn compare_spread(folds: &Folds, state: &State, models: &[Model; 2], after: &[Sh
     Comparison { shrink, ci95: interval(shrinks), gain_ci95: interval(gains), spread: Some(spread), ..base }
 }
 
-/// Order trials: those that explain first, each group by its held-out score
+/// Order trials: those that explain first; within each group those that can be named (fit inside
+/// its range, not equivalent to a simpler effect) first; then by held-out score
 /// ([`Comparison::score`]), best first.
 fn order(trials: &mut [Trial]) {
-    trials.sort_by(|a, b| b.explains().cmp(&a.explains()).then(b.held_out.score().total_cmp(&a.held_out.score())));
+    trials.sort_by(|a, b| {
+        b.explains()
+            .cmp(&a.explains())
+            .then(b.nameable().cmp(&a.nameable()))
+            .then(b.held_out.score().total_cmp(&a.held_out.score()))
+    });
+}
+
+/// 95 % bootstrap interval (over tracks, paired) of shrink(a) − shrink(b), both against `before`.
+fn shrink_difference_ci(folds: &Folds, before: &[ShotGap], a: &[ShotGap], b: &[ShotGap]) -> [f64; 2] {
+    let (tb, ta, tc) = (folds.per_track(before), folds.per_track(a), folds.per_track(b));
+    let mut d = Vec::with_capacity(BOOTSTRAP);
+    for pick in folds.resamples("ambiguity") {
+        let bb = sum_of(&tb, &pick).metrics();
+        let (aa, cc) = (sum_of(&ta, &pick).metrics(), sum_of(&tc, &pick).metrics());
+        if bb.n_pairs > 0 && aa.n_pairs > 0 && cc.n_pairs > 0 {
+            d.push(shrink_of(&bb, &aa) - shrink_of(&bb, &cc));
+        }
+    }
+    interval(d)
+}
+
+/// The effects that explain as well as the first within noise: nameable, explaining, judged on
+/// the systematic gap like it, and the paired interval of their shrink difference with the first
+/// contains 0.
+fn near_ties(folds: &Folds, before: &[ShotGap], trials: &[Trial]) -> Vec<String> {
+    let Some(first) = trials.first().filter(|t| t.explains() && t.held_out.spread.is_none()) else {
+        return Vec::new();
+    };
+    trials[1..]
+        .iter()
+        .filter(|t| t.explains() && t.nameable() && t.held_out.spread.is_none())
+        .filter(|t| {
+            let ci = shrink_difference_ci(folds, before, &first.gaps, &t.gaps);
+            ci[0] <= 0.0 && ci[1] >= 0.0
+        })
+        .map(|t| t.effect.name().to_string())
+        .collect()
 }
 
 fn interval(mut v: Vec<f64>) -> [f64; 2] {
@@ -307,6 +345,10 @@ pub struct Trial {
     pub held_out: Comparison,
     /// Held-out gaps per shot with the effect.
     pub gaps: Vec<ShotGap>,
+    /// The fitted parameter on a bound of its range ([`super::fit::at_bound`]), if any.
+    pub at_bound: Option<String>,
+    /// The simpler effect the fitted one is equivalent to ([`super::fit::simpler_equivalent`]).
+    pub equivalent: Option<Effect>,
 }
 
 impl Trial {
@@ -320,6 +362,12 @@ impl Trial {
                 |e| matches!(e, Some(Effect::Geolocation { shot_sigma_m, .. }) if *shot_sigma_m >= MIN_SHOT_SIGMA_M),
             );
         resolved && self.held_out.ci95[0] >= MIN_SHRINK_LOWER && self.held_out.gain_ci95[0] >= MIN_GAIN_M
+    }
+
+    /// Its fit lies inside its range and it is not a simpler effect in disguise: only such an
+    /// effect is named over another.
+    pub fn nameable(&self) -> bool {
+        self.at_bound.is_none() && self.equivalent.is_none()
     }
 }
 
@@ -355,7 +403,9 @@ pub fn try_effect(folds: &Folds, state: &State, name: &str) -> Option<Trial> {
     } else {
         compare(folds, &state.gaps, &gaps, name)
     };
-    Some(Trial { effect, fold_effects: fitted, held_out, gaps })
+    let at_bound = super::fit::at_bound(&effect);
+    let equivalent = super::fit::simpler_equivalent(&effect);
+    Some(Trial { effect, fold_effects: fitted, held_out, gaps, at_bound, equivalent })
 }
 
 /// The ranking and the ladder.
@@ -367,6 +417,9 @@ pub struct Ranking {
     pub ladder: Vec<Trial>,
     /// No effect's interval admits a real gain.
     pub unexplained: bool,
+    /// Effects that explain as well as the first within noise (`near_ties`): the diagnosis is
+    /// then ambiguous between the first and these.
+    pub ambiguous_with: Vec<String>,
 }
 
 /// Rank `names` on the nominal chain, then climb the ladder. `on_step` is told each effect tried.
@@ -381,6 +434,7 @@ pub fn rank(folds: &Folds, names: &[&str], on_step: &dyn Fn(&str)) -> Ranking {
         .collect();
     order(&mut effects);
     let unexplained = !effects.first().is_some_and(Trial::explains);
+    let ambiguous_with = near_ties(folds, &nominal.gaps, &effects);
     let mut ladder: Vec<Trial> = Vec::new();
     if !unexplained {
         let first = effects[0].clone();
@@ -406,7 +460,7 @@ pub fn rank(folds: &Folds, names: &[&str], on_step: &dyn Fn(&str)) -> Ranking {
             }
         }
     }
-    Ranking { effects, ladder, unexplained }
+    Ranking { effects, ladder, unexplained, ambiguous_with }
 }
 
 fn advance(state: &State, t: &Trial) -> State {

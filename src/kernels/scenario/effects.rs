@@ -10,7 +10,7 @@
 
 use std::fmt;
 
-use crate::kernels::sim::{Pulse, SimConfig, Weighting};
+use crate::kernels::sim::{SimConfig, Weighting};
 
 /// Footprint σ of the nominal physics (m), gediRat's default.
 pub const NOMINAL_FSIGMA_M: f64 = 5.5;
@@ -103,7 +103,8 @@ pub enum Effect {
     Datum { dz_m: f64 },
     /// Return weighting and ground/vegetation reflectance ratio of the real waveforms.
     Weighting { method: WeightMethod, rho_ground_over_veg: f64 },
-    /// Effective system pulse σ (m, range) of the real waveforms.
+    /// A system response beyond the transmit pulse: the real waveforms convolved with a further
+    /// zero-mean Gaussian of σ (m, range).
     Pulse { pulse_sigma_m: f64 },
     /// Footprint σ (m) of the real waveforms.
     Footprint { fsigma_m: f64 },
@@ -184,7 +185,7 @@ fn specs(effect: &str) -> Option<(&'static [ParamSpec], &'static str, f64)> {
         "geolocation" => (p!("level" = "shot", "shot_sigma_m" = "3.0"), "shot_sigma_m", 0.0),
         "datum" => (p!("dz_m" = "0.5"), "dz_m", 0.0),
         "weighting" => (p!("method" = "ratio", "rho_ground_over_veg" = "0.7"), "rho_ground_over_veg", 1.0),
-        "pulse" => (p!("pulse_sigma_m" = "1.5"), "pulse_sigma_m", NOMINAL_PULSE_SIGMA_M),
+        "pulse" => (p!("pulse_sigma_m" = "1.2"), "pulse_sigma_m", 0.0),
         "footprint" => (p!("fsigma_m" = "7.0"), "fsigma_m", NOMINAL_FSIGMA_M),
         "noise" => (p!("noise_sigma_factor" = "2.0"), "noise_sigma_factor", 1.0),
         "canopy_change" => (p!("height_m" = "10.0", "fraction" = "0.3"), "fraction", 0.0),
@@ -385,12 +386,8 @@ impl Effect {
                 };
                 p.rho_ground_over_veg = rho_ground_over_veg;
             }
-            Effect::Pulse { pulse_sigma_m } => {
-                // Validated at parse time (σ > 0.01 m), so the pulse always builds.
-                if let Ok(pulse) = Pulse::gaussian(pulse_sigma_m as f32, p.sim.res as f32) {
-                    p.sim.pulse = pulse;
-                }
-            }
+            // Shots with a recorded pulse are broadened alike (`Effect::extra_pulse_sigma`).
+            Effect::Pulse { pulse_sigma_m } => p.sim.pulse = p.sim.pulse.broadened(pulse_sigma_m),
             Effect::Footprint { fsigma_m } => p.sim.fsigma = fsigma_m as f32,
             _ => {}
         }
@@ -534,6 +531,15 @@ impl EffectSet {
         self.effects.iter().map(Effect::noise_sigma_factor).product()
     }
 
+    /// σ (m) of the system response beyond the transmit pulse (the `pulse` effect; 0 without).
+    pub fn extra_pulse_sigma(&self) -> f64 {
+        self.effects
+            .iter()
+            .map(|e| if let Effect::Pulse { pulse_sigma_m } = e { pulse_sigma_m.powi(2) } else { 0.0 })
+            .sum::<f64>()
+            .sqrt()
+    }
+
     /// Sum of the ground offsets of algorithm `alg` (m).
     pub fn ground_offset_m(&self, alg: u8) -> f64 {
         self.effects.iter().map(|e| e.ground_offset_m(alg)).sum()
@@ -556,9 +562,9 @@ mod tests {
     #[test]
     fn defaults_and_magnitude_scale_the_departure_from_nominal() {
         let e = Effect::parse("pulse", None, &[]).unwrap();
-        assert_eq!(e, Effect::Pulse { pulse_sigma_m: 1.5 });
+        assert_eq!(e, Effect::Pulse { pulse_sigma_m: 1.2 });
         let Effect::Pulse { pulse_sigma_m } = Effect::parse("pulse", Some(2.0), &[]).unwrap() else { panic!() };
-        assert!((pulse_sigma_m - (NOMINAL_PULSE_SIGMA_M + 2.0 * (1.5 - NOMINAL_PULSE_SIGMA_M))).abs() < 1e-12);
+        assert!((pulse_sigma_m - 2.4).abs() < 1e-12);
         assert_eq!(Effect::parse("datum", Some(3.0), &[]).unwrap(), Effect::Datum { dz_m: 1.5 });
         assert_eq!(Effect::parse("datum", None, &[kv("dz_m", "-2")]).unwrap(), Effect::Datum { dz_m: -2.0 });
         assert_eq!(
@@ -616,7 +622,8 @@ mod tests {
         let base = Physics::nominal();
         let p = EffectSet::parse("footprint+pulse", None, &[]).unwrap().physics(&base);
         assert_eq!(p.sim.fsigma, 7.0);
-        assert!((p.sim.pulse.sigma - 1.5).abs() < 1e-6);
+        let want = NOMINAL_PULSE_SIGMA_M.hypot(1.2);
+        assert!((f64::from(p.sim.pulse.sigma) - want).abs() < 0.01, "{} vs {want}", p.sim.pulse.sigma);
         assert!((base.sim.pulse.sigma as f64 - NOMINAL_PULSE_SIGMA_M).abs() < 1e-6);
         let g = EffectSet::parse("ground_detection", None, &[kv("algorithm", "2")]).unwrap();
         assert_eq!((g.ground_offset_m(1), g.ground_offset_m(2)), (0.0, 0.5));

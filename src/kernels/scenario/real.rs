@@ -53,16 +53,6 @@ pub const ENERGY_LOG_SPREAD: f64 = 0.13;
 /// Shot-to-shot spread of the noise mean (DN, normal σ; 10–90 % 240.6–245.4 for coverage).
 pub const NOISE_MEAN_SPREAD: f64 = 2.0;
 
-/// Transmit-pulse record: 128 samples (`tx_sample_count`), peak at sample 55, baseline 204.6 DN,
-/// peak 1332 DN (median over the full-power shots).
-pub const TX_SAMPLES: usize = 128;
-/// Sample of the transmit-pulse peak.
-pub const TX_PEAK_SAMPLE: usize = 55;
-/// Baseline of the transmit record (DN).
-pub const TX_BASELINE: f64 = 204.6;
-/// Peak above the baseline (DN).
-pub const TX_AMPLITUDE: f64 = 1127.4;
-
 /// The typical record of a beam type.
 pub fn record(beam_type: BeamType) -> BeamTypeRecord {
     match beam_type {

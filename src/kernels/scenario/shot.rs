@@ -3,10 +3,9 @@
 //! NASA would, with the `ground_detection` effect applied to the stored products. Pure.
 
 use super::effects::{EffectSet, Physics, WaveParts};
-use super::real;
 use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
 use crate::kernels::gedi::{L1bShot, L2aAlgorithm, L2aShot, LandCover};
-use crate::kernels::sim::{SimulatedFootprint, Weighting};
+use crate::kernels::sim::{Pulse, PulseReference, SimulatedFootprint, TransmitPulse, Weighting};
 use crate::kernels::waveform::forward::{forward, signal_span, L2aRunner, RecordWindow};
 use crate::kernels::waveform::l2a::{L2aOutcome, Noise};
 use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
@@ -43,6 +42,8 @@ pub struct ShotSpec {
     pub dem_error_m: f64,
     /// Land-cover values written to the L2A.
     pub land_cover: LandCover,
+    /// The recorded transmit pulse (`txwaveform`, 128 samples of DN).
+    pub tx_waveform: Vec<f32>,
 }
 
 /// What was planted in one shot (for truth.json).
@@ -71,16 +72,42 @@ pub enum ShotError {
     TooLong(usize),
 }
 
-/// The Gaussian transmit pulse of the nominal physics, on GEDI's 128-sample tx record.
-pub fn tx_waveform() -> Vec<f32> {
-    // 15 ns FWHM in 1 ns samples.
-    let sigma = super::effects::NOMINAL_PULSE_FWHM_NS / (8.0 * 2f64.ln()).sqrt();
-    (0..real::TX_SAMPLES)
-        .map(|i| {
-            let d = (i as f64 - real::TX_PEAK_SAMPLE as f64) / sigma;
-            (real::TX_BASELINE + real::TX_AMPLITUDE * (-0.5 * d * d).exp()) as f32
-        })
-        .collect()
+/// Spread (normal σ, clipped to ±[`TX_STRETCH_CLIP`]) of a drawn pulse's time scale.
+pub const TX_STRETCH_SIGMA: f64 = 0.03;
+pub const TX_STRETCH_CLIP: f64 = 0.08;
+/// Spread (samples) of where a drawn pulse's peak sits in its record, around the library's.
+pub const TX_SHIFT_SAMPLES: f64 = 1.5;
+
+/// One shot's transmit pulse drawn from a real recorded pulse of its laser (`library`, a raw L1B
+/// `txwaveform`): the library pulse cleaned of its noise floor, stretched in time by 1 + ε and
+/// shifted by a fraction of a sample, recorded again on the library's floor with fresh floor
+/// noise. Returns the new record (what the L1B stores) and the noise-free pulse that forms the
+/// received waveform, placed at `reference` as found on the new record (as GEDI's ranging finds
+/// it on its own record) at bin size `res` (m). `None` when the library record has no pulse.
+pub fn draw_transmit(
+    library: &[f32],
+    rng: &mut super::rng::Stream,
+    reference: PulseReference,
+    res: f64,
+) -> Option<(Vec<f32>, Pulse)> {
+    let lib = TransmitPulse::from_record(library).ok()?;
+    let stretch = 1.0 + (TX_STRETCH_SIGMA * rng.normal()).clamp(-TX_STRETCH_CLIP, TX_STRETCH_CLIP);
+    let shift = TX_SHIFT_SAMPLES * (rng.uniform() - 0.5) * 2.0;
+    let at = |x: f64| -> f64 {
+        if x < 0.0 || x > (lib.samples.len() - 1) as f64 {
+            return 0.0;
+        }
+        let j = x.floor() as usize;
+        let t = x - j as f64;
+        (1.0 - t) * lib.samples[j] + t * lib.samples.get(j + 1).copied().unwrap_or(0.0)
+    };
+    // New sample i holds the library's pulse at (i − shift − peak)/stretch + peak.
+    let clean: Vec<f64> =
+        (0..library.len()).map(|i| at((i as f64 - shift - lib.peak) / stretch + lib.peak) / stretch).collect();
+    let record: Vec<f32> = clean.iter().map(|&v| (lib.floor + v + lib.floor_sigma * rng.normal()) as f32).collect();
+    let seen = TransmitPulse::from_record(&record).ok()?;
+    let truth = TransmitPulse { samples: clean, ..seen };
+    Some((record, truth.to_pulse(reference, res)))
 }
 
 /// Make the L1B and L2A records of one shot from its true-physics simulation.
@@ -126,7 +153,7 @@ pub fn make_shot(
         shot_number: spec.shot_number,
         delta_time: spec.delta_time,
         rx_waveform: twin.wave.clone(),
-        tx_waveform: tx_waveform(),
+        tx_waveform: spec.tx_waveform.clone(),
         latitude_bin0: spec.lat,
         longitude_bin0: spec.lon,
         latitude_lastbin: spec.lat,

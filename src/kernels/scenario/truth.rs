@@ -72,7 +72,10 @@ impl PlantedEffect {
 pub struct TruePhysics {
     pub weighting: String,
     pub rho_ground_over_veg: f64,
-    pub pulse_sigma_m: f64,
+    /// The transmit pulse of every shot (recorded, and the reference point that lands on the surface).
+    pub pulse: String,
+    /// σ (m) of the system response beyond the transmit pulse (the `pulse` effect; 0 without).
+    pub extra_pulse_sigma_m: f64,
     pub fsigma_m: f64,
     pub profile: String,
 }

@@ -15,6 +15,7 @@ pub mod footprint;
 pub mod index;
 pub mod points;
 pub mod pulse;
+pub mod transmit;
 pub mod truth;
 pub mod wave;
 
@@ -30,6 +31,7 @@ use wave::{Contribution, Sample, WaveSet};
 
 pub use points::AlsPoints;
 pub use pulse::Pulse;
+pub use transmit::{PulseModel, PulseReference, TransmitPulse};
 pub use truth::Truth;
 
 /// Which behaviour the simulator reproduces.
@@ -175,6 +177,15 @@ pub struct Footprint {
     pub x: f64,
     /// Northing (m).
     pub y: f64,
+    /// The footprint's own transmit pulse (a shot's recorded pulse); `None` = the configured one.
+    pub pulse: Option<std::sync::Arc<Pulse>>,
+}
+
+impl Footprint {
+    /// A footprint at (x, y) simulated with the configured pulse.
+    pub fn at(id: impl Into<String>, x: f64, y: f64) -> Footprint {
+        Footprint { id: id.into(), x, y, pulse: None }
+    }
 }
 
 /// The waveforms of one weighting with their truths and relative heights.
@@ -409,9 +420,13 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
     }
 
     // Bin grid: top edge `top`, bin k = floor((top − z)/dz).
-    let pulse = &cfg.pulse;
+    let pulse = fp.pulse.as_deref().unwrap_or(&cfg.pulse);
     let res32 = cfg.res as f32;
-    let buff = WAVE_BUFFER + pulse.x.len() as f64 * pulse.res as f64 / 2.0;
+    // Half the pulse's length (the reference's buffer), or in the default profile its longer
+    // side if that is longer (a recorded pulse's slow tail).
+    let half_length = pulse.x.len() as f64 * pulse.res as f64 / 2.0;
+    let reach = if q.batch_grid { 0.0 } else { pulse.x.iter().fold(0f64, |m, &x| m.max(f64::from(x).abs())) };
+    let buff = WAVE_BUFFER + half_length.max(reach);
     let (top, dz, n_bins, top_index) = if q.batch_grid {
         let dz = res32 as f64;
         let (top, bottom) = (z_hi + buff, z_lo - buff);
@@ -596,7 +611,7 @@ mod tests {
     }
 
     fn fp(id: &str, x: f64, y: f64) -> Footprint {
-        Footprint { id: id.into(), x, y }
+        Footprint::at(id, x, y)
     }
 
     #[test]

@@ -116,6 +116,140 @@ impl Pulse {
     }
 }
 
+impl Pulse {
+    /// A pulse already on a regular grid: `pairs` (range offset m, amplitude ≥ 0) every `res` m,
+    /// the reference point at index `cent_bin`; zero samples at either end are dropped, weights
+    /// normalised to a unit sum, σ the rms width about the centre of gravity.
+    pub fn on_grid(pairs: &[(f64, f64)], cent_bin: usize, res: f64) -> Pulse {
+        let first = pairs.iter().position(|p| p.1 > 0.0).unwrap_or(0).min(cent_bin);
+        let last = pairs.iter().rposition(|p| p.1 > 0.0).unwrap_or(0).max(cent_bin);
+        let kept = &pairs[first..=last.min(pairs.len().saturating_sub(1))];
+        let tot: f64 = kept.iter().map(|p| p.1).sum();
+        if kept.is_empty() || !(tot > 0.0) {
+            return Pulse::dirac();
+        }
+        let mean = kept.iter().map(|p| p.0 * p.1).sum::<f64>() / tot;
+        let var = kept.iter().map(|p| (p.0 - mean).powi(2) * p.1).sum::<f64>() / tot;
+        Pulse {
+            x: kept.iter().map(|p| p.0 as f32).collect(),
+            y: kept.iter().map(|p| (p.1 / tot) as f32).collect(),
+            cent_bin: cent_bin - first,
+            res: res as f32,
+            sigma: var.sqrt() as f32,
+        }
+    }
+
+    /// This pulse convolved with a zero-mean Gaussian of σ `sigma` (m) on its own grid (a system
+    /// response beyond the pulse: the `pulse` effect); the reference point stays at offset 0.
+    pub fn broadened(&self, sigma: f64) -> Pulse {
+        if !(sigma > 0.0) {
+            return self.clone();
+        }
+        let res = if self.res > 0.0 { f64::from(self.res) } else { 0.15 };
+        let x0 = f64::from(self.x[0]);
+        let base: Vec<f64> = self.y.iter().map(|&v| f64::from(v)).collect();
+        let wide = gaussian_convolve(&base, sigma, res);
+        let pad = (wide.len() - base.len()) / 2;
+        let pairs: Vec<(f64, f64)> =
+            wide.iter().enumerate().map(|(k, &v)| (x0 + (k as f64 - pad as f64) * res, v)).collect();
+        Pulse::on_grid(&pairs, self.cent_bin + pad, res)
+    }
+
+    /// This pulse on a grid of spacing `res` (m), interpolated linearly, offset 0 kept at its
+    /// reference point; itself when already on that spacing.
+    pub fn resampled(&self, res: f64) -> Pulse {
+        if (f64::from(self.res) - res).abs() < 1e-9 || self.x.len() < 2 {
+            return self.clone();
+        }
+        let (x0, x1) = (f64::from(self.x[0]), f64::from(self.x[self.x.len() - 1]));
+        let (k0, k1) = ((x0 / res).floor() as i64, (x1 / res).ceil() as i64);
+        let at = |x: f64| -> f64 {
+            let i = self.x.partition_point(|&v| f64::from(v) <= x);
+            if i == 0 || i >= self.x.len() {
+                return 0.0;
+            }
+            let (xa, xb) = (f64::from(self.x[i - 1]), f64::from(self.x[i]));
+            let t = if xb > xa { (x - xa) / (xb - xa) } else { 0.0 };
+            (1.0 - t) * f64::from(self.y[i - 1]) + t * f64::from(self.y[i])
+        };
+        let pairs: Vec<(f64, f64)> = (k0..=k1).map(|k| (k as f64 * res, at(k as f64 * res))).collect();
+        Pulse::on_grid(&pairs, (-k0).max(0) as usize, res)
+    }
+
+    /// The mean of pulses on one grid spacing, aligned at their reference points (offset 0).
+    /// `None` without pulses or with different spacings.
+    pub fn mean(pulses: &[&Pulse]) -> Option<Pulse> {
+        let res = pulses.first()?.res;
+        if pulses.iter().any(|p| (p.res - res).abs() > 1e-6 * res.max(1e-6)) {
+            return None;
+        }
+        let lead = pulses.iter().map(|p| p.cent_bin).max()?;
+        let tail = pulses.iter().map(|p| p.x.len() - p.cent_bin).max()?;
+        let mut y = vec![0.0f64; lead + tail];
+        for p in pulses {
+            for (j, &v) in p.y.iter().enumerate() {
+                y[lead - p.cent_bin + j] += f64::from(v) / pulses.len() as f64;
+            }
+        }
+        let pairs: Vec<(f64, f64)> =
+            y.iter().enumerate().map(|(k, &v)| ((k as f64 - lead as f64) * f64::from(res), v)).collect();
+        Some(Pulse::on_grid(&pairs, lead, f64::from(res)))
+    }
+
+    /// `x` (bins of this pulse's spacing, top first) convolved with the pulse, same length, zero
+    /// outside: a return in bin i spreads to bin i + k with the weight of the sample k bins after
+    /// the reference point (later in time = lower).
+    pub fn convolve_same(&self, x: &[f64]) -> Vec<f64> {
+        let n = x.len() as isize;
+        let c = self.cent_bin as isize;
+        let mut out = vec![0.0; x.len()];
+        for (i, &v) in x.iter().enumerate() {
+            if v == 0.0 {
+                continue;
+            }
+            for (j, &w) in self.y.iter().enumerate() {
+                let o = i as isize + j as isize - c;
+                if o >= 0 && o < n {
+                    out[o as usize] += v * f64::from(w);
+                }
+            }
+        }
+        out
+    }
+
+    /// The pulse as a pulse file (`x y` per line, range m and weight), readable by
+    /// [`parse_pulse_text`] and by gediRat's `-readPulse` (which centres it on its peak).
+    pub fn to_text(&self, comment: &str) -> String {
+        let mut s = String::new();
+        for line in comment.lines() {
+            s.push_str("# ");
+            s.push_str(line);
+            s.push('\n');
+        }
+        for (x, y) in self.x.iter().zip(&self.y) {
+            s.push_str(&format!("{x:.6} {y:.9}\n"));
+        }
+        s
+    }
+}
+
+/// `x` (bins of `res` m) convolved with a unit-sum Gaussian of σ `sigma` (m), extended by the
+/// kernel's half-width (4σ) on each side.
+fn gaussian_convolve(x: &[f64], sigma: f64, res: f64) -> Vec<f64> {
+    let half = (4.0 * sigma / res).ceil() as usize;
+    let mut k: Vec<f64> =
+        (0..=2 * half).map(|i| (-0.5 * ((i as f64 - half as f64) * res / sigma).powi(2)).exp()).collect();
+    let sum: f64 = k.iter().sum();
+    k.iter_mut().for_each(|v| *v /= sum);
+    let mut out = vec![0.0; x.len() + 2 * half];
+    for (i, &v) in x.iter().enumerate() {
+        for (j, &w) in k.iter().enumerate() {
+            out[i + j] += v * w;
+        }
+    }
+    out
+}
+
 /// Parse a pulse text file: lines `x y` (range m, amplitude), lines starting with `#` and blank
 /// lines ignored, extra columns ignored.
 pub fn parse_pulse_text(text: &str) -> Result<Vec<(f32, f32)>> {
@@ -164,5 +298,31 @@ mod tests {
         assert!(parse_pulse_text("# c\n0 1\nfoo\n").is_err());
         assert_eq!(parse_pulse_text("# c\n0 1\n\n0.15 2 9\n").unwrap(), vec![(0.0, 1.0), (0.15, 2.0)]);
         assert_eq!(Pulse::gaussian(0.0, 0.15).unwrap(), Pulse::dirac());
+    }
+
+    #[test]
+    fn broadening_adds_variances_and_keeps_the_reference() {
+        let p = Pulse::gaussian(0.6, 0.15).unwrap();
+        let b = p.broadened(0.8);
+        assert_eq!(b.x[b.cent_bin], 0.0);
+        assert!((b.sigma - 1.0).abs() < 0.01, "{}", b.sigma);
+        assert!((b.y.iter().sum::<f32>() - 1.0).abs() < 1e-5);
+        let m = Pulse::mean(&[&p, &b]).unwrap();
+        assert!((m.y.iter().sum::<f32>() - 1.0).abs() < 1e-5);
+        assert_eq!(m.x[m.cent_bin], 0.0);
+        let text = m.to_text("mean");
+        let back = Pulse::tabulated(&parse_pulse_text(&text).unwrap()).unwrap();
+        assert_eq!(back.x.len(), m.x.len());
+    }
+
+    #[test]
+    fn convolution_moves_energy_later_by_the_pulse_delay() {
+        // A pulse whose energy lies one and two bins after its reference.
+        let p = Pulse::on_grid(&[(0.0, 0.0), (0.15, 1.0), (0.3, 1.0)], 0, 0.15);
+        assert_eq!(p.cent_bin, 0);
+        let mut x = vec![0.0; 10];
+        x[4] = 2.0;
+        let y = p.convolve_same(&x);
+        assert_eq!(&y[4..7], &[0.0, 1.0, 1.0]);
     }
 }

@@ -1,0 +1,166 @@
+#!/usr/bin/env python3
+"""Score `gedisim diagnose` on worlds from either generator (`gedisim scenario`, tools/worldgen).
+
+Each world folder holds `truth.json` (both generators write `effects: [{name, params}]`,
+`datum_dz_m` and per-shot true/reported positions) and `als/` + `gedi/`. For each world the
+diagnosis is run with the whole chain into `<world>/diag` unless `diag/diagnosis.json` exists.
+It is then scored against the truth:
+- which effect comes first (or `unexplained`), and whether the diagnosis calls it ambiguous;
+- the held-out shrink of the true effect (its own trial);
+- the error of its main parameter;
+- the collocation: for every segment of ≥ 20 shots, dz − datum_dz (vertical) and the distance
+  between (dx, dy) and the mean true − reported offset of its shots (horizontal).
+
+Usage:
+    python3 tools/diagnosis_benchmark.py --gedisim target/release/gedisim WORLD... [--json out.json]
+Prints one line per world, then the summary per generator. Asserts nothing.
+"""
+
+import argparse
+import json
+import math
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pyarrow.parquet as pq
+
+# The parameter of each effect that the benchmark scores, and its "no effect" value.
+MAIN = {
+    "datum": ("dz_m", 0.0),
+    "ground_detection": ("offset_m", 0.0),
+    "canopy_change": ("fraction", 0.0),
+    "occlusion": ("gain", 0.0),
+    "weighting": ("rho_ground_over_veg", 1.0),
+    "pulse": ("pulse_sigma_m", 0.0),
+    "footprint": ("fsigma_m", 5.5),
+    "noise": ("noise_sigma_factor", 1.0),
+    "geolocation": ("shot_sigma_m", 0.0),
+}
+
+
+def generator(truth):
+    g = str(truth.get("generator", truth.get("format", "")))
+    return "worldgen" if g.startswith("worldgen") else "gedisim"
+
+
+def true_offsets(truth):
+    """shot number -> (dx, dy) = true - reported (m)."""
+    out = {}
+    for s in truth["shots"]:
+        sn = int(s["shot_number"])
+        if "x_true" in s:
+            out[sn] = (s["x_true"] - s["x_reported"], s["y_true"] - s["y_reported"])
+        else:
+            out[sn] = (s["dx"], s["dy"])
+    return out
+
+
+def collocation_errors(world, truth):
+    path = world / "diag" / "dataset" / "offsets" / "offsets.parquet"
+    if not path.exists():
+        return []
+    t = pq.read_table(path).to_pylist()
+    offs = true_offsets(truth)
+    datum = float(truth.get("datum_dz_m", 0.0) or 0.0)
+    rows = []
+    for r in t:
+        shots = [s for s in (r["shot_numbers"] or []) if s in offs]
+        if len(shots) < 20 or r["dz"] is None:
+            continue
+        tx = sum(offs[s][0] for s in shots) / len(shots)
+        ty = sum(offs[s][1] for s in shots) / len(shots)
+        rows.append((r["dz"] - datum, math.hypot(r["dx"] - tx, r["dy"] - ty)))
+    return rows
+
+
+def score(world, truth, d):
+    planted = [e["name"] for e in truth["effects"] if e["name"] != "none"]
+    effects = d["effects"]
+    first = None if d["unexplained"] else effects[0]["name"]
+    named = [t["name"] for t in d["ladder"]] or ([first] if first else [])
+    row = {
+        "world": world.name,
+        "generator": generator(truth),
+        "truth": "+".join(planted) or "none",
+        "first": first or "unexplained",
+        "ambiguous_with": d.get("ambiguous_with", []),
+        "right_first": (first in planted) if planted else (first is None),
+        "pair_both": all(p in named for p in planted) if len(planted) == 2 else None,
+    }
+    if len(planted) == 1:
+        name = planted[0]
+        trial = next((t for t in effects if t["name"] == name), None)
+        if trial:
+            row["shrink"] = trial["held_out"]["shrink"]
+            key, nominal = MAIN[name]
+            want = next(e for e in truth["effects"] if e["name"] == name)["params"].get(key)
+            got = trial["params"].get(key)
+            if isinstance(want, (int, float)) and isinstance(got, (int, float)) and want != nominal:
+                row["param_rel_err"] = abs(got - want) / abs(want - nominal)
+                row["param"] = (got, want)
+    kp = d.get("known_physics") or []
+    if kp:
+        row["recorded_pulse_shrink"] = kp[0]["held_out"]["shrink"]
+    row["collocation"] = collocation_errors(world, truth)
+    return row
+
+
+def median(v):
+    v = sorted(v)
+    return v[len(v) // 2] if v else float("nan")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--gedisim", default="gedisim")
+    ap.add_argument("--json")
+    ap.add_argument("worlds", nargs="+", type=Path)
+    a = ap.parse_args()
+    rows = []
+    for w in a.worlds:
+        truth = json.loads((w / "truth.json").read_text())
+        diag = w / "diag" / "diagnosis.json"
+        if not diag.exists():
+            t0 = time.time()
+            cmd = [a.gedisim, "diagnose", "--als", str(w / "als"), "--l1b", str(w / "gedi"), "--l2a", str(w / "gedi"),
+                   "--out", str(w / "diag")]
+            r = subprocess.run(cmd, capture_output=True, text=True)
+            if r.returncode != 0:
+                print(f"{w.name}: diagnose failed: {r.stderr.strip().splitlines()[-1:]}", file=sys.stderr)
+                continue
+            print(f"{w.name}: diagnosed in {time.time() - t0:.0f} s", file=sys.stderr)
+        row = score(w, truth, json.loads(diag.read_text()))
+        rows.append(row)
+        col = row["collocation"]
+        print(f"{row['world']:<28} {row['generator']:<8} truth {row['truth']:<26} first {row['first']:<18}"
+              f"{' ambiguous ' + ','.join(row['ambiguous_with']) if row['ambiguous_with'] else ''}"
+              f" shrink {row.get('shrink', float('nan')):.2f} param_err {row.get('param_rel_err', float('nan')):.2f}"
+              f" recorded_pulse_shrink {row.get('recorded_pulse_shrink', float('nan')):.2f}"
+              f" segments {len(col)} median dz err {median([c[0] for c in col]):+.3f} m")
+    for g in sorted({r["generator"] for r in rows}):
+        rs = [r for r in rows if r["generator"] == g]
+        eff = [r for r in rs if r["truth"] != "none" and "+" not in r["truth"]]
+        ctl = [r for r in rs if r["truth"] == "none"]
+        pairs = [r for r in rs if "+" in r["truth"]]
+        col = [c for r in rs for c in r["collocation"]]
+        print(f"\n{g}: {len(rs)} worlds")
+        if eff:
+            print(f"  right effect first {sum(r['right_first'] for r in eff)}/{len(eff)}; "
+                  f"median held-out shrink of the true effect {median([r.get('shrink', 0.0) for r in eff]):.2f}; "
+                  f"parameter within 20 % {sum(r.get('param_rel_err', 9) <= 0.2 for r in eff)}/{len(eff)}")
+        if ctl:
+            print(f"  controls unexplained {sum(r['right_first'] for r in ctl)}/{len(ctl)}")
+        if pairs:
+            print(f"  pairs both named {sum(bool(r['pair_both']) for r in pairs)}/{len(pairs)}")
+        if col:
+            dz = [abs(c[0]) for c in col]
+            print(f"  collocation ({len(col)} segments ≥ 20 shots): |dz − truth| median {median(dz):.3f} m, "
+                  f"max {max(dz):.3f} m; horizontal within 1 m {sum(c[1] <= 1.0 for c in col)}/{len(col)}")
+    if a.json:
+        Path(a.json).write_text(json.dumps(rows, indent=1))
+
+
+if __name__ == "__main__":
+    main()
