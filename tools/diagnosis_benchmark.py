@@ -8,8 +8,9 @@ It is then scored against the truth:
 - which effect comes first (or `unexplained`), and whether the diagnosis calls it ambiguous;
 - the held-out shrink of the true effect (its own trial);
 - the error of its main parameter;
-- the collocation: for every segment of ≥ 20 shots, dz − datum_dz (vertical) and the distance
-  between (dx, dy) and the mean true − reported offset of its shots (horizontal).
+- the collocation: for every segment, dz − datum_dz (vertical) and the distance between (dx, dy)
+  and the mean true − reported offset of its shots (horizontal); summarised over all segments and
+  over those of ≥ 20 shots.
 
 Usage:
     python3 tools/diagnosis_benchmark.py --gedisim target/release/gedisim WORLD... [--json out.json]
@@ -67,11 +68,11 @@ def collocation_errors(world, truth):
     rows = []
     for r in t:
         shots = [s for s in (r["shot_numbers"] or []) if s in offs]
-        if len(shots) < 20 or r["dz"] is None:
+        if not shots or r["dz"] is None:
             continue
         tx = sum(offs[s][0] for s in shots) / len(shots)
         ty = sum(offs[s][1] for s in shots) / len(shots)
-        rows.append((r["dz"] - datum, math.hypot(r["dx"] - tx, r["dy"] - ty)))
+        rows.append((r["dz"] - datum, math.hypot(r["dx"] - tx, r["dy"] - ty), len(shots)))
     return rows
 
 
@@ -154,10 +155,12 @@ def main():
             print(f"  controls unexplained {sum(r['right_first'] for r in ctl)}/{len(ctl)}")
         if pairs:
             print(f"  pairs both named {sum(bool(r['pair_both']) for r in pairs)}/{len(pairs)}")
-        if col:
-            dz = [abs(c[0]) for c in col]
-            print(f"  collocation ({len(col)} segments ≥ 20 shots): |dz − truth| median {median(dz):.3f} m, "
-                  f"max {max(dz):.3f} m; horizontal within 1 m {sum(c[1] <= 1.0 for c in col)}/{len(col)}")
+        for label, sel in [("all segments", col), ("segments of ≥ 20 shots", [c for c in col if c[2] >= 20])]:
+            if sel:
+                dz = [c[0] for c in sel]
+                print(f"  collocation, {label} ({len(sel)}): dz − truth median {median(dz):+.3f} m, "
+                      f"max |.| {max(abs(x) for x in dz):.3f} m; horizontal within 1 m "
+                      f"{sum(c[1] <= 1.0 for c in sel)}/{len(sel)}")
     if a.json:
         Path(a.json).write_text(json.dumps(rows, indent=1))
 
