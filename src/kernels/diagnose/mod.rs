@@ -51,16 +51,13 @@ pub fn diagnose(mut cases: Vec<ShotCase>, names: &[&str], on_step: &dyn Fn(&str)
     let cases = &cases;
     let folds = rank::Folds::new(cases);
     let ranking = rank::rank(&folds, names, on_step);
-    let nominal = match ranking.effects.first() {
-        Some(t) => t.held_out.before.clone(),
-        None => fit::total(&rank::State::nominal(&folds).gaps).metrics(),
-    };
+    let nominal = fit::total(&ranking.nominal_gaps).metrics();
     let n_replaceable = cases.iter().filter(|c| c.sim.short_segment && c.sim.sites.len() > 1).count();
     let recorded_pulse = cases.iter().any(|c| c.real.pulse.is_some()).then(|| {
         on_step("known physics: recorded transmit pulse");
         let gaussian = chain::Model::gaussian();
         let before = folds.held_out(&[gaussian.clone(), gaussian]);
-        rank::compare(&folds, &before, &rank::State::nominal(&folds).gaps, "recorded pulse")
+        rank::compare(&folds, &before, &ranking.nominal_gaps, "recorded pulse")
     });
     Diagnosis {
         where_,

@@ -420,6 +420,8 @@ pub struct Ranking {
     /// Effects that explain as well as the first within noise (`near_ties`): the diagnosis is
     /// then ambiguous between the first and these.
     pub ambiguous_with: Vec<String>,
+    /// Held-out gaps per shot of the nominal chain (every effect's "before").
+    pub nominal_gaps: Vec<ShotGap>,
 }
 
 /// Rank `names` on the nominal chain, then climb the ladder. `on_step` is told each effect tried.
@@ -460,7 +462,7 @@ pub fn rank(folds: &Folds, names: &[&str], on_step: &dyn Fn(&str)) -> Ranking {
             }
         }
     }
-    Ranking { effects, ladder, unexplained, ambiguous_with }
+    Ranking { effects, ladder, unexplained, ambiguous_with, nominal_gaps: nominal.gaps }
 }
 
 fn advance(state: &State, t: &Trial) -> State {
