@@ -213,3 +213,51 @@ fn scenario_constants_match_the_real_granule() {
         assert!((mmean - rec.noise_mean).abs() < 0.05, "{kind}: {mmean}");
     }
 }
+
+#[test]
+fn shots_carry_real_transmit_pulses_and_plots_get_their_mean() {
+    use gedisim::kernels::sim::{pulse::parse_pulse_text, PulseReference};
+    let tmp = tempfile::tempdir().unwrap();
+    let world = tmp.path().join("world");
+    scenario(&world, &["--effect", "none", "--seed", "5"]);
+    let ds = tmp.path().join("ds");
+    let shots = ingest(&world, &ds);
+    // Every shot's txwaveform is a real GEDI pulse shape: its slow tail puts the energy centroid
+    // after the peak (a Gaussian would put it at the peak). Over the 300 bundled L1B records
+    // (floor = median of samples 0–19, clipped at 0) it lies 0.217–0.782 m after the peak (median
+    // 0.506); the draws stretch time by at most ±8 %, hence 0.15–0.9 m.
+    let dataset = gedisim::dataset::Dataset::open(&ds).unwrap();
+    let pulses = gedisim::dataset::shots::shot_pulses(&dataset, PulseReference::Peak, 0.15).unwrap();
+    assert_eq!((pulses.by_shot.len(), pulses.missing, pulses.unusable), (shots, 0, 0));
+    for p in pulses.by_shot.values() {
+        let centroid: f32 = p.x.iter().zip(&p.y).map(|(x, y)| x * y).sum();
+        assert!((0.15..0.9).contains(&centroid), "centroid {centroid} m after the peak");
+    }
+    // Plots (positions without a shot) are simulated with the mean recorded pulse, written beside
+    // the output as a pulse file.
+    let t = truth(&world);
+    let s = &t["shots"][0];
+    let csv = tmp.path().join("plots.csv");
+    std::fs::write(&csv, format!("id,x,y\np1,{},{}\n", s["x"], s["y"])).unwrap();
+    let d = ds.to_str().unwrap();
+    let (ok, _, err) =
+        gedisim(&["simulate", "--dataset", d, "--footprints", csv.to_str().unwrap(), "--pulse", "recorded"]);
+    assert!(ok, "{err}");
+    let text = std::fs::read_to_string(ds.join("sim/plots.pulse.txt")).unwrap();
+    let pairs = parse_pulse_text(&text).unwrap();
+    let total: f32 = pairs.iter().map(|p| p.1).sum();
+    assert!((total - 1.0).abs() < 1e-3 && pairs.len() > 50, "{} samples, Σ {total}", pairs.len());
+    // Direct mode has no shots to take pulses from: one line saying so.
+    let (ok, _, err) = gedisim(&[
+        "simulate",
+        "--als",
+        data(TILE).to_str().unwrap(),
+        "--footprints",
+        csv.to_str().unwrap(),
+        "--out",
+        tmp.path().join("x.parquet").to_str().unwrap(),
+        "--pulse",
+        "recorded",
+    ]);
+    assert!(!ok && err.contains("--pulse recorded") && err.trim().lines().count() == 1, "{err}");
+}
