@@ -44,15 +44,7 @@ pub fn diagnose(a: DiagnoseArgs) -> Result<()> {
         Some(d) => DiagnoseInput::Dataset(d),
         None if a.als.is_empty() => return Err(Error::Usage("give --dataset, or --als with --l1b and --l2a".into())),
         // The first half of `gedisim run`, with the diagnosis's per-beam collocation.
-        None => DiagnoseInput::Chain(Box::new(gedisim::ops::run::RunOptions {
-            als: a.als,
-            l1b: a.l1b,
-            l2a: a.l2a,
-            landcover: a.chain.landcover,
-            epsg: a.chain.epsg,
-            geoid_offset: a.chain.geoid_offset,
-            ..gedisim::ops::run::RunOptions::new(&a.out.join("dataset"))
-        })),
+        None => DiagnoseInput::Chain(Box::new(a.chain.run_options(a.als, a.l1b, a.l2a, &a.out.join("dataset")))),
     };
     let pulse = a.pulse.model("recorded", None);
     let r = gedisim::ops::diagnose::diagnose(input, &a.out, &a.effects, &pulse, &Bars::new())?;

@@ -1,9 +1,10 @@
 //! `gedisim run`, and the printing of what a run did (shared with `demo` and `diagnose`).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::Args;
 
+use gedisim::ops::run::RunOptions;
 use gedisim::Result;
 
 use super::collocate::{collocate_level, LevelArg};
@@ -21,6 +22,21 @@ pub struct ChainArgs {
     /// Geoid offset N (m, ellipsoid − orthometric) for every shot, instead of each shot's L1B geoid.
     #[arg(long, allow_hyphen_values = true)]
     pub geoid_offset: Option<f64>,
+}
+
+impl ChainArgs {
+    /// `run`'s options for these inputs into the dataset `out` (the rest at their defaults).
+    pub fn run_options(self, als: Vec<PathBuf>, l1b: Vec<PathBuf>, l2a: Vec<PathBuf>, out: &Path) -> RunOptions {
+        RunOptions {
+            als,
+            l1b,
+            l2a,
+            landcover: self.landcover,
+            epsg: self.epsg,
+            geoid_offset: self.geoid_offset,
+            ..RunOptions::new(out)
+        }
+    }
 }
 
 #[derive(Args)]
@@ -59,14 +75,8 @@ pub struct RunArgs {
 
 pub fn run_command(a: RunArgs) -> Result<()> {
     use gedisim::ops::collocate::CollocateOptions;
-    use gedisim::ops::run::RunOptions;
+    let base = a.chain.run_options(a.als, a.l1b, a.l2a, &a.out);
     let opts = RunOptions {
-        als: a.als,
-        l1b: a.l1b,
-        l2a: a.l2a,
-        landcover: a.chain.landcover,
-        epsg: a.chain.epsg,
-        geoid_offset: a.chain.geoid_offset,
         collocate: CollocateOptions {
             level: collocate_level(a.level),
             segment: a.segment,
@@ -75,7 +85,7 @@ pub fn run_command(a: RunArgs) -> Result<()> {
             ..CollocateOptions::default()
         },
         rules: gedisim::kernels::study::select::StudyRules { max_days_apart: a.max_days_apart, ..Default::default() },
-        ..RunOptions::new(&a.out)
+        ..base
     };
     let report = gedisim::ops::run::run_study(&opts, &Bars::new())?;
     print_run(&report);

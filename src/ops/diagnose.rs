@@ -767,7 +767,7 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
                     t.held_out.before.mean_abs_bias, t.held_out.after.mean_abs_bias
                 ),
             };
-            let caveat = match (&t.at_bound, &t.equivalent) {
+            let caveat = match (t.at_bound(), t.equivalent()) {
                 (_, Some(e)) => format!(" — equivalent to the simpler {}", e.name()),
                 (Some(b), None) => format!(" — fit on the edge of its range ({b}): the effect may not be this one"),
                 (None, None) => String::new(),

@@ -1097,6 +1097,15 @@ def _atomic_h5(path):
     return h5py.File(tmp, "w", libver="earliest", track_order=False), tmp
 
 
+def _beam_group(f, beam, btype, software):
+    """A beam group with its description and the processing software's attributes."""
+    G = f.create_group(beam)
+    _sattr(G, "description", "Coverage beam" if btype == "coverage" else "Full power beam")
+    _sattr(G, software + "_githash", "0" * 40)
+    _sattr(G, software + "_version", "worldgen-" + VERSION)
+    return G
+
+
 def _metadata(f, short, fname, pge, created, uid, abstract):
     md = f.create_group("METADATA").create_group("DatasetIdentification")
     for k, v in [("PGEVersion", pge), ("VersionID", "002"), ("abstract", abstract),
@@ -1132,10 +1141,7 @@ def write_granule(outdir, gran, geoid, phys, seed):
     for beam, shots in gran["beams"]:
         bnum, chan, btype, _, _, _ = BEAMS[beam]
         N = len(shots)
-        G = f.create_group(beam)
-        _sattr(G, "description", "Coverage beam" if btype == "coverage" else "Full power beam")
-        _sattr(G, "wp-l1a-to-l1b_githash", "0" * 40)
-        _sattr(G, "wp-l1a-to-l1b_version", "worldgen-" + VERSION)
+        G = _beam_group(f, beam, btype, "wp-l1a-to-l1b")
         R = [s["rec"] for s in shots]
         cnt = np.array([r["n"] for r in R])
         start = np.concatenate([[1], 1 + np.cumsum(cnt)[:-1]])
@@ -1244,10 +1250,7 @@ def write_granule(outdir, gran, geoid, phys, seed):
     for beam, shots in gran["beams"]:
         bnum, chan, btype, _, _, _ = BEAMS[beam]
         N = len(shots)
-        G = f.create_group(beam)
-        _sattr(G, "description", "Coverage beam" if btype == "coverage" else "Full power beam")
-        _sattr(G, "wp-l2-l2a_githash", "0" * 40)
-        _sattr(G, "wp-l2-l2a_version", "worldgen-" + VERSION)
+        G = _beam_group(f, beam, btype, "wp-l2-l2a")
         dt = np.array([s["delta_time"] for s in shots])
         mi = np.floor(dt)
         sn = np.array([s["shot_number"] for s in shots], dtype=np.uint64)

@@ -20,6 +20,7 @@ use crate::kernels::scenario::effects::{
     Effect, GeoLevel, WaveParts, WeightMethod, NOMINAL_FSIGMA_M, NOMINAL_PULSE_SIGMA_M,
 };
 use crate::kernels::scenario::EffectSet;
+use crate::kernels::sim::pulse::gaussian_blur;
 use crate::kernels::sim::{Pulse, Weighting};
 use crate::kernels::waveform::forward::{forward, signal_span, L2aRunner, RecordWindow};
 use crate::kernels::waveform::l2a::Noise;
@@ -86,11 +87,7 @@ impl Model {
 
     /// σ (m, range) of the system response beyond the transmit pulse (the `pulse` effect; 0 without).
     pub fn extra_pulse_sigma(&self) -> f64 {
-        self.effects
-            .iter()
-            .rev()
-            .find_map(|e| if let Effect::Pulse { pulse_sigma_m } = e { Some(*pulse_sigma_m) } else { None })
-            .unwrap_or(0.0)
+        self.set().extra_pulse_sigma()
     }
 
     /// `x` (bins of `dz`) convolved with the model's pulse: the shot's recorded `pulse` (at `dz`)
@@ -164,31 +161,6 @@ fn parts_at(site: &Site, w: Weighting, fsigma: f64) -> (Vec<f64>, Vec<f64>) {
         x.iter().zip(y).map(|(&p, &q)| (1.0 - t) * f64::from(p) + t * f64::from(q)).collect()
     };
     (mix(&a.ground, &b.ground), mix(&a.canopy, &b.canopy))
-}
-
-/// Convolve with a unit-sum Gaussian of σ `sigma` (m) on bins of `dz` (same length, zero outside).
-pub fn gaussian_blur(x: &[f64], sigma: f64, dz: f64) -> Vec<f64> {
-    if !(sigma > 0.0) || x.is_empty() {
-        return x.to_vec();
-    }
-    let half = (4.0 * sigma / dz).ceil() as isize;
-    let mut kernel: Vec<f64> = (-half..=half).map(|i| (-0.5 * (i as f64 * dz / sigma).powi(2)).exp()).collect();
-    let sum: f64 = kernel.iter().sum();
-    kernel.iter_mut().for_each(|k| *k /= sum);
-    let n = x.len() as isize;
-    let mut out = vec![0.0; x.len()];
-    for (i, &v) in x.iter().enumerate() {
-        if v == 0.0 {
-            continue;
-        }
-        for (j, &k) in kernel.iter().enumerate() {
-            let o = i as isize + j as isize - half;
-            if o >= 0 && o < n {
-                out[o as usize] += v * k;
-            }
-        }
-    }
-    out
 }
 
 /// The noise-free simulated waveform of `case` under `model` at the model's site of the case
@@ -452,18 +424,6 @@ pub fn real_products(case: &ShotCase, model: &Model, alg: u8) -> Option<Products
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn blur_keeps_the_sum_and_the_centre() {
-        let mut x = vec![0.0; 101];
-        x[50] = 1.0;
-        let y = gaussian_blur(&x, 0.955, 0.15);
-        assert!((y.iter().sum::<f64>() - 1.0).abs() < 1e-12);
-        let mean: f64 = y.iter().enumerate().map(|(i, v)| i as f64 * v).sum();
-        assert!((mean - 50.0).abs() < 1e-9);
-        let var: f64 = y.iter().enumerate().map(|(i, v)| (i as f64 - 50.0).powi(2) * v).sum::<f64>() * 0.15 * 0.15;
-        assert!((var.sqrt() - 0.955).abs() < 0.01, "{}", var.sqrt());
-    }
 
     use crate::kernels::diagnose::case::{site_grid, Parts, RealShot, SimShot, SimVariant, Strata};
     use crate::kernels::gedi::BeamType;

@@ -277,11 +277,8 @@ impl TrialJson {
             params: params(&t.effect),
             held_out: HeldOut::of(&t.held_out),
             fold_params: t.fold_effects.iter().map(|e| e.as_ref().map(params)).collect(),
-            at_bound: t.at_bound.clone(),
-            equivalent_to: t
-                .equivalent
-                .as_ref()
-                .map(|e| EquivalentJson { name: e.name().to_string(), params: params(e) }),
+            at_bound: t.at_bound(),
+            equivalent_to: t.equivalent().map(|e| EquivalentJson { name: e.name().to_string(), params: params(&e) }),
         }
     }
 }

@@ -345,10 +345,6 @@ pub struct Trial {
     pub held_out: Comparison,
     /// Held-out gaps per shot with the effect.
     pub gaps: Vec<ShotGap>,
-    /// The fitted parameter on a bound of its range ([`super::fit::at_bound`]), if any.
-    pub at_bound: Option<String>,
-    /// The simpler effect the fitted one is equivalent to ([`super::fit::simpler_equivalent`]).
-    pub equivalent: Option<Effect>,
 }
 
 impl Trial {
@@ -364,10 +360,20 @@ impl Trial {
         resolved && self.held_out.ci95[0] >= MIN_SHRINK_LOWER && self.held_out.gain_ci95[0] >= MIN_GAIN_M
     }
 
+    /// The fitted parameter on a bound of its range ([`super::fit::at_bound`]), if any.
+    pub fn at_bound(&self) -> Option<String> {
+        super::fit::at_bound(&self.effect)
+    }
+
+    /// The simpler effect the fitted one is equivalent to ([`super::fit::simpler_equivalent`]).
+    pub fn equivalent(&self) -> Option<Effect> {
+        super::fit::simpler_equivalent(&self.effect)
+    }
+
     /// Its fit lies inside its range and it is not a simpler effect in disguise: only such an
     /// effect is named over another.
     pub fn nameable(&self) -> bool {
-        self.at_bound.is_none() && self.equivalent.is_none()
+        self.at_bound().is_none() && self.equivalent().is_none()
     }
 }
 
@@ -403,9 +409,7 @@ pub fn try_effect(folds: &Folds, state: &State, name: &str) -> Option<Trial> {
     } else {
         compare(folds, &state.gaps, &gaps, name)
     };
-    let at_bound = super::fit::at_bound(&effect);
-    let equivalent = super::fit::simpler_equivalent(&effect);
-    Some(Trial { effect, fold_effects: fitted, held_out, gaps, at_bound, equivalent })
+    Some(Trial { effect, fold_effects: fitted, held_out, gaps })
 }
 
 /// The ranking and the ladder.

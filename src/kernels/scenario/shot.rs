@@ -93,17 +93,10 @@ pub fn draw_transmit(
     let lib = TransmitPulse::from_record(library).ok()?;
     let stretch = 1.0 + (TX_STRETCH_SIGMA * rng.normal()).clamp(-TX_STRETCH_CLIP, TX_STRETCH_CLIP);
     let shift = TX_SHIFT_SAMPLES * (rng.uniform() - 0.5) * 2.0;
-    let at = |x: f64| -> f64 {
-        if x < 0.0 || x > (lib.samples.len() - 1) as f64 {
-            return 0.0;
-        }
-        let j = x.floor() as usize;
-        let t = x - j as f64;
-        (1.0 - t) * lib.samples[j] + t * lib.samples.get(j + 1).copied().unwrap_or(0.0)
-    };
     // New sample i holds the library's pulse at (i − shift − peak)/stretch + peak.
-    let clean: Vec<f64> =
-        (0..library.len()).map(|i| at((i as f64 - shift - lib.peak) / stretch + lib.peak) / stretch).collect();
+    let clean: Vec<f64> = (0..library.len())
+        .map(|i| lib.sample_at((i as f64 - shift - lib.peak) / stretch + lib.peak) / stretch)
+        .collect();
     let record: Vec<f32> = clean.iter().map(|&v| (lib.floor + v + lib.floor_sigma * rng.normal()) as f32).collect();
     let seen = TransmitPulse::from_record(&record).ok()?;
     let truth = TransmitPulse { samples: clean, ..seen };

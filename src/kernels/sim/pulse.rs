@@ -147,9 +147,11 @@ impl Pulse {
         }
         let res = if self.res > 0.0 { f64::from(self.res) } else { 0.15 };
         let x0 = f64::from(self.x[0]);
-        let base: Vec<f64> = self.y.iter().map(|&v| f64::from(v)).collect();
-        let wide = gaussian_convolve(&base, sigma, res);
-        let pad = (wide.len() - base.len()) / 2;
+        // Room for the Gaussian's reach (4σ, where `gaussian_blur` truncates it) on both sides.
+        let pad = (4.0 * sigma / res).ceil() as usize;
+        let mut base = vec![0.0; self.y.len() + 2 * pad];
+        base[pad..pad + self.y.len()].iter_mut().zip(&self.y).for_each(|(b, &v)| *b = f64::from(v));
+        let wide = gaussian_blur(&base, sigma, res);
         let pairs: Vec<(f64, f64)> =
             wide.iter().enumerate().map(|(k, &v)| (x0 + (k as f64 - pad as f64) * res, v)).collect();
         Pulse::on_grid(&pairs, self.cent_bin + pad, res)
@@ -233,18 +235,26 @@ impl Pulse {
     }
 }
 
-/// `x` (bins of `res` m) convolved with a unit-sum Gaussian of σ `sigma` (m), extended by the
-/// kernel's half-width (4σ) on each side.
-fn gaussian_convolve(x: &[f64], sigma: f64, res: f64) -> Vec<f64> {
-    let half = (4.0 * sigma / res).ceil() as usize;
-    let mut k: Vec<f64> =
-        (0..=2 * half).map(|i| (-0.5 * ((i as f64 - half as f64) * res / sigma).powi(2)).exp()).collect();
-    let sum: f64 = k.iter().sum();
-    k.iter_mut().for_each(|v| *v /= sum);
-    let mut out = vec![0.0; x.len() + 2 * half];
+/// Convolve with a unit-sum Gaussian of σ `sigma` (m) on bins of `dz` (same length, zero outside).
+pub fn gaussian_blur(x: &[f64], sigma: f64, dz: f64) -> Vec<f64> {
+    if !(sigma > 0.0) || x.is_empty() {
+        return x.to_vec();
+    }
+    let half = (4.0 * sigma / dz).ceil() as isize;
+    let mut kernel: Vec<f64> = (-half..=half).map(|i| (-0.5 * (i as f64 * dz / sigma).powi(2)).exp()).collect();
+    let sum: f64 = kernel.iter().sum();
+    kernel.iter_mut().for_each(|k| *k /= sum);
+    let n = x.len() as isize;
+    let mut out = vec![0.0; x.len()];
     for (i, &v) in x.iter().enumerate() {
-        for (j, &w) in k.iter().enumerate() {
-            out[i + j] += v * w;
+        if v == 0.0 {
+            continue;
+        }
+        for (j, &k) in kernel.iter().enumerate() {
+            let o = i as isize + j as isize - half;
+            if o >= 0 && o < n {
+                out[o as usize] += v * k;
+            }
         }
     }
     out
@@ -324,5 +334,17 @@ mod tests {
         x[4] = 2.0;
         let y = p.convolve_same(&x);
         assert_eq!(&y[4..7], &[0.0, 1.0, 1.0]);
+    }
+
+    #[test]
+    fn blur_keeps_the_sum_and_the_centre() {
+        let mut x = vec![0.0; 101];
+        x[50] = 1.0;
+        let y = gaussian_blur(&x, 0.955, 0.15);
+        assert!((y.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        let mean: f64 = y.iter().enumerate().map(|(i, v)| i as f64 * v).sum();
+        assert!((mean - 50.0).abs() < 1e-9);
+        let var: f64 = y.iter().enumerate().map(|(i, v)| (i as f64 - 50.0).powi(2) * v).sum::<f64>() * 0.15 * 0.15;
+        assert!((var.sqrt() - 0.955).abs() < 0.01, "{}", var.sqrt());
     }
 }

@@ -77,16 +77,6 @@ impl PulseModel {
             file => PulseModel::File(file.into()),
         }
     }
-
-    /// One-line description for metadata and reports.
-    pub fn describe(&self) -> String {
-        match self {
-            PulseModel::Gaussian(None) => "gaussian (15 ns FWHM)".into(),
-            PulseModel::Gaussian(Some(s)) => format!("gaussian (sigma {s} m)"),
-            PulseModel::Recorded(r) => format!("recorded (reference {r})"),
-            PulseModel::File(p) => format!("file {}", p.display()),
-        }
-    }
 }
 
 /// Why a transmit record gives no pulse.
@@ -167,6 +157,16 @@ impl TransmitPulse {
         Ok(TransmitPulse { samples: s, floor, floor_sigma, peak, centroid, gaussian_fit })
     }
 
+    /// The cleaned pulse at fractional record sample `i` (linear interpolation, 0 outside).
+    pub fn sample_at(&self, i: f64) -> f64 {
+        if !(i >= 0.0 && i <= (self.samples.len() - 1) as f64) {
+            return 0.0;
+        }
+        let j = i.floor() as usize;
+        let t = i - j as f64;
+        (1.0 - t) * self.samples[j] + t * self.samples.get(j + 1).copied().unwrap_or(0.0)
+    }
+
     /// The record sample (fractional) of reference point `r`.
     pub fn reference_sample(&self, r: PulseReference) -> f64 {
         match r {
@@ -186,16 +186,8 @@ impl TransmitPulse {
         let step = res / TX_SAMPLE_M;
         let k_lo = ((first - reference) / step).floor() as i64;
         let k_hi = ((last - reference) / step).ceil() as i64;
-        let at = |i: f64| -> f64 {
-            if i < 0.0 || i > (self.samples.len() - 1) as f64 {
-                return 0.0;
-            }
-            let j = i.floor() as usize;
-            let t = i - j as f64;
-            let next = self.samples.get(j + 1).copied().unwrap_or(0.0);
-            (1.0 - t) * self.samples[j] + t * next
-        };
-        let pairs: Vec<(f64, f64)> = (k_lo..=k_hi).map(|k| (k as f64 * res, at(reference + k as f64 * step))).collect();
+        let pairs: Vec<(f64, f64)> =
+            (k_lo..=k_hi).map(|k| (k as f64 * res, self.sample_at(reference + k as f64 * step))).collect();
         Pulse::on_grid(&pairs, (-k_lo) as usize, res)
     }
 }
