@@ -143,7 +143,7 @@ pub struct SimShot {
     /// The shot's collocation segment is short ([`SHORT_SEGMENT_SHOTS`]): every hypothesis
     /// re-places the segment as one. Other shots move only under a `geolocation` hypothesis.
     pub short_segment: bool,
-    /// Noise-free RH0..RH100 of the nominal physics (count, 15 ns pulse, 5.5 m) from the ALS
+    /// Noise-free RH0..RH100 of the study's physics (count, 15 ns pulse, 5.5 m) from the ALS
     /// ground at the collocated position: the study's baseline simulated RH.
     pub rh_nominal: Vec<f32>,
 }

@@ -2,7 +2,8 @@
 //! → L2A a1–a6) with a set of effects switched on, and the same effects undone on the real side.
 //!
 //! The nominal chain is what a scientist would simulate with the study's settings *and* process
-//! like GEDI: count weighting, 15 ns pulse, σ_f 5.5 m, noise at the level of the median real GEDI
+//! like GEDI: frac weighting (`NOMINAL_WEIGHTING`), the shot's recorded transmit pulse (or the
+//! 15 ns Gaussian), σ_f 5.5 m, noise at the level of the median real GEDI
 //! shot of the beam type with the shots' own spread (`case::set_nominal_noise`), the shot's own
 //! energy and record window, our L2A. A
 //! world without any unmodelled effect then differs from it only by noise, so a control is
@@ -17,7 +18,7 @@ use rayon::prelude::*;
 use super::case::{RealAlgorithm, ShotCase, Site, FSIGMA_GRID, SITE_STEP_M};
 use crate::kernels::gedi::{N_ALGORITHMS, RH_LEN};
 use crate::kernels::scenario::effects::{
-    Effect, GeoLevel, WaveParts, WeightMethod, NOMINAL_FSIGMA_M, NOMINAL_PULSE_SIGMA_M,
+    Effect, GeoLevel, WaveParts, NOMINAL_FSIGMA_M, NOMINAL_PULSE_SIGMA_M, NOMINAL_WEIGHTING,
 };
 use crate::kernels::scenario::EffectSet;
 use crate::kernels::sim::pulse::gaussian_blur;
@@ -106,17 +107,10 @@ impl Model {
             .iter()
             .rev()
             .find_map(|e| match *e {
-                Effect::Weighting { method, rho_ground_over_veg } => Some((
-                    match method {
-                        WeightMethod::Count | WeightMethod::Ratio => Weighting::Count,
-                        WeightMethod::Frac => Weighting::Frac,
-                        WeightMethod::Int => Weighting::Int,
-                    },
-                    rho_ground_over_veg,
-                )),
+                Effect::Weighting { method, rho_ground_over_veg } => Some((method.weighting(), rho_ground_over_veg)),
                 _ => None,
             })
-            .unwrap_or((Weighting::Count, 1.0))
+            .unwrap_or((NOMINAL_WEIGHTING, 1.0))
     }
 }
 
@@ -427,6 +421,7 @@ mod tests {
 
     use crate::kernels::diagnose::case::{site_grid, Parts, RealShot, SimShot, SimVariant, Strata};
     use crate::kernels::gedi::BeamType;
+    use crate::kernels::scenario::effects::WeightMethod;
 
     /// A site at `offset` (m from the collocated position) whose canopy layer's height depends on
     /// the position (unique on the site grid), over a ground at 100 m.
@@ -517,5 +512,6 @@ mod tests {
         assert_eq!(m.fsigma(), 7.0);
         assert_eq!(m.weighting(), (Weighting::Int, 0.5));
         assert_eq!(m.extra_pulse_sigma(), 0.0);
+        assert_eq!(Model::default().weighting(), (NOMINAL_WEIGHTING, 1.0));
     }
 }

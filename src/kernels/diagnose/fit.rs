@@ -11,7 +11,7 @@ use super::chain::{null_cases, predict, real_products, reposition, Model, Scratc
 use super::gap::GapSums;
 use super::profile::{self, ShotProfile};
 use crate::kernels::gedi::N_ALGORITHMS;
-use crate::kernels::scenario::effects::{Effect, GeoLevel, WeightMethod};
+use crate::kernels::scenario::effects::{Effect, GeoLevel, WeightMethod, NOMINAL_WEIGHTING};
 
 /// The effects the diagnosis fits: every effect of the registry, in its order.
 pub const FITTED_EFFECTS: [&str; 9] = crate::kernels::scenario::effects::EFFECT_NAMES;
@@ -240,8 +240,10 @@ fn fit_placed(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
         }
         "weighting" => {
             let grid: Vec<f64> = RHO_GRID.iter().map(|r: &f64| r.ln()).collect();
-            [WeightMethod::Ratio, WeightMethod::Frac, WeightMethod::Int]
+            // ρ on the nominal weighting, and on each other method.
+            [WeightMethod::Ratio, WeightMethod::Count, WeightMethod::Frac, WeightMethod::Int]
                 .into_iter()
+                .filter(|&m| m == WeightMethod::Ratio || m.weighting() != NOMINAL_WEIGHTING)
                 .map(|method| {
                     let (x, v) =
                         minimise(&mut |lr| obj(Effect::Weighting { method, rho_ground_over_veg: lr.exp() }), &grid, 8);

@@ -18,6 +18,11 @@ pub const NOMINAL_FSIGMA_M: f64 = 5.5;
 pub const NOMINAL_PULSE_FWHM_NS: f64 = 15.0;
 /// Pulse σ (m, range) of a 15 ns FWHM Gaussian, as [`Pulse::from_fwhm_ns`] computes it.
 pub const NOMINAL_PULSE_SIGMA_M: f64 = 15.0 * 0.2998 / 2.0 / 2.35482;
+/// Return weighting of the nominal physics: `frac`, each ALS pulse's unit of energy split equally
+/// among its returns. Without intensities it is the estimate of the area each surface takes in
+/// the footprint; `count` gives a pulse of four returns four times the energy of a single ground
+/// hit (docs/diagnosis.md, "Nominal weighting").
+pub const NOMINAL_WEIGHTING: Weighting = Weighting::Frac;
 /// Lower bound of the band the `occlusion` effect scales (m above ground).
 pub const OCCLUSION_FLOOR_M: f64 = 0.5;
 
@@ -34,13 +39,14 @@ pub struct Physics {
 }
 
 impl Physics {
-    /// The nominal ("true" by default) physics: intensity-free count weighting, ρg/ρv = 1,
-    /// Gaussian pulse of 15 ns FWHM, σ_f 5.5 m, default simulator profile. This is exactly what
-    /// `gedisim simulate --profile default` assumes, so a `none` world is a control.
+    /// The nominal ("true" by default) physics: intensity-free [`NOMINAL_WEIGHTING`], ρg/ρv = 1,
+    /// Gaussian pulse of 15 ns FWHM, σ_f 5.5 m, default simulator profile: the `frac` columns of
+    /// `gedisim simulate --profile default`, so a `none` world is a control of the diagnosis's
+    /// nominal chain.
     pub fn nominal() -> Physics {
         Physics {
             sim: SimConfig::new(crate::kernels::sim::Profile::Default),
-            weighting: Weighting::Count,
+            weighting: NOMINAL_WEIGHTING,
             rho_ground_over_veg: 1.0,
         }
     }
@@ -90,8 +96,21 @@ pub enum WeightMethod {
     Count,
     Frac,
     Int,
-    /// Count weighting with the ground part scaled by `rho_ground_over_veg`.
+    /// The nominal weighting ([`NOMINAL_WEIGHTING`]) with the ground part scaled by
+    /// `rho_ground_over_veg`.
     Ratio,
+}
+
+impl WeightMethod {
+    /// The simulator weighting whose parts the method uses.
+    pub fn weighting(self) -> Weighting {
+        match self {
+            WeightMethod::Ratio => NOMINAL_WEIGHTING,
+            WeightMethod::Count => Weighting::Count,
+            WeightMethod::Frac => Weighting::Frac,
+            WeightMethod::Int => Weighting::Int,
+        }
+    }
 }
 
 /// One withheld effect with its parameters.
@@ -379,11 +398,7 @@ impl Effect {
     pub fn apply_physics(&self, p: &mut Physics) {
         match *self {
             Effect::Weighting { method, rho_ground_over_veg } => {
-                p.weighting = match method {
-                    WeightMethod::Count | WeightMethod::Ratio => Weighting::Count,
-                    WeightMethod::Frac => Weighting::Frac,
-                    WeightMethod::Int => Weighting::Int,
-                };
+                p.weighting = method.weighting();
                 p.rho_ground_over_veg = rho_ground_over_veg;
             }
             // Shots with a recorded pulse are broadened alike (`Effect::extra_pulse_sigma`).
