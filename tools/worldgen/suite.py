@@ -82,14 +82,16 @@ def main(argv=None):
     ap.add_argument("--pulse-reference", choices=["centroid", "peak", "gaussian-fit"], default="gaussian-fit")
     ap.add_argument("--passes", type=int, default=None, help="passes per world (default 6; 3 with --small)")
     ap.add_argument("--only", default=None, help="build only worlds whose name contains this text")
+    ap.add_argument("--seeds", default=None, help="comma list: build only worlds of these seeds (controls included)")
     a = ap.parse_args(argv)
+    seeds = {int(x) for x in a.seeds.split(",")} if a.seeds else None
     passes = a.passes or (3 if a.small else 6)
     os.makedirs(a.out, exist_ok=True)
     index = {"generator": worldgen.GENERATOR, "pulse_reference": a.pulse_reference, "worlds": []}
     t_all = time.time()
     for eff, lab, par, seed in plan(a.small):
         name = f"{eff}-{lab}-s{seed}"
-        if a.only and a.only not in name:
+        if (a.only and a.only not in name) or (seeds and seed not in seeds):
             continue
         params = [f"{k}={v}" for k, v in par.items()]
         argv_w = ["--effect", eff, "--seed", str(seed), "--out", os.path.join(a.out, name),
