@@ -149,8 +149,16 @@ def main():
         print(f"\n{g}: {len(rs)} worlds")
         if eff:
             print(f"  right effect first {sum(r['right_first'] for r in eff)}/{len(eff)}; "
-                  f"median held-out shrink of the true effect {median([r.get('shrink', 0.0) for r in eff]):.2f}; "
+                  f"held-out shrink of the true effect median {median([r.get('shrink', 0.0) for r in eff]):.2f}, "
+                  f"mean {sum(r.get('shrink', 0.0) for r in eff) / len(eff):.2f}; "
                   f"parameter within 20 % {sum(r.get('param_rel_err', 9) <= 0.2 for r in eff)}/{len(eff)}")
+            for name in sorted({r["truth"] for r in eff}):
+                er = [r for r in eff if r["truth"] == name]
+                shrinks = ", ".join(f"{r.get('shrink', float('nan')):.2f}" for r in er)
+                errs = ", ".join(f"{100 * r['param_rel_err']:.0f} %" if "param_rel_err" in r else "–" for r in er)
+                print(f"    {name:<17} first {sum(r['right_first'] for r in er)}/{len(er)} "
+                      f"(ambiguous {sum(bool(r['ambiguous_with']) for r in er)}); shrink {shrinks}; "
+                      f"parameter error {errs}")
         if ctl:
             print(f"  controls unexplained {sum(r['right_first'] for r in ctl)}/{len(ctl)}")
         if pairs:
