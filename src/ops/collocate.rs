@@ -24,7 +24,7 @@ use crate::error::{Error, Result};
 use crate::kernels::collocate::profile::{real_profile, ProfileError};
 use crate::kernels::collocate::segments::{plan, Level, SegmentPlan, Slot, MIN_SEGMENT};
 use crate::kernels::collocate::{collocate_unit, CollocateConfig, PointCloud, ShotInput};
-use crate::kernels::sim::{Pulse, PulseModel, PulseReference};
+use crate::kernels::sim::{PulseModel, PulseReference};
 use crate::ops::progress::{Progress, Step};
 
 /// Options of `gedisim collocate`.
@@ -141,10 +141,8 @@ impl<'a> Collocation<'a> {
             return Err(Error::Usage("--segment must be at least 1".into()));
         }
         let mut cfg = CollocateConfig::new(opts.max_shift, opts.step)?;
-        match &opts.pulse {
-            PulseModel::Gaussian(Some(s)) => cfg.model.pulse = Pulse::gaussian(*s, cfg.model.res as f32)?,
-            PulseModel::File(path) => cfg.model.pulse = crate::io::pulse::read_pulse_file(path)?,
-            PulseModel::Gaussian(None) | PulseModel::Recorded(_) => {}
+        if let Some(p) = crate::io::pulse::fixed_pulse(&opts.pulse, cfg.model.res)? {
+            cfg.model.pulse = p;
         }
         cfg.validate()?;
         let als = AlsTable::open(ds)?;

@@ -416,15 +416,12 @@ enum ShotPulseSource {
 
 impl ShotPulseSource {
     fn new(pulse: &PulseModel, res: f64) -> Result<ShotPulseSource> {
+        if let Some(p) = crate::io::pulse::fixed_pulse(pulse, res)? {
+            return Ok(ShotPulseSource::Fixed(Arc::new(p.resampled(res))));
+        }
         Ok(match pulse {
-            PulseModel::Gaussian(None) => ShotPulseSource::Gaussian,
-            PulseModel::Gaussian(Some(s)) => {
-                ShotPulseSource::Fixed(Arc::new(sim::Pulse::gaussian(*s, res as f32)?.resampled(res)))
-            }
             PulseModel::Recorded(r) => ShotPulseSource::Recorded(*r, res),
-            PulseModel::File(path) => {
-                ShotPulseSource::Fixed(Arc::new(crate::io::pulse::read_pulse_file(path)?.resampled(res)))
-            }
+            _ => ShotPulseSource::Gaussian,
         })
     }
 

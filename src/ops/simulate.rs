@@ -55,13 +55,11 @@ pub fn sim_config(opts: &SimulateOptions) -> Result<SimConfig> {
     if opts.pulse_before {
         cfg.pulse_timing = PulseTiming::BeforeBinning;
     }
-    cfg.pulse = match &opts.pulse {
-        PulseModel::Gaussian(Some(s)) => sim::Pulse::gaussian(*s, cfg.res as f32)?,
-        // Recorded pulses are attached to each footprint (`attach_recorded_pulses`); the Gaussian
-        // stays for a footprint that gets none.
-        PulseModel::Gaussian(None) | PulseModel::Recorded(_) => cfg.pulse,
-        PulseModel::File(path) => crate::io::pulse::read_pulse_file(path)?,
-    };
+    // Recorded pulses are attached to each footprint (`attach_recorded_pulses`); the Gaussian
+    // stays for a footprint that gets none.
+    if let Some(p) = crate::io::pulse::fixed_pulse(&opts.pulse, cfg.res)? {
+        cfg.pulse = p;
+    }
     Ok(cfg)
 }
 

@@ -10,6 +10,7 @@ use super::gap::{GapMetrics, N_PCT};
 use super::rank::{Comparison, Trial, BOOTSTRAP, MIN_GAIN_M, MIN_SHRINK_LOWER};
 use super::Diagnosis;
 use crate::kernels::scenario::effects::{Effect, ParamValue};
+use crate::kernels::scenario::truth::PlantedEffect;
 
 /// An effect's parameters by contract name.
 pub type Params = BTreeMap<String, ParamValue>;
@@ -77,14 +78,7 @@ pub struct TrialJson {
     /// The fitted parameter on a bound of its range (`name = value (… bound)`), if any.
     pub at_bound: Option<String>,
     /// The simpler effect the fitted one is equivalent to, if any.
-    pub equivalent_to: Option<EquivalentJson>,
-}
-
-/// A simpler effect with its parameters.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct EquivalentJson {
-    pub name: String,
-    pub params: Params,
+    pub equivalent_to: Option<PlantedEffect>,
 }
 
 /// A step of known physics: the gap before (without it) and after (with it), held out.
@@ -278,7 +272,7 @@ impl TrialJson {
             held_out: HeldOut::of(&t.held_out),
             fold_params: t.fold_effects.iter().map(|e| e.as_ref().map(params)).collect(),
             at_bound: t.at_bound(),
-            equivalent_to: t.equivalent().map(|e| EquivalentJson { name: e.name().to_string(), params: params(&e) }),
+            equivalent_to: t.equivalent().as_ref().map(PlantedEffect::of),
         }
     }
 }

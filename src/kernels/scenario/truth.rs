@@ -43,7 +43,8 @@ pub struct Truth {
     pub dropped: Vec<DroppedShot>,
 }
 
-/// One planted effect with its parameters (contract names, docs/scenario.md).
+/// An effect with its parameters by contract name (docs/scenario.md): planted in truth.json, or
+/// the simpler equivalent of a fitted effect in diagnosis.json.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PlantedEffect {
     pub name: String,
