@@ -5,7 +5,6 @@ use std::time::Instant;
 
 use clap::Args;
 
-use gedisim::dataset::Dataset;
 use gedisim::Result;
 
 use super::reporters::{cpu_seconds, peak_rss_mb, Bars};
@@ -52,7 +51,7 @@ pub fn collocate(a: CollocateArgs) -> Result<()> {
     use gedisim::ops::collocate::CollocateOptions;
     let start = Instant::now();
     let level = collocate_level(a.level);
-    let ds = Dataset::open(&a.dataset)?;
+    let ds = super::reporters::writer(&a.dataset)?;
     let opts = CollocateOptions {
         level,
         segment: a.segment,

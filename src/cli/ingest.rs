@@ -5,7 +5,6 @@ use std::time::Instant;
 
 use clap::Args;
 
-use gedisim::dataset::Dataset;
 use gedisim::ops::ingest_als::{self as als, AlsOptions, TileOutcome};
 use gedisim::{Error, Result};
 
@@ -64,7 +63,7 @@ pub struct IngestStrataArgs {
 
 pub fn ingest_als(a: IngestAlsArgs) -> Result<()> {
     let start = Instant::now();
-    let ds = Dataset::create(&a.out)?;
+    let ds = super::reporters::writer(&a.out)?;
     let opts = AlsOptions { keep_all_classes: a.keep_all_classes, epsg: a.epsg };
     let outcomes = als::ingest(&ds, &a.inputs, &opts, &Bars::new())?;
     let (mut read, mut written) = (0, 0);
@@ -94,7 +93,7 @@ pub fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
     if a.l1b.is_empty() && a.l2a.is_empty() {
         return Err(Error::Usage("give --l1b and/or --l2a files".into()));
     }
-    let ds = Dataset::create(&a.out)?;
+    let ds = super::reporters::writer(&a.out)?;
     let (outcomes, report) =
         gedisim::ops::ingest_gedi::ingest(&ds, &a.l1b, &a.l2a, a.epsg, a.geoid_offset, a.strict_join, &Bars::new())?;
     for w in report.warnings() {
@@ -112,7 +111,7 @@ pub fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
 }
 
 pub fn ingest_strata(a: IngestStrataArgs) -> Result<()> {
-    let ds = Dataset::open(&a.dataset)?;
+    let ds = super::reporters::writer(&a.dataset)?;
     let report = gedisim::ops::ingest_strata::ingest_strata(&ds, &a.landcover, &Bars::new())?;
     let mut counts: Vec<_> = report.counts.iter().collect();
     counts.sort();

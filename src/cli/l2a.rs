@@ -21,6 +21,9 @@ pub struct L2aArgs {
 
 pub fn l2a(a: L2aArgs) -> Result<()> {
     let r = gedisim::ops::l2a::l2a(&a.l1b, &a.algorithms, &a.out)?;
+    for w in &r.warnings {
+        eprintln!("warning: {w}");
+    }
     eprintln!("{} shots × {} algorithms → {} rows in {}", r.shots, a.algorithms.len(), r.rows, a.out.display());
     Ok(())
 }

@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use super::reporters::Bars;
 use clap::Args;
 
-use gedisim::dataset::Dataset;
 use gedisim::Result;
 
 #[derive(Args)]
@@ -19,7 +18,7 @@ pub struct ReportArgs {
 }
 
 pub fn report(a: ReportArgs) -> Result<()> {
-    let ds = Dataset::open(&a.dataset)?;
+    let ds = super::reporters::writer(&a.dataset)?;
     let s = gedisim::ops::report::run_report(&ds, a.out.as_deref(), &Bars::new())?;
     for (name, rows) in &s.tables {
         eprintln!("{name}: {rows} rows");

@@ -1,5 +1,6 @@
 //! Progress bars (indicatif): the command line's one implementation of the operations'
-//! [`Progress`] trait; and process statistics for `--stats`.
+//! [`Progress`] trait; process statistics for `--stats`; and the writer lock every writing
+//! command takes ([`writer`]).
 
 use std::sync::Mutex;
 use std::time::Duration;
@@ -92,4 +93,19 @@ pub fn peak_rss_mb() -> f64 {
         })
         .map(|kb| kb / 1024.0)
         .unwrap_or(0.0)
+}
+
+/// Open (or create) the dataset at `root` as its one writer (see `gedisim::dataset::lock`),
+/// saying on stderr what an interrupted writer left and this one removed. Every command that
+/// writes into a dataset calls it first and holds the returned dataset until it ends.
+pub fn writer(root: &std::path::Path) -> gedisim::Result<gedisim::dataset::Dataset> {
+    let (ds, cleanup) = gedisim::dataset::Dataset::writer(root)?;
+    let (tmp, orphans) = (cleanup.temporaries.len(), cleanup.orphan_points.len());
+    if tmp + orphans > 0 {
+        eprintln!(
+            "{}: removed what an interrupted writer left: {tmp} temporary file(s), {orphans} als/ file(s) without a tiles/ row",
+            root.display()
+        );
+    }
+    Ok(ds)
 }

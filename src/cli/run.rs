@@ -87,6 +87,7 @@ pub fn run_command(a: RunArgs) -> Result<()> {
         rules: gedisim::kernels::study::select::StudyRules { max_days_apart: a.max_days_apart, ..Default::default() },
         ..base
     };
+    let _writer = super::reporters::writer(&opts.out)?;
     let report = gedisim::ops::run::run_study(&opts, &Bars::new())?;
     print_run(&report);
     Ok(())

@@ -86,6 +86,8 @@ pub enum ProfileArg {
 pub fn simulate(a: SimulateArgs) -> Result<()> {
     use gedisim::kernels::sim::Profile;
     use gedisim::ops::simulate::{SimulateOptions, Source};
+    // Dataset mode writes sim/ into the dataset: it holds the writer lock while it runs.
+    let _writer = a.dataset.as_deref().map(super::reporters::writer).transpose()?;
     let source = match (a.dataset, a.als) {
         (Some(dataset), _) => Source::Dataset { dataset, footprints: a.footprints, out: a.out },
         (None, Some(als)) => {

@@ -19,6 +19,32 @@ pub struct SqlArgs {
     /// Write the result to this Parquet or CSV file instead of printing it.
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Allow DDL (CREATE …), DML (INSERT …) and COPY … TO. Dataset tables stay read-only, and no
+    /// statement may name a location inside the dataset.
+    #[arg(long)]
+    allow_writes: bool,
+    /// Memory that sorts, joins and aggregations may use before spilling to disk or failing
+    /// (e.g. 512M, 8G; default: half of the machine's memory).
+    #[arg(long, value_parser = parse_size)]
+    memory_limit: Option<usize>,
+}
+
+/// `<number>[K|M|G|T]` (binary units) as bytes.
+fn parse_size(s: &str) -> std::result::Result<usize, String> {
+    let s = s.trim();
+    let (num, unit) = s.split_at(s.find(|c: char| c.is_ascii_alphabetic()).unwrap_or(s.len()));
+    let scale: f64 = match unit.to_ascii_uppercase().trim_end_matches(['B', 'I']) {
+        "" => 1.0,
+        "K" => 1024.0,
+        "M" => 1024.0 * 1024.0,
+        "G" => 1024.0 * 1024.0 * 1024.0,
+        "T" => 1024.0 * 1024.0 * 1024.0 * 1024.0,
+        _ => return Err(format!("unknown unit {unit:?} (use K, M, G or T)")),
+    };
+    match num.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok((v * scale) as usize),
+        _ => Err(format!("{s:?} is not a positive size such as 512M or 8G")),
+    }
 }
 
 pub fn sql(a: SqlArgs) -> Result<()> {
@@ -27,7 +53,11 @@ pub fn sql(a: SqlArgs) -> Result<()> {
         (None, Some(f)) => std::fs::read_to_string(&f).map_err(|e| Error::file(&f, e))?,
         _ => return Err(Error::Usage("give either a SQL statement or -f <file>".into())),
     };
-    if let Some(table) = gedisim::ops::sql::sql(&a.dataset, &query, a.out.as_deref())? {
+    let mut limits = gedisim::sql::SessionLimits { allow_writes: a.allow_writes, ..Default::default() };
+    if let Some(bytes) = a.memory_limit {
+        limits.memory_limit = bytes;
+    }
+    if let Some(table) = gedisim::ops::sql::sql(&a.dataset, &query, a.out.as_deref(), &limits)? {
         println!("{table}");
     }
     Ok(())

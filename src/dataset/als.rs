@@ -19,7 +19,7 @@ use parquet::file::metadata::ParquetMetaData;
 use parquet::file::statistics::Statistics;
 use rayon::prelude::*;
 
-use crate::dataset::{self, tables, Dataset};
+use crate::dataset::{tables, Dataset};
 use crate::error::{Error, Result};
 use crate::kernels::collocate::PointCloud;
 use crate::kernels::sim::AlsPoints;
@@ -105,19 +105,6 @@ pub fn tiles_schema() -> SchemaRef {
     ]))
 }
 
-/// The EPSG recorded by previously ingested tiles, if any.
-pub fn dataset_epsg(dataset: &Dataset) -> Result<Option<u32>> {
-    let tiles_dir = dataset.root().join(tables::TILES);
-    if !tiles_dir.is_dir() {
-        return Ok(None);
-    }
-    let files = dataset::table_files(&tiles_dir).map_err(|e| Error::file(&tiles_dir, e))?;
-    let Some(first) = files.first() else { return Ok(None) };
-    let builder = super::read::open(first)?;
-    let kv = builder.metadata().file_metadata().key_value_metadata().cloned().unwrap_or_default();
-    Ok(kv.iter().find(|k| k.key == meta::EPSG).and_then(|k| k.value.as_deref()?.parse().ok()))
-}
-
 /// The points of one cell as an `als/` batch (the columns are moved, not copied).
 pub fn als_batch(p: AlsPoints, tile: &str, cell: u64) -> Result<RecordBatch> {
     let n = p.len();
@@ -174,7 +161,8 @@ impl AlsTable {
     /// Open the `als/` table of a dataset (reads only the footers).
     pub fn open(ds: &Dataset) -> Result<Self> {
         let dir = ds.root().join(tables::ALS);
-        let paths = dataset::table_files(&dir)
+        let paths = ds
+            .visible_files(tables::ALS)
             .map_err(|e| Error::file(&dir, format!("no ALS table ({e}): run `gedisim ingest als`")))?;
         let mut files = Vec::new();
         let mut cover_index: HashMap<(i64, i64), Vec<(usize, usize)>> = HashMap::new();

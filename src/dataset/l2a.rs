@@ -13,7 +13,9 @@ use rayon::prelude::*;
 
 use super::{list_f32, list_f32_builder};
 use crate::error::{Error, Result};
-use crate::kernels::waveform::l2a::{AlgorithmSettings, L2aOutcome, L2aProcessor, Noise, WaveformGeolocation};
+use crate::kernels::waveform::l2a::{
+    AlgorithmSettings, L2aOutcome, L2aProcessor, NoResult, Noise, WaveformGeolocation,
+};
 
 /// Schema of the `l2a` table.
 pub fn l2a_schema() -> SchemaRef {
@@ -171,9 +173,9 @@ impl L2aColumns {
     }
 }
 
-/// Run the L2A kernel with `settings` on every shot of a `shots` batch that has a waveform (rows
-/// without L1B columns are skipped), shots in parallel. A shot the kernel cannot process keeps
-/// its rows with `status` = `no_result: <reason>` and null values.
+/// Run the L2A kernel with `settings` on every shot of a `shots` batch that has L1B columns (rows
+/// without are skipped), shots in parallel. A shot the kernel cannot process, or whose waveform
+/// ingest nulled, keeps its rows with `status` = `no_result: <reason>` and null values.
 pub fn l2a_batch(shots: &RecordBatch, settings: &[AlgorithmSettings], source: &std::path::Path) -> Result<RecordBatch> {
     let col = |n: &str| shots.column_by_name(n).ok_or_else(|| Error::field(source, n, "column missing"));
     let sn = col("shot_number")?.as_primitive::<UInt64Type>().clone();
@@ -184,14 +186,14 @@ pub fn l2a_batch(shots: &RecordBatch, settings: &[AlgorithmSettings], source: &s
     let (z0, zn) = (f64c("elevation_bin0")?, f64c("elevation_lastbin")?);
     let (la0, lan) = (f64c("lat_bin0")?, f64c("lat_lastbin")?);
     let (lo0, lon) = (f64c("lon_bin0")?, f64c("lon_lastbin")?);
-    let rows: Vec<usize> = (0..shots.num_rows()).filter(|&i| !waves.is_null(i)).collect();
-    let outcomes: Vec<(usize, Vec<L2aOutcome>, WaveformGeolocation)> = rows
+    let l1b_rows: Vec<usize> = (0..shots.num_rows()).filter(|&i| !z0.is_null(i)).collect();
+    let outcomes: Vec<(usize, Vec<L2aOutcome>, WaveformGeolocation)> = l1b_rows
         .par_iter()
         .map_init(L2aProcessor::new, |proc, &i| {
-            let w = waves.value(i);
-            let w = w.as_primitive::<Float32Type>();
+            let w = if waves.is_null(i) { None } else { Some(waves.value(i)) };
+            let w = w.as_ref().map(|w| w.as_primitive::<Float32Type>());
             let geo = WaveformGeolocation {
-                sample_count: w.len(),
+                sample_count: w.map_or(0, |w| w.len()),
                 elevation_bin0: z0.value(i),
                 elevation_lastbin: zn.value(i),
                 latitude_bin0: la0.value(i),
@@ -201,7 +203,10 @@ pub fn l2a_batch(shots: &RecordBatch, settings: &[AlgorithmSettings], source: &s
             };
             let noise = Noise { mean: mean.value(i), stddev: sd.value(i) };
             let mut out = Vec::with_capacity(settings.len());
-            proc.process_all(w.values(), noise, &geo, settings, &mut out);
+            match w {
+                Some(w) => proc.process_all(w.values(), noise, &geo, settings, &mut out),
+                None => out.extend(settings.iter().map(|_| Err(NoResult::NoWaveform))),
+            }
             (i, out, geo)
         })
         .collect();

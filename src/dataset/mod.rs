@@ -10,6 +10,7 @@
 pub mod als;
 pub mod blocks;
 pub mod l2a;
+pub mod lock;
 pub mod offsets;
 pub mod read;
 pub mod results;
@@ -62,22 +63,46 @@ pub mod tables {
 #[derive(Debug, Clone)]
 pub struct Dataset {
     root: PathBuf,
+    /// The writer lock, for a dataset opened by [`Dataset::writer`].
+    lock: Option<Arc<lock::WriteLock>>,
 }
 
 impl Dataset {
-    /// Open (and create if needed) the dataset at `root`.
+    /// Open (and create if needed) the dataset at `root`, without the writer lock (library use
+    /// where the caller is the only writer; commands use [`Dataset::writer`]).
     pub fn create(root: &Path) -> Result<Self> {
         std::fs::create_dir_all(root)
             .map_err(|e| Error::file(root, format!("cannot create dataset directory: {e}")))?;
-        Ok(Dataset { root: root.to_path_buf() })
+        Ok(Dataset { root: root.to_path_buf(), lock: None })
     }
 
-    /// Open an existing dataset.
+    /// Open (and create if needed) the dataset at `root` as its one writer: take the writer lock
+    /// (one line if another process holds it) and remove what dead writers left
+    /// ([`lock::WriteLock::acquire`]). The lock is held while any clone of the dataset lives.
+    pub fn writer(root: &Path) -> Result<(Self, lock::Cleanup)> {
+        let mut ds = Self::create(root)?;
+        let (lock, cleanup) = lock::WriteLock::acquire(&ds)?;
+        ds.lock = Some(Arc::new(lock));
+        Ok((ds, cleanup))
+    }
+
+    /// Open an existing dataset for reading.
     pub fn open(root: &Path) -> Result<Self> {
         if !root.is_dir() {
             return Err(Error::file(root, "not a dataset directory (run `gedisim ingest` first)"));
         }
-        Ok(Dataset { root: root.to_path_buf() })
+        Ok(Dataset { root: root.to_path_buf(), lock: None })
+    }
+
+    /// The complete files of table `name` that readers may see, sorted: every Parquet file,
+    /// except `als/` files whose `tiles/` row is absent (a tile's points appear with its row).
+    pub fn visible_files(&self, name: &str) -> std::io::Result<Vec<PathBuf>> {
+        let files = table_files(&self.root.join(name))?;
+        if name != tables::ALS {
+            return Ok(files);
+        }
+        let tiles = self.root.join(tables::TILES);
+        Ok(files.into_iter().filter(|f| f.file_name().is_some_and(|n| tiles.join(n).is_file())).collect())
     }
 
     /// The dataset's directory.
@@ -101,6 +126,30 @@ impl Dataset {
     pub fn table_file(&self, name: &str, stem: &str) -> Result<PathBuf> {
         Ok(self.table_dir(name)?.join(format!("{stem}.parquet")))
     }
+}
+
+/// The CRS (EPSG) of the dataset: the one recorded by its ingested tiles and shots (`None` before
+/// the first ingest). A dataset holds one CRS; tables that disagree are an error.
+pub fn dataset_epsg(dataset: &Dataset) -> Result<Option<u32>> {
+    let mut found: Option<(u32, PathBuf)> = None;
+    for table in [tables::TILES, tables::SHOTS] {
+        let dir = dataset.root().join(table);
+        let Some(first) = table_files(&dir).ok().and_then(|f| f.into_iter().next()) else { continue };
+        let kv = read::key_value_metadata(&first).unwrap_or_default();
+        let Some(epsg) = kv.get(als::meta::EPSG).and_then(|v| v.parse::<u32>().ok()) else { continue };
+        match &found {
+            Some((other, at)) if *other != epsg => {
+                return Err(Error::field(
+                    &first,
+                    als::meta::EPSG,
+                    format!("EPSG:{epsg} differs from EPSG:{other} of {}", at.display()),
+                ))
+            }
+            Some(_) => {}
+            None => found = Some((epsg, first)),
+        }
+    }
+    Ok(found.map(|(e, _)| e))
 }
 
 /// The complete Parquet files of a table folder, sorted by name.
@@ -201,10 +250,14 @@ impl AtomicParquet {
             Writer::RowGroups(w, _) => w.into_inner(),
         }
         .map_err(|e| Error::table(&self.dest, e))?;
-        file.sync_all().map_err(|e| Error::file(&self.tmp, e))?;
-        std::fs::rename(&self.tmp, &self.dest)
-            .map_err(|e| Error::file(&self.dest, format!("cannot rename into place: {e}")))?;
-        Ok(self.dest.clone())
+        let placed = file
+            .sync_all()
+            .map_err(|e| Error::file(&self.tmp, e))
+            .and_then(|_| rename_into_place(&self.tmp, &self.dest));
+        if placed.is_err() {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+        placed.map(|_| self.dest.clone())
     }
 }
 
@@ -234,13 +287,31 @@ pub fn write_parquet(
 /// one atomic write of every non-Parquet output: CSV, JSON, figures, HTML).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let tmp = tmp_path(path);
-    std::fs::write(&tmp, bytes).map_err(|e| Error::file(&tmp, format!("cannot write: {e}")))?;
-    std::fs::rename(&tmp, path).map_err(|e| Error::file(path, format!("cannot rename into place: {e}")))
+    let written = std::fs::write(&tmp, bytes)
+        .map_err(|e| Error::file(&tmp, format!("cannot write: {e}")))
+        .and_then(|_| rename_into_place(&tmp, path));
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
 }
 
-fn tmp_path(dest: &Path) -> PathBuf {
+/// Rename a complete temporary file onto `dest` (never onto a directory).
+fn rename_into_place(tmp: &Path, dest: &Path) -> Result<()> {
+    if dest.is_dir() {
+        return Err(Error::file(dest, "is a directory: give a file name"));
+    }
+    std::fs::rename(tmp, dest).map_err(|e| Error::file(dest, format!("cannot rename into place: {e}")))
+}
+
+/// A temporary name beside `dest`, unique to this process and this call:
+/// `<name>.<pid>-<n>.tmp`. Readers ignore `*.tmp`; [`remove_stale_temporaries`] removes those of
+/// dead processes.
+pub fn tmp_path(dest: &Path) -> PathBuf {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let mut name = dest.file_name().map(|n| n.to_os_string()).unwrap_or_default();
-    name.push(format!(".{}.tmp", std::process::id()));
+    name.push(format!(".{}-{n}.tmp", std::process::id()));
     dest.with_file_name(name)
 }
 
@@ -261,6 +332,9 @@ pub fn content_hash(path: &Path) -> Result<String> {
 
 /// Write query results to `out`: Parquet when it ends in `.parquet`, CSV otherwise (atomically).
 pub fn write_result(out: &Path, batches: &[RecordBatch]) -> Result<()> {
+    if out.is_dir() {
+        return Err(Error::file(out, "is a directory: give a .parquet or .csv file name"));
+    }
     let schema = match batches.first() {
         Some(b) => b.schema(),
         None => Arc::new(arrow::datatypes::Schema::empty()),
@@ -269,14 +343,27 @@ pub fn write_result(out: &Path, batches: &[RecordBatch]) -> Result<()> {
         write_parquet(out, schema, batches, &HashMap::new())?;
         return Ok(());
     }
-    let tmp = tmp_path(out);
-    let file = File::create(&tmp).map_err(|e| Error::file(&tmp, format!("cannot create: {e}")))?;
-    let mut w = arrow::csv::Writer::new(file);
-    for b in batches {
-        w.write(b).map_err(|e| Error::table(out, e))?;
+    if let Some(f) = schema.fields().iter().find(|f| f.data_type().is_nested()) {
+        return Err(Error::field(
+            out,
+            f.name(),
+            format!("{} cannot be written as CSV: write a .parquet file, or select scalar columns", f.data_type()),
+        ));
     }
-    drop(w);
-    std::fs::rename(&tmp, out).map_err(|e| Error::file(out, format!("cannot rename into place: {e}")))
+    let tmp = tmp_path(out);
+    let written = (|| {
+        let file = File::create(&tmp).map_err(|e| Error::file(&tmp, format!("cannot create: {e}")))?;
+        let mut w = arrow::csv::Writer::new(file);
+        for b in batches {
+            w.write(b).map_err(|e| Error::table(out, e))?;
+        }
+        w.into_inner().sync_all().map_err(|e| Error::file(&tmp, e))?;
+        rename_into_place(&tmp, out)
+    })();
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
 }
 
 /// A Parquet row selection of the sorted row indices `rows` of a file of `total` rows

@@ -227,17 +227,23 @@ impl BeamGroup<'_> {
 pub struct Waveforms {
     pub samples: Vec<f32>,
     pub spans: Vec<(usize, usize)>,
+    /// Shots whose record holds a NaN or infinite sample (their waveform reads as `None`).
+    pub non_finite: Vec<u64>,
+    /// Per shot: whether its record is usable (non-empty and every sample finite).
+    usable: Vec<bool>,
 }
 
 impl Waveforms {
-    pub fn get(&self, i: usize) -> &[f32] {
+    /// Shot `i`'s record; `None` when it is empty or holds a NaN or infinite sample.
+    pub fn get(&self, i: usize) -> Option<&[f32]> {
         let (s, c) = self.spans[i];
-        &self.samples[s..s + c]
+        self.usable[i].then(|| &self.samples[s..s + c])
     }
 }
 
 /// Read `<wave>`, `<prefix>_sample_start_index` (1-based) and `<prefix>_sample_count`; `None`
-/// when any of the three is absent (the caller decides whether that is an error).
+/// when any of the three is absent (the caller decides whether that is an error). A negative
+/// count, a start index below 1 or a record past the end of `<wave>` is an error naming the shot.
 pub fn read_waveforms(g: &BeamGroup, shots: &[u64], wave: &str, prefix: &str) -> Result<Option<Waveforms>> {
     let start_rel = format!("{prefix}_sample_start_index");
     let count_rel = format!("{prefix}_sample_count");
@@ -246,21 +252,31 @@ pub fn read_waveforms(g: &BeamGroup, shots: &[u64], wave: &str, prefix: &str) ->
         _ => return Ok(None),
     };
     let samples = g.read_ds::<f32>(wave, &w, Shape::Flat)?;
-    let start = g.read_ds::<u64>(&start_rel, &s, Shape::PerShot)?;
-    let count = g.read_ds::<u64>(&count_rel, &c, Shape::PerShot)?;
+    // Signed reads: a negative value in a signed dataset must not convert to 0 or wrap.
+    let start = g.read_ds::<i64>(&start_rel, &s, Shape::PerShot)?;
+    let count = g.read_ds::<i64>(&count_rel, &c, Shape::PerShot)?;
     let len = samples.len() as u64;
     let mut spans = Vec::with_capacity(shots.len());
+    let (mut usable, mut non_finite) = (Vec::with_capacity(shots.len()), Vec::new());
     for ((&shot, &s), &c) in shots.iter().zip(&start).zip(&count) {
-        if s == 0 {
-            return Err(g.err(&start_rel, format!("shot {shot}: index 0, but GEDI's start index is 1-based")));
+        if s < 1 {
+            return Err(g.err(&start_rel, format!("shot {shot}: index {s}, but GEDI's start index is 1-based")));
         }
+        let c = u64::try_from(c).map_err(|_| g.err(&count_rel, format!("shot {shot}: negative count {c}")))?;
+        let s = s as u64;
         // 1-based: the shot's samples are [s-1, s-1+c).
         let end = (s - 1).checked_add(c).filter(|&e| e <= len).ok_or_else(|| {
             g.err(&start_rel, format!("shot {shot}: start {s} + {count_rel} {c} - 1 exceeds the {wave} length {len}"))
         })?;
-        spans.push(((s - 1) as usize, (end - (s - 1)) as usize));
+        let (first, n) = ((s - 1) as usize, (end - (s - 1)) as usize);
+        let finite = samples[first..first + n].iter().all(|v| v.is_finite());
+        if !finite {
+            non_finite.push(shot);
+        }
+        usable.push(finite && n > 0);
+        spans.push((first, n));
     }
-    Ok(Some(Waveforms { samples, spans }))
+    Ok(Some(Waveforms { samples, spans, non_finite, usable }))
 }
 
 /// The L1B datasets of one beam that the shots table uses.
@@ -416,7 +432,7 @@ pub fn read_transmit_records(path: &Path) -> Result<Vec<(bool, Vec<f32>)>> {
         let full_power =
             crate::kernels::gedi::BeamType::from_name(&name) == Some(crate::kernels::gedi::BeamType::FullPower);
         if let Some(tx) = read_waveforms(&b, &shots, "txwaveform", "tx")? {
-            out.extend((0..shots.len()).map(|i| (full_power, tx.get(i).to_vec())));
+            out.extend((0..shots.len()).filter_map(|i| Some((full_power, tx.get(i)?.to_vec()))));
         }
     }
     Ok(out)

@@ -48,7 +48,8 @@ impl TileReader {
 
     /// Open a file; `parallel` decodes LAZ chunks on the rayon pool.
     pub fn open_with(path: &Path, parallel: bool) -> Result<Self> {
-        let file = std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
+        let mut file = std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
+        check_layout(path, &mut file)?;
         let laz_parallelism = if parallel { las::LazParallelism::Yes } else { las::LazParallelism::No };
         let options = las::ReaderOptions::default().with_laz_parallelism(laz_parallelism);
         let reader = Reader::with_options(std::io::BufReader::with_capacity(1 << 20, file), options).map_err(|e| {
@@ -118,6 +119,176 @@ impl TileReader {
         }
         Ok(all)
     }
+}
+
+/// Check what the header, VLRs, EVLRs and LAZ chunk table announce against the file's size before
+/// the `las` crate trusts them (a hostile count overflows its arithmetic or allocates unbounded
+/// memory): scale factors finite and non-zero, offsets finite, every record inside the file, and
+/// the point count equal to what the point bytes hold (LAS) or within the chunk table's capacity
+/// (LAZ; an understatement smaller than one chunk of a fixed-chunk file is not detectable here).
+/// Leaves `file` at its start.
+fn check_layout(path: &Path, file: &mut std::fs::File) -> Result<()> {
+    use std::io::{Read, Seek, SeekFrom};
+    let bad = |field: &str, msg: String| Error::field(path, field, msg);
+    let io = |e: std::io::Error| Error::field(path, "header", format!("cannot read: {e}"));
+    let file_len = file.metadata().map_err(|e| Error::file(path, format!("cannot stat: {e}")))?.len();
+    let h = las::raw::Header::read_from(std::io::BufReader::new(&mut *file)).map_err(|e| {
+        bad("header", format!("not a LAS/LAZ header (truncated?): {}", crate::error::one_line(&e.to_string())))
+    })?;
+    for (name, v) in [
+        ("x_scale_factor", h.x_scale_factor),
+        ("y_scale_factor", h.y_scale_factor),
+        ("z_scale_factor", h.z_scale_factor),
+    ] {
+        if !(v.is_finite() && v != 0.0) {
+            return Err(bad(name, format!("{v}: must be a finite non-zero number")));
+        }
+    }
+    for (name, v) in [("x_offset", h.x_offset), ("y_offset", h.y_offset), ("z_offset", h.z_offset)] {
+        if !v.is_finite() {
+            return Err(bad(name, format!("{v}: must be finite")));
+        }
+    }
+    let data_start = u64::from(h.offset_to_point_data);
+    if data_start < u64::from(h.header_size) || data_start > file_len {
+        return Err(bad(
+            "offset_to_point_data",
+            format!("{data_start} lies outside [header_size {}, file size {file_len}]", h.header_size),
+        ));
+    }
+    // VLRs: between the header and the points.
+    file.seek(SeekFrom::Start(u64::from(h.header_size))).map_err(io)?;
+    let mut at = u64::from(h.header_size);
+    let mut laszip = None;
+    for i in 0..h.number_of_variable_length_records {
+        if at + 54 > data_start {
+            return Err(bad(
+                "number_of_variable_length_records",
+                format!(
+                    "{}: VLR {i} would start at byte {at}, past the point data at {data_start}",
+                    h.number_of_variable_length_records
+                ),
+            ));
+        }
+        let vlr = las::raw::Vlr::read_from(&mut *file, false)
+            .map_err(|e| bad("VLR", crate::error::one_line(&e.to_string())))?;
+        at += 54 + vlr.data.len() as u64;
+        if at > data_start {
+            return Err(bad("VLR", format!("VLR {i} ends at byte {at}, past the point data at {data_start}")));
+        }
+        let user = String::from_utf8_lossy(&vlr.user_id);
+        if user.trim_end_matches('\0') == "laszip encoded" && vlr.record_id == 22204 {
+            laszip = Some(vlr.data);
+        }
+    }
+    // EVLRs: after the points, each inside the file.
+    let mut points_end = file_len;
+    if let Some(evlr) = h.evlr.filter(|e| e.number_of_evlrs > 0) {
+        let mut at = evlr.start_of_first_evlr;
+        if at < data_start || at > file_len {
+            return Err(bad(
+                "start_of_first_evlr",
+                format!("{at} lies outside [point data {data_start}, file size {file_len}]"),
+            ));
+        }
+        points_end = at;
+        for i in 0..evlr.number_of_evlrs {
+            let mut head = [0u8; 60];
+            file.seek(SeekFrom::Start(at)).map_err(io)?;
+            file.read_exact(&mut head).map_err(|_| {
+                bad(
+                    "number_of_evlrs",
+                    format!("{}: EVLR {i} at byte {at} is past the end of the file", evlr.number_of_evlrs),
+                )
+            })?;
+            let len = u64::from_le_bytes(head[20..28].try_into().expect("8 bytes"));
+            at = at.checked_add(60).and_then(|a| a.checked_add(len)).filter(|&a| a <= file_len).ok_or_else(|| {
+                bad("EVLR", format!("EVLR {i} announces {len} bytes, past the end of the file ({file_len} bytes)"))
+            })?;
+        }
+    }
+    let legacy = u64::from(h.number_of_point_records);
+    let count = match h.large_file {
+        Some(lf) if legacy != 0 && legacy != lf.number_of_point_records => {
+            return Err(bad(
+                "number_of_point_records",
+                format!("legacy count {legacy} differs from the 64-bit count {}", lf.number_of_point_records),
+            ))
+        }
+        Some(lf) => lf.number_of_point_records,
+        None => legacy,
+    };
+    let record = u64::from(h.point_data_record_length);
+    let point_bytes = points_end - data_start;
+    let compressed = h.point_data_record_format & 0x80 != 0 || h.point_data_record_format & 0x40 != 0;
+    if record == 0 {
+        return Err(bad("point_data_record_length", "0 bytes".into()));
+    }
+    if count.checked_mul(record).is_none() {
+        return Err(bad(
+            "number_of_point_records",
+            format!("header announces {count} points, more than any file holds"),
+        ));
+    }
+    match laszip {
+        None if compressed => return Err(bad("laszip VLR", "compressed point format without a LASzip VLR".into())),
+        None => {
+            let holds = point_bytes / record;
+            if holds != count {
+                return Err(bad(
+                    "number_of_point_records",
+                    format!("header announces {count} points but the file holds {holds}"),
+                ));
+            }
+        }
+        Some(data) => {
+            let vlr = laz::LazVlr::read_from(data.as_slice())
+                .map_err(|e| bad("laszip VLR", crate::error::one_line(&e.to_string())))?;
+            file.seek(SeekFrom::Start(data_start)).map_err(io)?;
+            let mut offset = [0u8; 8];
+            file.read_exact(&mut offset)
+                .map_err(|_| bad("points", "no LAZ chunk table offset after the header".into()))?;
+            let table_at = i64::from_le_bytes(offset);
+            // A table stored at the end (the writer could not seek back) is found by the reader;
+            // only a table announced inside the file is checked here.
+            if table_at > data_start as i64 && (table_at as u64) < points_end {
+                let mut head = [0u8; 8];
+                file.seek(SeekFrom::Start(table_at as u64)).map_err(io)?;
+                file.read_exact(&mut head).map_err(|_| bad("chunk table", "truncated".into()))?;
+                let chunks = u64::from(u32::from_le_bytes(head[4..8].try_into().expect("4 bytes")));
+                if chunks > table_at as u64 - data_start {
+                    return Err(bad(
+                        "chunk table",
+                        format!("{chunks} chunks cannot fit in {} bytes of points", table_at as u64 - data_start),
+                    ));
+                }
+                file.seek(SeekFrom::Start(data_start)).map_err(io)?;
+                let table = laz::laszip::ChunkTable::read_from(&mut *file, &vlr)
+                    .map_err(|e| bad("chunk table", crate::error::one_line(&e.to_string())))?;
+                let capacity: u64 = table.as_ref().iter().map(|c| c.point_count).sum();
+                let smallest = if vlr.uses_variable_size_chunks() {
+                    capacity
+                } else {
+                    capacity.saturating_sub(u64::from(vlr.chunk_size())) + 1
+                };
+                if chunks > 0 && !(smallest..=capacity).contains(&count) {
+                    return Err(bad(
+                        "number_of_point_records",
+                        format!(
+                            "header announces {count} points but the LAZ chunk table holds {}",
+                            if smallest == capacity {
+                                capacity.to_string()
+                            } else {
+                                format!("{smallest} to {capacity}")
+                            }
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    file.seek(SeekFrom::Start(0)).map_err(io)?;
+    Ok(())
 }
 
 /// Read every point (every class) of a LAS/LAZ file.

@@ -21,7 +21,7 @@ use arrow::record_batch::RecordBatch;
 use rayon::prelude::*;
 
 use crate::dataset::als::{
-    als_batch, als_schema, cell_key, dataset_epsg, meta, tiles_schema, CELL_SIZE_M, DROPPED_CLASSES, MAX_ROW_GROUP_ROWS,
+    als_batch, als_schema, cell_key, meta, tiles_schema, CELL_SIZE_M, DROPPED_CLASSES, MAX_ROW_GROUP_ROWS,
 };
 use crate::dataset::{self, tables, AtomicParquet, Dataset};
 use crate::error::{Error, Result};
@@ -64,9 +64,25 @@ pub fn ingest(
     if files.is_empty() {
         return Err(Error::Usage("no LAS/LAZ file found in the inputs".into()));
     }
+    // Every header is read (and checked) before any point is written; one call brings one CRS.
+    let existing = dataset::dataset_epsg(dataset)?;
     let mut total = 0;
+    let mut first: Option<(u32, &Path)> = None;
     for f in &files {
-        total += TileReader::open(f)?.header().number_of_points;
+        let reader = TileReader::open(f)?;
+        let epsg = resolve_epsg(reader.header(), opts, existing)?;
+        match first {
+            Some((e, at)) if e != epsg => {
+                return Err(Error::field(
+                    f,
+                    "CRS",
+                    format!("EPSG:{epsg} differs from EPSG:{e} of {} in the same call", at.display()),
+                ))
+            }
+            Some(_) => {}
+            None => first = Some((epsg, f)),
+        }
+        total += reader.header().number_of_points;
     }
     progress.start(Step::IngestAls, total);
     let outcomes = ingest_tiles(dataset, &files, opts, progress);
@@ -85,13 +101,30 @@ pub fn ingest_tiles(
     let als_dir = dataset.table_dir(tables::ALS)?;
     let tiles_dir = dataset.table_dir(tables::TILES)?;
     // One CRS per dataset: the tiles already there fix it.
-    let existing_epsg = dataset_epsg(dataset)?;
+    let existing_epsg = dataset::dataset_epsg(dataset)?;
+    // Content hashes first: a file whose content appears earlier in the call is skipped like one
+    // ingested before (two copies must not write the same table files at once).
+    let hashes = files.par_iter().map(|f| dataset::content_hash(f)).collect::<Result<Vec<_>>>()?;
+    let mut seen = std::collections::HashSet::new();
+    let first_copy: Vec<bool> = hashes.iter().map(|h| seen.insert(h.clone())).collect();
     // A single file gets both cores for LAZ decoding; several files run one per core.
-    let parallel_decode = files.len() == 1;
+    let parallel_decode = seen.len() == 1;
     files
         .par_iter()
-        .map(|f| ingest_tile(f, &als_dir, &tiles_dir, opts, existing_epsg, parallel_decode, progress))
+        .zip(&hashes)
+        .zip(&first_copy)
+        .map(|((f, hash), &first)| {
+            if !first {
+                progress.advance(TileReader::open(f)?.header().number_of_points);
+                return Ok(TileOutcome::AlreadyIngested { tile: tile_name(f) });
+            }
+            ingest_tile(f, hash, &als_dir, &tiles_dir, opts, existing_epsg, parallel_decode, progress)
+        })
         .collect()
+}
+
+fn tile_name(path: &Path) -> String {
+    path.file_stem().and_then(|s| s.to_str()).unwrap_or("tile").to_string()
 }
 
 fn resolve_epsg(h: &TileHeader, opts: &AlsOptions, existing: Option<u32>) -> Result<u32> {
@@ -193,6 +226,7 @@ const SPILL_RECORD: usize = 8 * 4 + 4 + 2 * 2 + 3;
 #[allow(clippy::too_many_arguments)]
 fn ingest_tile(
     path: &Path,
+    hash: &str,
     als_dir: &Path,
     tiles_dir: &Path,
     opts: &AlsOptions,
@@ -200,9 +234,8 @@ fn ingest_tile(
     parallel_decode: bool,
     progress: &dyn Progress,
 ) -> Result<TileOutcome> {
-    let hash = dataset::content_hash(path)?;
     let key = &hash[..16];
-    let tile = path.file_stem().and_then(|s| s.to_str()).unwrap_or("tile").to_string();
+    let tile = tile_name(path);
     let tiles_file = tiles_dir.join(format!("{key}.parquet"));
     if tiles_file.exists() {
         return Ok(TileOutcome::AlreadyIngested { tile });
@@ -212,7 +245,7 @@ fn ingest_tile(
     let epsg = resolve_epsg(&header, opts, existing_epsg)?;
 
     // Pass 1: decode, filter, file by cell, spill runs sorted by cell.
-    let spill_path = als_dir.join(format!("{key}.spill.tmp"));
+    let spill_path = dataset::tmp_path(&als_dir.join(format!("{key}.spill")));
     let spill = SpillFile::create(&spill_path)?;
     let result = (|| {
         let mut spill = spill;
@@ -275,7 +308,7 @@ fn ingest_tile(
         drop(spill_reader);
         let _ = std::fs::remove_file(&spill);
 
-        let batch = tiles_batch(&header, &tile, &hash, epsg, &stats)?;
+        let batch = tiles_batch(&header, &tile, hash, epsg, &stats)?;
         dataset::write_parquet(&tiles_file, tiles_schema(), &[batch], &metadata)?;
         Ok(TileOutcome::Ingested { tile: tile.clone(), points: stats.kept, dropped: stats.dropped })
     })();

@@ -10,7 +10,7 @@
 //! never float); `rx_sample_start_index` is **1-based**; L2A `geolocation/rh_aN` is integer
 //! centimetres while root `rh` is metres; V1 has no `land_cover_data/leaf_off_flag`.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -82,6 +82,9 @@ pub struct BeamReport {
     pub l2a_only: Vec<u64>,
     /// L2A shots whose `lat/lon_lowestmode` are not valid coordinates (kept null).
     pub invalid_lowestmode: Vec<u64>,
+    /// L1B shots whose `rxwaveform` or `txwaveform` record holds NaN or infinite samples (that
+    /// waveform kept null).
+    pub non_finite_waveform: Vec<u64>,
 }
 
 impl BeamReport {
@@ -110,6 +113,15 @@ impl BeamReport {
                 self.beam,
                 self.l2a_only.len(),
                 name(&self.l1b_file)
+            ));
+        }
+        if let Some(&first) = self.non_finite_waveform.first() {
+            out.push(format!(
+                "{}: {}/rxwaveform: {} shot(s) with NaN or infinite samples in rxwaveform or txwaveform (first {first}); \
+                 that waveform kept null",
+                name(&self.l1b_file),
+                self.beam,
+                self.non_finite_waveform.len()
             ));
         }
         if let Some(&first) = self.invalid_lowestmode.first() {
@@ -295,6 +307,12 @@ pub fn read_granule(
             l2a_file: pair.l2a.clone(),
             ..Default::default()
         };
+        if let Some(b) = &l1b_beam {
+            report.non_finite_waveform =
+                b.rx.non_finite.iter().chain(b.tx.iter().flat_map(|t| &t.non_finite)).copied().collect();
+            report.non_finite_waveform.sort_unstable();
+            report.non_finite_waveform.dedup();
+        }
         let rows = join(pair, &beam, l1b_beam.as_ref(), l2a_beam.as_ref(), opts, &projector, &mut report)?;
         let ctx = BatchContext {
             schema: &schema,
@@ -529,9 +547,9 @@ impl BatchContext<'_> {
             ("xy_source".into(), strings(rows, |r| r.xy.map(|p| p.2.as_str()))),
             ("elevation_bin0".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.elevation_bin0[i]))),
             ("elevation_lastbin".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.elevation_lastbin[i]))),
-            ("rx_waveform".into(), lists(rows, |r| a1(r).map(|(b, i)| b.rx.get(i)))),
+            ("rx_waveform".into(), lists(rows, |r| a1(r).and_then(|(b, i)| b.rx.get(i)))),
             ("rx_sample_count".into(), prim::<UInt32Type>(rows, |r| a1(r).map(|(b, i)| b.rx.spans[i].1 as u32))),
-            ("tx_waveform".into(), lists(rows, |r| a1(r).and_then(|(b, i)| Some(b.tx.as_ref()?.get(i))))),
+            ("tx_waveform".into(), lists(rows, |r| a1(r).and_then(|(b, i)| b.tx.as_ref()?.get(i)))),
             ("noise_mean_corrected".into(), f64s(rows, |r| a1(r).and_then(|(b, i)| at(&b.noise_mean, Some(i))))),
             ("noise_stddev_corrected".into(), f64s(rows, |r| a1(r).and_then(|(b, i)| at(&b.noise_stddev, Some(i))))),
             (
@@ -630,9 +648,16 @@ pub fn ingest(
     if l1b.is_empty() && l2a.is_empty() {
         return Err(Error::Usage("--l1b/--l2a: no GEDI01_B or GEDI02_A .h5 file found in the inputs".into()));
     }
-    let epsg = match epsg {
-        Some(e) => e,
-        None => crate::dataset::als::dataset_epsg(dataset)?.unwrap_or(2154),
+    let epsg = match (epsg, crate::dataset::dataset_epsg(dataset)?) {
+        (Some(given), Some(ds)) if given != ds => {
+            return Err(Error::field(
+                dataset.root(),
+                "CRS",
+                format!("--epsg {given} differs from the dataset's EPSG:{ds} (one CRS per dataset)"),
+            ))
+        }
+        (Some(e), _) | (None, Some(e)) => e,
+        (None, None) => 2154,
     };
     let opts = GediOptions { epsg, geoid_offset, strict_join };
     progress.start(Step::IngestGedi, pair_granules(&l1b, &l2a)?.0.len() as u64);
@@ -658,14 +683,53 @@ pub fn ingest_into_dataset(
     let (pairs, notes) = pair_granules(l1b, l2a)?;
     let shots_dir = dataset.table_dir(tables::SHOTS)?;
     let granules_dir = dataset.table_dir(tables::GRANULES)?;
+    // Content first: a file's content belongs to one granule key, whatever the file is called
+    // (a renamed copy must not double the shots), and one copy per call is written.
+    let hash = |p: &Option<PathBuf>| p.as_deref().map(dataset::content_hash).transpose();
+    let keyed = pairs
+        .par_iter()
+        .map(|pair| {
+            let key = granule_key(pair.l1b.as_deref().or(pair.l2a.as_deref()).expect("a pair has a file"));
+            Ok((key, hash(&pair.l1b)?, hash(&pair.l2a)?))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let mut owner: HashMap<String, String> = HashMap::new(); // content hash → granule key
+    for record in dataset::table_files(&granules_dir).map_err(|e| Error::file(&granules_dir, e))? {
+        let key = record.file_stem().and_then(|s| s.to_str()).unwrap_or_default().to_string();
+        if let Some((h1, h2)) = previous_hashes(&record)? {
+            owner.extend([h1, h2].into_iter().flatten().map(|h| (h, key.clone())));
+        }
+    }
+    let mut duplicate = vec![false; pairs.len()];
+    for (i, ((key, h1, h2), pair)) in keyed.iter().zip(&pairs).enumerate() {
+        let present: Vec<(&String, &PathBuf)> = [(h1, &pair.l1b), (h2, &pair.l2a)]
+            .into_iter()
+            .filter_map(|(h, f)| Some((h.as_ref()?, f.as_ref()?)))
+            .collect();
+        let others: Vec<&String> = present.iter().filter_map(|(h, _)| owner.get(*h)).filter(|o| *o != key).collect();
+        match others.first() {
+            None => owner.extend(present.iter().map(|(h, _)| ((*h).clone(), key.clone()))),
+            // Every file is a copy of the same other granule: nothing new.
+            Some(other) if others.len() == present.len() && others.iter().all(|o| o == other) => duplicate[i] = true,
+            Some(other) => {
+                let file = present.iter().find(|(h, _)| owner.get(*h) == Some(*other)).map(|(_, f)| *f).expect("owned");
+                return Err(Error::file(
+                    file,
+                    format!(
+                        "same content as granule {other} of the dataset, paired here with other files: \
+                         ingest it under its original name to replace that granule"
+                    ),
+                ));
+            }
+        }
+    }
     let results = pairs
         .par_iter()
-        .map(|pair| -> Result<(GranuleOutcome, Vec<BeamReport>)> {
-            let key = granule_key(pair.l1b.as_deref().or(pair.l2a.as_deref()).expect("a pair has a file"));
-            let hash = |p: &Option<PathBuf>| p.as_deref().map(dataset::content_hash).transpose();
-            let (h1, h2) = (hash(&pair.l1b)?, hash(&pair.l2a)?);
+        .zip(keyed)
+        .zip(duplicate)
+        .map(|((pair, (key, h1, h2)), duplicate)| -> Result<(GranuleOutcome, Vec<BeamReport>)> {
             let record = granules_dir.join(format!("{key}.parquet"));
-            if previous_hashes(&record)? == Some((h1.clone(), h2.clone())) {
+            if duplicate || previous_hashes(&record)? == Some((h1.clone(), h2.clone())) {
                 progress.advance(1);
                 return Ok((GranuleOutcome::AlreadyIngested { granule: pair.granule.clone() }, Vec::new()));
             }

@@ -10,10 +10,12 @@ use crate::kernels::waveform::l2a::AlgorithmSettings;
 use crate::ops::ingest_gedi::{ingest_gedi, GediOptions};
 
 /// What `gedisim l2a` wrote.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct L2aReport {
     pub shots: usize,
     pub rows: usize,
+    /// What reading the L1B found wrong (one line each, naming file, beam and count).
+    pub warnings: Vec<String>,
 }
 
 /// Run the GEDI `algorithms` (1..6) on every waveform of `l1b` into `out` (atomically).
@@ -33,5 +35,5 @@ pub fn l2a(l1b: &Path, algorithms: &[u8], out: &Path) -> Result<L2aReport> {
         writer.write(&batch)
     })?;
     writer.finish()?;
-    Ok(L2aReport { shots: report.rows(), rows })
+    Ok(L2aReport { shots: report.rows(), rows, warnings: report.warnings() })
 }

@@ -1,19 +1,41 @@
 //! `gedisim sql`: one SQL statement over a dataset's tables (with gedisim's functions), printed as
 //! a table or written to a Parquet or CSV file.
+//!
+//! Read-only by default: DDL, DML and `COPY` need `allow_writes`, and even then no statement may
+//! name a location inside the dataset (its tables change only through gedisim's commands).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+use datafusion::logical_expr::{DdlStatement, LogicalPlan};
 
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
+use crate::sql::SessionLimits;
 
 /// Run `query` on `dataset`; the result as a text table, or written to `out` (then `None`).
-pub fn sql(dataset: &Path, query: &str, out: Option<&Path>) -> Result<Option<String>> {
+pub fn sql(dataset: &Path, query: &str, out: Option<&Path>, limits: &SessionLimits) -> Result<Option<String>> {
     let ds = Dataset::open(dataset)?;
     let rt = tokio::runtime::Runtime::new().map_err(|e| Error::Usage(e.to_string()))?;
+    let sql_err = |e: datafusion::error::DataFusionError| {
+        Error::Usage(format!("SQL: {}", crate::error::one_line(&e.to_string())))
+    };
     rt.block_on(async move {
-        let ctx = crate::sql::session(&ds).await?;
-        let df = ctx.sql(query).await.map_err(|e| Error::Usage(format!("SQL: {e}")))?;
-        let batches = df.collect().await.map_err(|e| Error::Usage(format!("SQL: {e}")))?;
+        let ctx = crate::sql::session_with(&ds, limits).await?;
+        let plan = ctx.state().create_logical_plan(query).await.map_err(sql_err)?;
+        crate::sql::statement_options(limits).verify_plan(&plan).map_err(|e| {
+            Error::Usage(format!(
+                "SQL: {} (gedisim sql is read-only; --allow-writes permits it)",
+                crate::error::one_line(&e.to_string())
+            ))
+        })?;
+        if let Some(location) = location_inside(&plan, ds.root()) {
+            return Err(Error::Usage(format!(
+                "SQL: {location} lies inside the dataset {}: its tables change only through gedisim's commands",
+                ds.root().display()
+            )));
+        }
+        let df = ctx.execute_logical_plan(plan).await.map_err(sql_err)?;
+        let batches = df.collect().await.map_err(sql_err)?;
         match out {
             None => {
                 let table =
@@ -22,5 +44,22 @@ pub fn sql(dataset: &Path, query: &str, out: Option<&Path>) -> Result<Option<Str
             }
             Some(out) => crate::dataset::write_result(out, &batches).map(|_| None),
         }
+    })
+}
+
+/// The location a `COPY … TO` or `CREATE EXTERNAL TABLE` of `plan` names inside `root`, if any.
+fn location_inside(plan: &LogicalPlan, root: &Path) -> Option<String> {
+    let locations = match plan {
+        LogicalPlan::Copy(copy) => vec![copy.output_url.clone()],
+        LogicalPlan::Ddl(DdlStatement::CreateExternalTable(t)) => t.locations.clone(),
+        _ => return None,
+    };
+    let root = root.canonicalize().ok()?;
+    locations.into_iter().find(|location| {
+        let path = PathBuf::from(location.strip_prefix("file://").unwrap_or(location));
+        let Ok(cwd) = std::env::current_dir() else { return true };
+        let path = if path.is_absolute() { path } else { cwd.join(path) };
+        // The deepest existing ancestor, resolved (the target itself may not exist yet).
+        path.ancestors().find(|p| p.exists()).and_then(|p| p.canonicalize().ok()).is_some_and(|p| p.starts_with(&root))
     })
 }

@@ -11,33 +11,82 @@ pub mod twin;
 
 use std::path::Path;
 
-use datafusion::datasource::file_format::parquet::ParquetFormat;
-use datafusion::datasource::listing::ListingOptions;
-use datafusion::logical_expr::{DocSection, ScalarUDF};
-use datafusion::prelude::{SessionConfig, SessionContext};
+use std::path::PathBuf;
 use std::sync::Arc;
+
+use arrow::datatypes::SchemaRef;
+use datafusion::catalog::{Session, TableProvider};
+use datafusion::common::Statistics;
+use datafusion::datasource::file_format::parquet::ParquetFormat;
+use datafusion::datasource::listing::{ListingOptions, ListingTable, ListingTableConfig, ListingTableUrl};
+use datafusion::datasource::TableType;
+use datafusion::execution::runtime_env::RuntimeEnvBuilder;
+use datafusion::logical_expr::dml::InsertOp;
+use datafusion::logical_expr::{DocSection, Expr, ScalarUDF, TableProviderFilterPushDown};
+use datafusion::physical_plan::ExecutionPlan;
+use datafusion::prelude::{SQLOptions, SessionConfig, SessionContext};
 
 use crate::dataset::{self, Dataset};
 use crate::error::{Error, Result};
 
-/// A session with every table folder of `dataset` registered under its folder name.
+/// How a session may use the machine and the file system.
+#[derive(Debug, Clone, Copy)]
+pub struct SessionLimits {
+    /// Bytes that sorts, joins and aggregations may hold before they spill to disk or fail.
+    pub memory_limit: usize,
+    /// Allow DDL (`CREATE …`), DML (`INSERT …`) and `COPY … TO`. Dataset tables stay read-only.
+    pub allow_writes: bool,
+}
+
+impl Default for SessionLimits {
+    fn default() -> Self {
+        SessionLimits { memory_limit: default_memory_limit(), allow_writes: false }
+    }
+}
+
+/// Half of the machine's physical memory (4 GiB when it cannot be read).
+pub fn default_memory_limit() -> usize {
+    let mut sys = sysinfo::System::new();
+    sys.refresh_memory();
+    match sys.total_memory() {
+        0 => 4 << 30,
+        total => usize::try_from(total / 2).unwrap_or(usize::MAX),
+    }
+}
+
+/// A session with every table folder of `dataset` registered under its folder name (read-only)
+/// and gedisim's functions, under the default [`SessionLimits`].
 pub async fn session(ds: &Dataset) -> Result<SessionContext> {
+    session_with(ds, &SessionLimits::default()).await
+}
+
+/// [`session`] with `limits`' memory pool.
+pub async fn session_with(ds: &Dataset, limits: &SessionLimits) -> Result<SessionContext> {
     let config = SessionConfig::new().with_information_schema(true);
-    let ctx = SessionContext::new_with_config(config);
+    let runtime = RuntimeEnvBuilder::new()
+        .with_memory_limit(limits.memory_limit, 1.0)
+        .build_arc()
+        .map_err(|e| Error::Usage(format!("SQL: {e}")))?;
+    let ctx = SessionContext::new_with_config_rt(config, runtime);
     register_functions(&ctx, ds);
     for entry in std::fs::read_dir(ds.root()).map_err(|e| Error::file(ds.root(), e))? {
         let dir = entry.map_err(|e| Error::file(ds.root(), e))?.path();
         let Some(name) = dir.file_name().and_then(|n| n.to_str()).map(str::to_string) else { continue };
         // `report/` holds the report's outputs (many schemas), not a table.
-        if name == dataset::tables::REPORT
-            || !dir.is_dir()
-            || dataset::table_files(&dir).map(|f| f.is_empty()).unwrap_or(true)
-        {
+        if name == dataset::tables::REPORT || !dir.is_dir() {
             continue;
         }
-        register_table(&ctx, &name, &dir).await?;
+        let files = ds.visible_files(&name).map_err(|e| Error::file(&dir, e))?;
+        if !files.is_empty() {
+            register_table(&ctx, &name, &files).await?;
+        }
     }
     Ok(ctx)
+}
+
+/// What `limits` lets a statement do: reads always; DDL, DML and `COPY` only with `allow_writes`.
+pub fn statement_options(limits: &SessionLimits) -> SQLOptions {
+    SQLOptions::new().with_allow_ddl(limits.allow_writes).with_allow_dml(limits.allow_writes)
 }
 
 /// The section gedisim's functions are documented under (`documentation()`, `information_schema`).
@@ -64,9 +113,65 @@ pub fn register_functions(ctx: &SessionContext, ds: &Dataset) {
     ctx.register_udtf("gedi_simulate", Arc::new(simulate::GediSimulate::new(ds.clone())));
 }
 
-/// Register the Parquet folder `dir` as table `name`.
-pub async fn register_table(ctx: &SessionContext, name: &str, dir: &Path) -> Result<()> {
+/// Register the Parquet `files` (of one table folder) as the read-only table `name`.
+pub async fn register_table(ctx: &SessionContext, name: &str, files: &[PathBuf]) -> Result<()> {
+    let dir = files.first().and_then(|f| f.parent()).unwrap_or(Path::new("."));
+    let table_err = |e: datafusion::error::DataFusionError| Error::table(dir, e);
+    let urls = files
+        .iter()
+        .map(|f| {
+            let path = f.canonicalize().map_err(|e| Error::file(f, e))?;
+            ListingTableUrl::parse(path.to_string_lossy()).map_err(table_err)
+        })
+        .collect::<Result<Vec<_>>>()?;
     let options = ListingOptions::new(Arc::new(ParquetFormat::default())).with_file_extension(".parquet");
-    let url = format!("{}/", dir.canonicalize().map_err(|e| Error::file(dir, e))?.display());
-    ctx.register_listing_table(name, &url, options, None, None).await.map_err(|e| Error::table(dir, e))
+    let config = ListingTableConfig::new_with_multi_paths(urls)
+        .with_listing_options(options)
+        .infer_schema(&ctx.state())
+        .await
+        .map_err(table_err)?;
+    let table = ListingTable::try_new(config).map_err(table_err)?;
+    ctx.register_table(name, Arc::new(ReadOnly(Arc::new(table)))).map_err(table_err)?;
+    Ok(())
+}
+
+/// A dataset table as SQL sees it: every read of the inner table, no `INSERT` (a dataset's tables
+/// change only through gedisim's commands, which keep their schemas and registries).
+#[derive(Debug)]
+struct ReadOnly(Arc<dyn TableProvider>);
+
+#[async_trait::async_trait]
+impl TableProvider for ReadOnly {
+    fn schema(&self) -> SchemaRef {
+        self.0.schema()
+    }
+    fn table_type(&self) -> TableType {
+        self.0.table_type()
+    }
+    async fn scan(
+        &self,
+        state: &dyn Session,
+        projection: Option<&Vec<usize>>,
+        filters: &[Expr],
+        limit: Option<usize>,
+    ) -> datafusion::error::Result<Arc<dyn ExecutionPlan>> {
+        self.0.scan(state, projection, filters, limit).await
+    }
+    fn supports_filters_pushdown(
+        &self,
+        filters: &[&Expr],
+    ) -> datafusion::error::Result<Vec<TableProviderFilterPushDown>> {
+        self.0.supports_filters_pushdown(filters)
+    }
+    fn statistics(&self) -> Option<Statistics> {
+        self.0.statistics()
+    }
+    async fn insert_into(
+        &self,
+        _state: &dyn Session,
+        _input: Arc<dyn ExecutionPlan>,
+        _op: InsertOp,
+    ) -> datafusion::error::Result<Arc<dyn ExecutionPlan>> {
+        datafusion::common::plan_err!("dataset tables are read-only: they change only through gedisim's commands")
+    }
 }

@@ -13,7 +13,7 @@ use datafusion::logical_expr::{
 use super::DOC_SECTION;
 
 use crate::dataset::{list_f32, list_f32_builder};
-use crate::kernels::waveform::rh::rh_profile;
+use crate::kernels::waveform::rh::{has_energy, rh_profile};
 
 /// The `gedi_rh` scalar function.
 #[derive(Debug, PartialEq, Eq, Hash)]
@@ -43,7 +43,8 @@ static DOCUMENTATION: LazyLock<Documentation> = LazyLock::new(|| {
     Documentation::builder(
         DOC_SECTION,
         "RH0…RH100 (m above `ground`) of a simulated waveform, as gediMetric computes them: a list of 101 values, \
-            element k+1 is RH k.",
+            element k+1 is RH k. Null when the waveform holds a NaN, infinite or null sample or no positive energy \
+            (empty, all zero or negative), or when z0 or ground is not finite.",
         "gedi_rh(wave, z0, dz, ground)",
     )
     .with_argument("wave", "waveform (list<float32>); sample k at elevation z0 − k·dz")
@@ -85,11 +86,18 @@ impl ScalarUDFImpl for GediRh {
                 out.append_null();
                 continue;
             }
-            if !(dz.value(i) > 0.0) {
+            if !(dz.value(i) > 0.0 && dz.value(i).is_finite()) {
                 return exec_err!("gedi_rh: dz must be > 0, got {}", dz.value(i));
             }
             let w = waves.value(i);
             let w = w.as_primitive::<Float32Type>();
+            // RH is undefined without a finite waveform holding positive energy and finite
+            // elevations: null, not the reference's all-zero profile.
+            let finite = [z0.value(i), ground.value(i)].iter().all(|v| v.is_finite());
+            if !finite || w.null_count() > 0 || !has_energy(w.values()) {
+                out.append_null();
+                continue;
+            }
             let rh = rh_profile(w.values(), z0.value(i), dz.value(i), ground.value(i));
             out.append_value(rh.iter().map(|&v| Some(v)));
         }

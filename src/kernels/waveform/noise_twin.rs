@@ -32,6 +32,13 @@ pub enum TwinError {
     /// A sample, parameter or pulse value is NaN or infinite, or a size parameter is not positive.
     #[error("invalid value for {0}")]
     Invalid(&'static str),
+    /// The record (or the simulated signal on the GEDI grid) would be longer than
+    /// [`MAX_RECORD_SAMPLES`].
+    #[error("record longer than {samples} samples")]
+    TooLong {
+        /// The limit.
+        samples: usize,
+    },
     /// The simulated waveform carries no positive energy, so it cannot be scaled to a gain.
     #[error("simulated waveform has no positive energy")]
     NoEnergy,
@@ -164,6 +171,9 @@ impl ShotTwin {
         }
         if !self.noise_shape.is_valid() {
             return Err(TwinError::Invalid("noise_shape"));
+        }
+        if self.sample_count > MAX_RECORD_SAMPLES {
+            return Err(TwinError::TooLong { samples: MAX_RECORD_SAMPLES });
         }
         let mut signal = resample_to_gedi(sim, input_bin_m);
         if let Some(pulse) = &self.tx_pulse {
@@ -317,8 +327,15 @@ fn check_signal(sim: &[f64], input_bin_m: f64) -> Result<(), TwinError> {
     if !input_bin_m.is_finite() || input_bin_m <= 0.0 {
         return Err(TwinError::Invalid("input_bin_m"));
     }
+    if (sim.len() - 1) as f64 * input_bin_m / GEDI_BIN_M >= MAX_RECORD_SAMPLES as f64 {
+        return Err(TwinError::TooLong { samples: MAX_RECORD_SAMPLES });
+    }
     Ok(())
 }
+
+/// The longest record a twin makes: 100,000 GEDI samples (15 km of range; a real record has
+/// about 1,000). Longer requests are errors, not allocations.
+pub const MAX_RECORD_SAMPLES: usize = 100_000;
 
 /// A record of `len` zeros with `signal[k]` at record sample `start + k`; samples falling outside
 /// the record must be zero.

@@ -15,6 +15,13 @@ pub fn rh_profile(wave: &[f32], z0: f64, dz: f64, ground: f64) -> [f32; N_RH] {
     rh_profile_by(wave, |k| z0 - k as f64 * dz, ground)
 }
 
+/// Whether RH is defined for `wave`: every sample finite and the total energy positive. (The
+/// reference gives all zeros otherwise, which [`rh_profile`] keeps for parity; callers that can
+/// say "undefined" — the `gedi_rh` SQL function — return null instead.)
+pub fn has_energy(wave: &[f32]) -> bool {
+    wave.iter().all(|w| w.is_finite()) && wave.iter().sum::<f32>() > 0.0
+}
+
 /// RH0 … RH100 of a waveform stored top to bottom whose sample k has the elevation `label(k)`.
 ///
 /// Follows `findRH`: energies are summed in f32 from the bottom bin upwards; only bins with

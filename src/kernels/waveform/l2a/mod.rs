@@ -45,6 +45,10 @@ pub enum NoResult {
     /// The waveform has no samples.
     #[error("empty waveform")]
     EmptyWaveform,
+    /// The shot has L1B columns but no usable waveform: ingest nulls an empty record or one with
+    /// NaN or infinite samples (and warns).
+    #[error("no usable waveform (empty, or NaN or infinite samples at ingest)")]
+    NoWaveform,
     /// A sample is NaN or infinite.
     #[error("non-finite sample at index {index}")]
     NonFiniteSample {
