@@ -15,11 +15,30 @@ fn main() -> ExitCode {
         std::env::set_var("HDF5_USE_FILE_LOCKING", "FALSE");
     }
     let cli = cli::Cli::parse();
-    match cli::run(cli) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
+    // Errors are one line. A panic is a bug: it too ends with one line (and exit code 101), and a
+    // panic the library catches (the LAZ decoder's, see io::las) prints nothing. RUST_BACKTRACE
+    // keeps Rust's own report for debugging.
+    let quiet_panics = std::env::var_os("RUST_BACKTRACE").is_none();
+    if quiet_panics {
+        std::panic::set_hook(Box::new(|info| {
+            *LAST_PANIC.lock().unwrap_or_else(|e| e.into_inner()) = Some(info.to_string());
+        }));
+    }
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| cli::run(cli))) {
+        Ok(Ok(())) => ExitCode::SUCCESS,
+        Ok(Err(e)) => {
             eprintln!("error: {}", gedisim::error::one_line(&e.to_string()));
             ExitCode::FAILURE
         }
+        Err(_) => {
+            let what = LAST_PANIC.lock().unwrap_or_else(|e| e.into_inner()).take().unwrap_or_default();
+            if quiet_panics {
+                eprintln!("error: internal error (a bug; please report it): {}", gedisim::error::one_line(&what));
+            }
+            ExitCode::from(101)
+        }
     }
 }
+
+/// The message of the last panic, for the one-line report of an uncaught one.
+static LAST_PANIC: std::sync::Mutex<Option<String>> = std::sync::Mutex::new(None);

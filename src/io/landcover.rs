@@ -316,13 +316,17 @@ impl LandCoverRaster {
     /// `on_points(n)` reports progress.
     pub fn sample_xy(&mut self, points: &[(f64, f64)], on_points: &dyn Fn(u64)) -> Result<Vec<PixelSample>> {
         let mut out = vec![PixelSample::Outside; points.len()];
-        // (index in points, chunk, offset within the chunk)
-        let mut located: Vec<(usize, u32, usize)> = Vec::new();
+        // (index in points, chunk, (row, column) within the chunk)
+        let mut located: Vec<(usize, u32, (usize, usize))> = Vec::new();
         for (i, &(x, y)) in points.iter().enumerate() {
             if let Some((c, r)) = self.transform.pixel_of(x, y, self.width, self.height) {
-                let chunk = (r / self.chunk.1) * self.chunks_across + c / self.chunk.0;
-                let offset = ((r % self.chunk.1) * self.chunk.0 + c % self.chunk.0) as usize;
-                located.push((i, chunk, offset));
+                // In u64: a strip spans the image width, so width × rows per strip can pass u32.
+                let (c, r, (cw, ch)) = (u64::from(c), u64::from(r), (u64::from(self.chunk.0), u64::from(self.chunk.1)));
+                let chunk = (r / ch) * u64::from(self.chunks_across) + c / cw;
+                let chunk = u32::try_from(chunk).map_err(|_| {
+                    Error::field(&self.path, "TileOffsets", format!("strip/tile {chunk} is beyond TIFF's 32-bit index"))
+                })?;
+                located.push((i, chunk, ((r % ch) as usize, (c % cw) as usize)));
             }
         }
         on_points((points.len() - located.len()) as u64);
@@ -330,10 +334,10 @@ impl LandCoverRaster {
         let mut k = 0;
         while k < located.len() {
             let chunk = located[k].1;
-            let values = self.read_chunk(chunk)?;
+            let (values, data_w) = self.read_chunk(chunk)?;
             let end = k + located[k..].iter().take_while(|l| l.1 == chunk).count();
-            for &(i, _, offset) in &located[k..end] {
-                let v = values.get(offset).copied();
+            for &(i, _, (row, col)) in &located[k..end] {
+                let v = (col < data_w).then(|| values.get(row * data_w + col).copied()).flatten();
                 let code = v.filter(|v| Some(*v) != self.nodata).and_then(|v| match self.codes {
                     Codes::Grid => u16::try_from(v).ok().and_then(classes::clc_code_of_grid_code),
                     Codes::Clc => u16::try_from(v).ok().filter(|c| classes::CLC_CODES.contains(c)),
@@ -346,12 +350,12 @@ impl LandCoverRaster {
         Ok(out)
     }
 
-    /// The samples of one strip or tile, row-major with the chunk's full width as stride.
-    fn read_chunk(&mut self, chunk: u32) -> Result<Vec<i64>> {
+    /// The samples of one strip or tile, row-major, and the width of its data: the decoder returns a
+    /// chunk's data only (the last strip is shorter; edge tiles are narrower and shorter than the
+    /// nominal tile).
+    fn read_chunk(&mut self, chunk: u32) -> Result<(Vec<i64>, usize)> {
         let data =
             self.decoder.read_chunk(chunk).map_err(|e| Error::field(&self.path, format!("strip/tile {chunk}"), e))?;
-        // The decoder returns a chunk's data only: the last strip is shorter, and edge tiles are
-        // narrower and shorter than the nominal tile.
         let values: Vec<i64> = match data {
             DecodingResult::U8(v) => v.into_iter().map(i64::from).collect(),
             DecodingResult::U16(v) => v.into_iter().map(i64::from).collect(),
@@ -362,17 +366,7 @@ impl LandCoverRaster {
             _ => return Err(Error::field(&self.path, "SampleFormat", "expected integer class codes")),
         };
         let (data_w, _) = self.decoder.chunk_data_dimensions(chunk);
-        if data_w == self.chunk.0 {
-            return Ok(values);
-        }
-        // A chunk narrower than the nominal width (the last strip column cannot be: strips span the
-        // image width): re-pad rows so that offsets computed with the nominal width stay valid.
-        let mut padded = vec![i64::MIN; (self.chunk.0 * self.chunk.1) as usize];
-        for (r, row) in values.chunks(data_w as usize).enumerate() {
-            let start = r * self.chunk.0 as usize;
-            padded[start..start + row.len()].copy_from_slice(row);
-        }
-        Ok(padded)
+        Ok((values, data_w as usize))
     }
 }
 

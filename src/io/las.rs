@@ -83,19 +83,25 @@ impl TileReader {
         }
         let want = n.min(left);
         let path = self.header.path.clone();
-        let got = self.reader.fill_points(want, &mut self.buffer).map_err(|e| {
+        let cannot_decode = |why: String| {
             Error::field(
                 &path,
                 "points",
                 format!(
-                    "cannot decode points {}..{} (header number_of_points = {}): {}",
+                    "cannot decode points {}..{} (header number_of_points = {}): {why}",
                     self.read_so_far,
                     self.read_so_far + want,
                     self.header.number_of_points,
-                    crate::error::one_line(&e.to_string())
                 ),
             )
-        })?;
+        };
+        // A corrupt LAZ stream can only be found by decoding it, and the `laz` decoder indexes its
+        // contexts with decoded values (an out-of-range index panics): the one place a
+        // third-party panic is caught instead of prevented, and reported as corrupt data.
+        let (reader, buffer) = (&mut self.reader, &mut self.buffer);
+        let got = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| reader.fill_points(want, buffer)))
+            .map_err(|_| cannot_decode("corrupt compressed data (the LAZ decoder failed)".into()))?
+            .map_err(|e| cannot_decode(crate::error::one_line(&e.to_string())))?;
         if got < want {
             return Err(Error::field(
                 &path,
@@ -177,7 +183,8 @@ fn check_layout(path: &Path, file: &mut std::fs::File) -> Result<()> {
             return Err(bad("VLR", format!("VLR {i} ends at byte {at}, past the point data at {data_start}")));
         }
         let user = String::from_utf8_lossy(&vlr.user_id);
-        if user.trim_end_matches('\0') == "laszip encoded" && vlr.record_id == 22204 {
+        // The first LASzip VLR, as the `las` crate uses.
+        if laszip.is_none() && user.trim_end_matches('\0') == "laszip encoded" && vlr.record_id == 22204 {
             laszip = Some(vlr.data);
         }
     }
@@ -244,6 +251,13 @@ fn check_layout(path: &Path, file: &mut std::fs::File) -> Result<()> {
         Some(data) => {
             let vlr = laz::LazVlr::read_from(data.as_slice())
                 .map_err(|e| bad("laszip VLR", crate::error::one_line(&e.to_string())))?;
+            let item_bytes: u64 = vlr.items().iter().map(|i| u64::from(i.size())).sum();
+            if vlr.items().is_empty() || item_bytes != record {
+                return Err(bad(
+                    "laszip VLR",
+                    format!("its items describe {item_bytes}-byte points, the header {record}-byte points"),
+                ));
+            }
             file.seek(SeekFrom::Start(data_start)).map_err(io)?;
             let mut offset = [0u8; 8];
             file.read_exact(&mut offset)
@@ -371,7 +385,7 @@ pub fn epsg_from_wkt(wkt: &str) -> Option<u32> {
             b'[' | b'(' => depth += 1,
             b']' | b')' => depth -= 1,
             _ => {
-                if depth == 1 {
+                if depth == 1 && wkt.is_char_boundary(i) {
                     let rest = &wkt[i..];
                     let upper = rest.get(..10).unwrap_or(rest).to_ascii_uppercase();
                     if upper.starts_with("AUTHORITY[") || upper.starts_with("ID[") {
