@@ -103,7 +103,8 @@ pub fn writer(root: &std::path::Path) -> gedisim::Result<gedisim::dataset::Datas
     let (tmp, orphans) = (cleanup.temporaries.len(), cleanup.orphan_points.len());
     if tmp + orphans > 0 {
         eprintln!(
-            "{}: removed what an interrupted writer left: {tmp} temporary file(s), {orphans} als/ file(s) without a tiles/ row",
+            "{}: removed what an interrupted writer left: {tmp} temporary file(s), \
+             {orphans} als/ file(s) without a tiles/ row",
             root.display()
         );
     }

@@ -53,7 +53,7 @@ pub fn sql(a: SqlArgs) -> Result<()> {
         (None, Some(f)) => std::fs::read_to_string(&f).map_err(|e| Error::file(&f, e))?,
         _ => return Err(Error::Usage("give either a SQL statement or -f <file>".into())),
     };
-    let mut limits = gedisim::sql::SessionLimits { allow_writes: a.allow_writes, ..Default::default() };
+    let mut limits = gedisim::ops::sql::SessionLimits { allow_writes: a.allow_writes, ..Default::default() };
     if let Some(bytes) = a.memory_limit {
         limits.memory_limit = bytes;
     }

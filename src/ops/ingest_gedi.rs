@@ -117,8 +117,8 @@ impl BeamReport {
         }
         if let Some(&first) = self.non_finite_waveform.first() {
             out.push(format!(
-                "{}: {}/rxwaveform: {} shot(s) with NaN or infinite samples in rxwaveform or txwaveform (first {first}); \
-                 that waveform kept null",
+                "{}: {}/rxwaveform: {} shot(s) with NaN or infinite samples in rxwaveform or txwaveform \
+                 (first {first}); that waveform kept null",
                 name(&self.l1b_file),
                 self.beam,
                 self.non_finite_waveform.len()

@@ -10,7 +10,7 @@ use datafusion::logical_expr::{DdlStatement, LogicalPlan};
 
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
-use crate::sql::SessionLimits;
+pub use crate::sql::SessionLimits;
 
 /// Run `query` on `dataset`; the result as a text table, or written to `out` (then `None`).
 pub fn sql(dataset: &Path, query: &str, out: Option<&Path>, limits: &SessionLimits) -> Result<Option<String>> {
