@@ -199,6 +199,31 @@ fn a_renamed_granule_is_not_ingested_twice() {
 }
 
 #[test]
+fn one_side_of_a_granule_never_replaces_both() {
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tmp.path().join("ds");
+    let (l1b, l2a) = (data(L1B), data(L2A));
+    let (ok, _, err) = gedisim(&["ingest", "gedi", "--out", s(&ds), "--l1b", s(&l1b), "--l2a", s(&l2a)]);
+    assert!(ok, "{err}");
+    let counts = "select count(rx_waveform) || ' ' || count(rh) from shots";
+    assert_eq!(scalar(&ds, counts), "300 301");
+    // The same L1B again, alone: nothing new, and the L2A columns stay.
+    let (ok, _, err) = gedisim(&["ingest", "gedi", "--out", s(&ds), "--l1b", s(&l1b)]);
+    assert!(ok && err.contains("already ingested"), "{err}");
+    assert_eq!(scalar(&ds, counts), "300 301");
+    // A changed L1B alone (same granule name): once rewrote the granule without its L2A.
+    let dir = tmp.path().join("changed");
+    std::fs::create_dir(&dir).unwrap();
+    let changed = dir.join(l1b.file_name().unwrap());
+    let mut bytes = std::fs::read(&l1b).unwrap();
+    bytes.extend_from_slice(b"changed");
+    std::fs::write(&changed, bytes).unwrap();
+    let (ok, _, err) = gedisim(&["ingest", "gedi", "--out", s(&ds), "--l1b", s(&changed)]);
+    one_line_error(ok, &err, &["give both files"]);
+    assert_eq!(scalar(&ds, counts), "300 301");
+}
+
+#[test]
 fn gedi_rh_is_null_where_rh_is_undefined() {
     let tmp = tempfile::tempdir().unwrap();
     let ds = tmp.path().join("ds");
@@ -358,7 +383,7 @@ fn killed_ingests_leave_nothing_the_next_run_does_not_repair() {
     let (ok, _, err) = ingest_als(&clean, &refs);
     assert!(ok, "{err}");
     let expected = table_digest(&clean);
-    // Kill at several points of a run (seeded, so a failure can be replayed).
+    // Kill at five points of a run: while reading headers, decoding, spilling and writing.
     let delays_ms = [40u64, 150, 300, 600, 900];
     for (i, delay) in delays_ms.iter().enumerate() {
         let ds = tmp.path().join(format!("killed{i}"));

@@ -729,7 +729,28 @@ pub fn ingest_into_dataset(
         .zip(duplicate)
         .map(|((pair, (key, h1, h2)), duplicate)| -> Result<(GranuleOutcome, Vec<BeamReport>)> {
             let record = granules_dir.join(format!("{key}.parquet"));
-            if duplicate || previous_hashes(&record)? == Some((h1.clone(), h2.clone())) {
+            let previous = previous_hashes(&record)?;
+            // A side the granule had and this call lacks would be lost by a rewrite: unchanged
+            // given sides are nothing new; changed ones need both files.
+            let same = |new: &Option<String>, old: &Option<String>| new.is_none() || new == old;
+            if let Some((p1, p2)) = &previous {
+                if (p1.is_some() && h1.is_none()) || (p2.is_some() && h2.is_none()) {
+                    if same(&h1, p1) && same(&h2, p2) {
+                        progress.advance(1);
+                        return Ok((GranuleOutcome::AlreadyIngested { granule: pair.granule.clone() }, Vec::new()));
+                    }
+                    let (given, missing) = if h1.is_none() { ("L2A", "L1B") } else { ("L1B", "L2A") };
+                    let file = pair.l1b.as_ref().or(pair.l2a.as_ref()).expect("a pair has a file");
+                    return Err(Error::file(
+                        file,
+                        format!(
+                            "a changed {given} of granule {key}, which the dataset holds with its {missing}: \
+                             give both files to replace it"
+                        ),
+                    ));
+                }
+            }
+            if duplicate || previous == Some((h1.clone(), h2.clone())) {
                 progress.advance(1);
                 return Ok((GranuleOutcome::AlreadyIngested { granule: pair.granule.clone() }, Vec::new()));
             }
