@@ -683,8 +683,7 @@ pub fn ingest_into_dataset(
     let (pairs, notes) = pair_granules(l1b, l2a)?;
     let shots_dir = dataset.table_dir(tables::SHOTS)?;
     let granules_dir = dataset.table_dir(tables::GRANULES)?;
-    // Content first: a file's content belongs to one granule key, whatever the file is called
-    // (a renamed copy must not double the shots), and one copy per call is written.
+    // Content first: copies of a granule under other names are found before anything is written.
     let hash = |p: &Option<PathBuf>| p.as_deref().map(dataset::content_hash).transpose();
     let keyed = pairs
         .par_iter()
@@ -693,36 +692,7 @@ pub fn ingest_into_dataset(
             Ok((key, hash(&pair.l1b)?, hash(&pair.l2a)?))
         })
         .collect::<Result<Vec<_>>>()?;
-    let mut owner: HashMap<String, String> = HashMap::new(); // content hash → granule key
-    for record in dataset::table_files(&granules_dir).map_err(|e| Error::file(&granules_dir, e))? {
-        let key = record.file_stem().and_then(|s| s.to_str()).unwrap_or_default().to_string();
-        if let Some((h1, h2)) = previous_hashes(&record)? {
-            owner.extend([h1, h2].into_iter().flatten().map(|h| (h, key.clone())));
-        }
-    }
-    let mut duplicate = vec![false; pairs.len()];
-    for (i, ((key, h1, h2), pair)) in keyed.iter().zip(&pairs).enumerate() {
-        let present: Vec<(&String, &PathBuf)> = [(h1, &pair.l1b), (h2, &pair.l2a)]
-            .into_iter()
-            .filter_map(|(h, f)| Some((h.as_ref()?, f.as_ref()?)))
-            .collect();
-        let others: Vec<&String> = present.iter().filter_map(|(h, _)| owner.get(*h)).filter(|o| *o != key).collect();
-        match others.first() {
-            None => owner.extend(present.iter().map(|(h, _)| ((*h).clone(), key.clone()))),
-            // Every file is a copy of the same other granule: nothing new.
-            Some(other) if others.len() == present.len() && others.iter().all(|o| o == other) => duplicate[i] = true,
-            Some(other) => {
-                let file = present.iter().find(|(h, _)| owner.get(*h) == Some(*other)).map(|(_, f)| *f).expect("owned");
-                return Err(Error::file(
-                    file,
-                    format!(
-                        "same content as granule {other} of the dataset, paired here with other files: \
-                         ingest it under its original name to replace that granule"
-                    ),
-                ));
-            }
-        }
-    }
+    let duplicate = copies_of_other_granules(&pairs, &keyed, &granules_dir)?;
     let results = pairs
         .par_iter()
         .zip(keyed)
@@ -786,6 +756,46 @@ pub fn ingest_into_dataset(
         report.beams.extend(beams);
     }
     Ok((outcomes, report))
+}
+
+/// A pair's granule key and the content hashes of its L1B and L2A files.
+type Keyed = (String, Option<String>, Option<String>);
+
+/// Which pairs are copies of granules the dataset (or an earlier pair of the call) already holds
+/// under another key: a file's content belongs to one granule key, whatever the file is called, so
+/// a renamed copy must not double the shots. A copy paired with other files is an error.
+fn copies_of_other_granules(pairs: &[GranulePair], keyed: &[Keyed], granules_dir: &Path) -> Result<Vec<bool>> {
+    let mut owner: HashMap<String, String> = HashMap::new(); // content hash → granule key
+    for record in crate::dataset::table_files(granules_dir).map_err(|e| Error::file(granules_dir, e))? {
+        let key = record.file_stem().and_then(|s| s.to_str()).unwrap_or_default().to_string();
+        if let Some((h1, h2)) = previous_hashes(&record)? {
+            owner.extend([h1, h2].into_iter().flatten().map(|h| (h, key.clone())));
+        }
+    }
+    let mut duplicate = vec![false; pairs.len()];
+    for (i, ((key, h1, h2), pair)) in keyed.iter().zip(pairs).enumerate() {
+        let present: Vec<(&String, &PathBuf)> = [(h1, &pair.l1b), (h2, &pair.l2a)]
+            .into_iter()
+            .filter_map(|(h, f)| Some((h.as_ref()?, f.as_ref()?)))
+            .collect();
+        let others: Vec<&String> = present.iter().filter_map(|(h, _)| owner.get(*h)).filter(|o| *o != key).collect();
+        match others.first() {
+            None => owner.extend(present.iter().map(|(h, _)| ((*h).clone(), key.clone()))),
+            // Every file is a copy of the same other granule: nothing new.
+            Some(other) if others.len() == present.len() && others.iter().all(|o| o == other) => duplicate[i] = true,
+            Some(other) => {
+                let file = present.iter().find(|(h, _)| owner.get(*h) == Some(*other)).map(|(_, f)| *f).expect("owned");
+                return Err(Error::file(
+                    file,
+                    format!(
+                        "same content as granule {other} of the dataset, paired here with other files: \
+                         ingest it under its original name to replace that granule"
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(duplicate)
 }
 
 /// The (L1B, L2A) content hashes recorded by an earlier ingest of a granule (its
