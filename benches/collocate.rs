@@ -41,9 +41,12 @@ fn main() {
         println!("ingested the scene into {} in {:.1} s", als_dataset.display(), t.elapsed().as_secs_f64());
     }
 
-    // A dataset sharing the scene's `als/` table, with the planted granule.
+    // A dataset sharing the scene's `als/` and `tiles/` tables (points are visible with their tile
+    // row), with the planted granule.
     let tmp = tempfile::tempdir().unwrap();
-    std::os::unix::fs::symlink(als_dataset.join("als"), tmp.path().join("als")).unwrap();
+    for table in ["als", "tiles"] {
+        std::os::unix::fs::symlink(als_dataset.join(table), tmp.path().join(table)).unwrap();
+    }
     let ds = Dataset::open(tmp.path()).unwrap();
     let beam = PlantedBeam {
         name: "BEAM0101",

@@ -130,11 +130,14 @@ fn base_dataset() -> &'static Path {
 /// when given).
 fn planted_dataset(geoid_offset: Option<&str>) -> tempfile::TempDir {
     let tmp = tempfile::tempdir().unwrap();
-    let als = tmp.path().join("als");
-    std::fs::create_dir_all(&als).unwrap();
-    for f in std::fs::read_dir(base_dataset().join("als")).unwrap() {
-        let f = f.unwrap().path();
-        std::fs::copy(&f, als.join(f.file_name().unwrap())).unwrap();
+    // A tile's points are visible with its tiles/ row (docs/robustness.md): copy both tables.
+    for table in ["als", "tiles"] {
+        let dir = tmp.path().join(table);
+        std::fs::create_dir_all(&dir).unwrap();
+        for f in std::fs::read_dir(base_dataset().join(table)).unwrap() {
+            let f = f.unwrap().path();
+            std::fs::copy(&f, dir.join(f.file_name().unwrap())).unwrap();
+        }
     }
     let ds = Dataset::open(tmp.path()).unwrap();
     let l1b = tmp.path().join(gedisim::kernels::gedi::v2_file_name("01_B", "2019108080338", 1964, 2, 5337));
