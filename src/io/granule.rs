@@ -295,13 +295,11 @@ fn h5err<'a>(path: &'a Path, what: &str) -> impl Fn(hdf5::Error) -> Error + 'a {
 
 /// Create the file with the root `short_name` and `METADATA/DatasetIdentification` attributes.
 fn create_granule(path: &Path, short_name: &str, meta: &GranuleMeta) -> Result<File> {
-    let file = File::with_options()
-        .with_fcpl(|p| p.obj_track_times(false))
-        .create(path)
-        .map_err(h5err(path, "cannot create HDF5 file"))?;
+    let file = File::create(path).map_err(h5err(path, "cannot create HDF5 file"))?;
     write_str_attr(&file, "short_name", short_name).map_err(h5err(path, "short_name"))?;
-    let ident = new_group(&file, "METADATA")
-        .and_then(|g| new_group(&g, "DatasetIdentification"))
+    let ident = file
+        .create_group("METADATA")
+        .and_then(|g| g.create_group("DatasetIdentification"))
         .map_err(h5err(path, "METADATA/DatasetIdentification"))?;
     let file_name = path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     for (k, v) in [
@@ -324,7 +322,7 @@ pub fn write_str_attr(loc: &Location, name: &str, value: &str) -> hdf5::Result<(
 fn write_beam(path: &Path, file: &File, name: &str, sets: &[ExtraDataset]) -> Result<()> {
     let beam_type = BeamType::from_name(name)
         .ok_or_else(|| Error::field(path, name, "not a GEDI beam name (BEAM0000..BEAM1011)"))?;
-    let group = new_group(file, name).map_err(h5err(path, name))?;
+    let group = file.create_group(name).map_err(h5err(path, name))?;
     write_str_attr(&group, "description", beam_type.description()).map_err(h5err(path, name))?;
     for d in sets {
         let field = format!("{name}/{}", d.path);
@@ -340,8 +338,7 @@ fn write_beam(path: &Path, file: &File, name: &str, sets: &[ExtraDataset]) -> Re
 pub fn write_values(root: &Group, rel: &str, values: &Values, row_len: usize) -> hdf5::Result<()> {
     fn typed<T: H5Type>(parent: &Group, name: &str, data: &[T], row_len: usize) -> hdf5::Result<()> {
         let rows = data.len() / row_len.max(1);
-        // No modification times: the same world gives byte-identical granules (HDF5 2.x stores them).
-        let builder = parent.new_dataset::<T>().obj_track_times(false);
+        let builder = parent.new_dataset::<T>();
         let ds = if row_len == 1 {
             builder.shape(rows).create(name)?
         } else {
@@ -366,17 +363,12 @@ pub fn write_values(root: &Group, rel: &str, values: &Values, row_len: usize) ->
     }
 }
 
-/// A new group without modification times (see `write_values`).
-fn new_group(parent: &Group, name: &str) -> hdf5::Result<Group> {
-    parent.create_group_builder().obj_track_times(false).create(name)
-}
-
 /// The group holding `rel` (created if needed) and the last path component.
 fn parent_group<'a>(root: &Group, rel: &'a str) -> hdf5::Result<(Group, &'a str)> {
     let (dirs, name) = rel.rsplit_once('/').unwrap_or(("", rel));
     let mut g = root.clone();
     for part in dirs.split('/').filter(|p| !p.is_empty()) {
-        g = if g.link_exists(part) { g.group(part)? } else { new_group(&g, part)? };
+        g = if g.link_exists(part) { g.group(part)? } else { g.create_group(part)? };
     }
     Ok((g, name))
 }
