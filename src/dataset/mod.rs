@@ -200,7 +200,10 @@ impl AtomicParquet {
     pub fn create(dest: &Path, schema: SchemaRef, props: WriterProperties) -> Result<Self> {
         let tmp = tmp_path(dest);
         let file = File::create(&tmp).map_err(|e| Error::file(&tmp, format!("cannot create: {e}")))?;
-        let writer = ArrowWriter::try_new(file, schema, Some(props)).map_err(|e| Error::table(dest, e))?;
+        let writer = ArrowWriter::try_new(file, schema, Some(props)).map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            Error::table(dest, e)
+        })?;
         Ok(AtomicParquet { writer: Some(Writer::Buffered(writer)), tmp, dest: dest.to_path_buf() })
     }
 
@@ -250,14 +253,8 @@ impl AtomicParquet {
             Writer::RowGroups(w, _) => w.into_inner(),
         }
         .map_err(|e| Error::table(&self.dest, e))?;
-        let placed = file
-            .sync_all()
-            .map_err(|e| Error::file(&self.tmp, e))
-            .and_then(|_| rename_into_place(&self.tmp, &self.dest));
-        if placed.is_err() {
-            let _ = std::fs::remove_file(&self.tmp);
-        }
-        placed.map(|_| self.dest.clone())
+        place(&self.tmp, &self.dest, file.sync_all().map_err(|e| Error::file(&self.tmp, e)))?;
+        Ok(self.dest.clone())
     }
 }
 
@@ -287,13 +284,17 @@ pub fn write_parquet(
 /// one atomic write of every non-Parquet output: CSV, JSON, figures, HTML).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let tmp = tmp_path(path);
-    let written = std::fs::write(&tmp, bytes)
-        .map_err(|e| Error::file(&tmp, format!("cannot write: {e}")))
-        .and_then(|_| rename_into_place(&tmp, path));
-    if written.is_err() {
-        let _ = std::fs::remove_file(&tmp);
+    place(&tmp, path, std::fs::write(&tmp, bytes).map_err(|e| Error::file(&tmp, format!("cannot write: {e}"))))
+}
+
+/// End a write to the temporary `tmp`: rename it onto `dest` when `written` is `Ok`, remove it
+/// otherwise (and when the rename fails), so that neither a partial file nor a temporary remains.
+fn place(tmp: &Path, dest: &Path, written: Result<()>) -> Result<()> {
+    let placed = written.and_then(|_| rename_into_place(tmp, dest));
+    if placed.is_err() {
+        let _ = std::fs::remove_file(tmp);
     }
-    written
+    placed
 }
 
 /// Rename a complete temporary file onto `dest` (never onto a directory).
@@ -357,13 +358,9 @@ pub fn write_result(out: &Path, batches: &[RecordBatch]) -> Result<()> {
         for b in batches {
             w.write(b).map_err(|e| Error::table(out, e))?;
         }
-        w.into_inner().sync_all().map_err(|e| Error::file(&tmp, e))?;
-        rename_into_place(&tmp, out)
+        w.into_inner().sync_all().map_err(|e| Error::file(&tmp, e))
     })();
-    if written.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    written
+    place(&tmp, out, written)
 }
 
 /// A Parquet row selection of the sorted row indices `rows` of a file of `total` rows

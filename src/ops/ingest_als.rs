@@ -64,44 +64,40 @@ pub fn ingest(
     if files.is_empty() {
         return Err(Error::Usage("no LAS/LAZ file found in the inputs".into()));
     }
-    // Every header is read (and checked) before any point is written; one call brings one CRS.
-    let existing = dataset::dataset_epsg(dataset)?;
-    let mut total = 0;
-    let mut first: Option<(u32, &Path)> = None;
-    for f in &files {
-        let reader = TileReader::open(f)?;
-        let epsg = resolve_epsg(reader.header(), opts, existing)?;
-        match first {
-            Some((e, at)) if e != epsg => {
-                return Err(Error::field(
-                    f,
-                    "CRS",
-                    format!("EPSG:{epsg} differs from EPSG:{e} of {} in the same call", at.display()),
-                ))
-            }
-            Some(_) => {}
-            None => first = Some((epsg, f)),
-        }
-        total += reader.header().number_of_points;
-    }
-    progress.start(Step::IngestAls, total);
+    progress.start(Step::IngestAls, 0);
     let outcomes = ingest_tiles(dataset, &files, opts, progress);
     progress.finish();
     outcomes
 }
 
-/// Ingest `files` into `dataset`, several files in parallel. `progress` advances by the
-/// number of points decoded, for progress display.
+/// Ingest `files` into `dataset`, several files in parallel. Every header is read and checked
+/// first, and one call brings one CRS, that of the dataset if it has one: nothing is written
+/// otherwise. `progress` gets the total points, then advances by the points decoded.
 pub fn ingest_tiles(
     dataset: &Dataset,
     files: &[PathBuf],
     opts: &AlsOptions,
     progress: &dyn Progress,
 ) -> Result<Vec<TileOutcome>> {
+    let existing = dataset::dataset_epsg(dataset)?;
+    let mut headers: Vec<(u32, u64)> = Vec::with_capacity(files.len()); // (EPSG, points) per file
+    for f in files {
+        let reader = TileReader::open(f)?;
+        let epsg = resolve_epsg(reader.header(), opts, existing)?;
+        if let Some(((first, _), at)) = headers.first().zip(files.first()) {
+            if *first != epsg {
+                return Err(Error::field(
+                    f,
+                    "CRS",
+                    format!("EPSG:{epsg} differs from EPSG:{first} of {} in the same call", at.display()),
+                ));
+            }
+        }
+        headers.push((epsg, reader.header().number_of_points));
+    }
+    progress.set_total(headers.iter().map(|h| h.1).sum());
     let als_dir = dataset.table_dir(tables::ALS)?;
     let tiles_dir = dataset.table_dir(tables::TILES)?;
-    // One CRS per dataset: the tiles already there fix it.
-    let existing_epsg = dataset::dataset_epsg(dataset)?;
     // Content hashes first: a file whose content appears earlier in the call is skipped like one
     // ingested before (two copies must not write the same table files at once).
     let hashes = files.par_iter().map(|f| dataset::content_hash(f)).collect::<Result<Vec<_>>>()?;
@@ -113,12 +109,13 @@ pub fn ingest_tiles(
         .par_iter()
         .zip(&hashes)
         .zip(&first_copy)
-        .map(|((f, hash), &first)| {
+        .zip(&headers)
+        .map(|(((f, hash), &first), &(epsg, points))| {
             if !first {
-                progress.advance(TileReader::open(f)?.header().number_of_points);
+                progress.advance(points);
                 return Ok(TileOutcome::AlreadyIngested { tile: tile_name(f) });
             }
-            ingest_tile(f, hash, &als_dir, &tiles_dir, opts, existing_epsg, parallel_decode, progress)
+            ingest_tile(f, hash, &als_dir, &tiles_dir, opts, epsg, parallel_decode, progress)
         })
         .collect()
 }
@@ -230,7 +227,7 @@ fn ingest_tile(
     als_dir: &Path,
     tiles_dir: &Path,
     opts: &AlsOptions,
-    existing_epsg: Option<u32>,
+    epsg: u32,
     parallel_decode: bool,
     progress: &dyn Progress,
 ) -> Result<TileOutcome> {
@@ -242,7 +239,6 @@ fn ingest_tile(
     }
     let mut reader = TileReader::open_with(path, parallel_decode)?;
     let header = reader.header().clone();
-    let epsg = resolve_epsg(&header, opts, existing_epsg)?;
 
     // Pass 1: decode, filter, file by cell, spill runs sorted by cell.
     let spill_path = dataset::tmp_path(&als_dir.join(format!("{key}.spill")));

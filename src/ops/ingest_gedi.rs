@@ -692,14 +692,21 @@ pub fn ingest_into_dataset(
             Ok((key, hash(&pair.l1b)?, hash(&pair.l2a)?))
         })
         .collect::<Result<Vec<_>>>()?;
-    let duplicate = copies_of_other_granules(&pairs, &keyed, &granules_dir)?;
+    // What each granule's record says, read once: (L1B hash, L2A hash) by granule key.
+    let mut recorded = HashMap::new();
+    for record in dataset::table_files(&granules_dir).map_err(|e| Error::file(&granules_dir, e))? {
+        if let Some(hashes) = previous_hashes(&record)? {
+            recorded.insert(record.file_stem().and_then(|s| s.to_str()).unwrap_or_default().to_string(), hashes);
+        }
+    }
+    let duplicate = copies_of_other_granules(&pairs, &keyed, &recorded)?;
     let results = pairs
         .par_iter()
         .zip(keyed)
         .zip(duplicate)
         .map(|((pair, (key, h1, h2)), duplicate)| -> Result<(GranuleOutcome, Vec<BeamReport>)> {
             let record = granules_dir.join(format!("{key}.parquet"));
-            let previous = previous_hashes(&record)?;
+            let previous = recorded.get(&key).cloned();
             // A side the granule had and this call lacks would be lost by a rewrite: unchanged
             // given sides are nothing new; changed ones need both files.
             let same = |new: &Option<String>, old: &Option<String>| new.is_none() || new == old;
@@ -758,20 +765,25 @@ pub fn ingest_into_dataset(
     Ok((outcomes, report))
 }
 
+/// The content hashes of a granule's L1B and L2A files (either may be absent).
+type Hashes = (Option<String>, Option<String>);
+
 /// A pair's granule key and the content hashes of its L1B and L2A files.
 type Keyed = (String, Option<String>, Option<String>);
 
 /// Which pairs are copies of granules the dataset (or an earlier pair of the call) already holds
 /// under another key: a file's content belongs to one granule key, whatever the file is called, so
 /// a renamed copy must not double the shots. A copy paired with other files is an error.
-fn copies_of_other_granules(pairs: &[GranulePair], keyed: &[Keyed], granules_dir: &Path) -> Result<Vec<bool>> {
-    let mut owner: HashMap<String, String> = HashMap::new(); // content hash → granule key
-    for record in crate::dataset::table_files(granules_dir).map_err(|e| Error::file(granules_dir, e))? {
-        let key = record.file_stem().and_then(|s| s.to_str()).unwrap_or_default().to_string();
-        if let Some((h1, h2)) = previous_hashes(&record)? {
-            owner.extend([h1, h2].into_iter().flatten().map(|h| (h, key.clone())));
-        }
-    }
+fn copies_of_other_granules(
+    pairs: &[GranulePair],
+    keyed: &[Keyed],
+    recorded: &HashMap<String, Hashes>,
+) -> Result<Vec<bool>> {
+    // content hash → granule key
+    let mut owner: HashMap<String, String> = recorded
+        .iter()
+        .flat_map(|(key, (h1, h2))| [h1, h2].into_iter().flatten().map(move |h| (h.clone(), key.clone())))
+        .collect();
     let mut duplicate = vec![false; pairs.len()];
     for (i, ((key, h1, h2), pair)) in keyed.iter().zip(pairs).enumerate() {
         let present: Vec<(&String, &PathBuf)> = [(h1, &pair.l1b), (h2, &pair.l2a)]
@@ -800,7 +812,7 @@ fn copies_of_other_granules(pairs: &[GranulePair], keyed: &[Keyed], granules_dir
 
 /// The (L1B, L2A) content hashes recorded by an earlier ingest of a granule (its
 /// `granules/<key>.parquet` record), if any.
-pub fn previous_hashes(record: &Path) -> Result<Option<(Option<String>, Option<String>)>> {
+pub fn previous_hashes(record: &Path) -> Result<Option<Hashes>> {
     if !record.exists() {
         return Ok(None);
     }
