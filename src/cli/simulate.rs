@@ -36,6 +36,11 @@ pub struct SimulateArgs {
     /// Turn off ALS density normalisation.
     #[arg(long)]
     no_norm: bool,
+    /// What the density normalisation counts: last-returns (gediRat: each return divided by the
+    /// last returns of its own 1.5 m cell) or pulses (each pulse counted once at its first
+    /// return, its returns sharing that count: the diagnosis's nominal physics, docs/diagnosis.md).
+    #[arg(long, value_enum, default_value = "last-returns", conflicts_with = "no_norm")]
+    density: DensityArg,
     /// Footprint Gaussian σ (m).
     #[arg(long, default_value_t = 5.5)]
     fsigma: f32,
@@ -77,6 +82,12 @@ impl PulseArgs {
     }
 }
 
+#[derive(Clone, Copy, PartialEq, clap::ValueEnum)]
+pub enum DensityArg {
+    LastReturns,
+    Pulses,
+}
+
 #[derive(Clone, Copy, clap::ValueEnum)]
 pub enum ProfileArg {
     Gedirat,
@@ -84,7 +95,7 @@ pub enum ProfileArg {
 }
 
 pub fn simulate(a: SimulateArgs) -> Result<()> {
-    use gedisim::kernels::sim::Profile;
+    use gedisim::kernels::sim::{DensityCount, Profile};
     use gedisim::ops::simulate::{SimulateOptions, Source};
     // Dataset mode writes sim/ into the dataset: it holds the writer lock while it runs.
     let _writer = a.dataset.as_deref().map(super::reporters::writer).transpose()?;
@@ -100,6 +111,11 @@ pub fn simulate(a: SimulateArgs) -> Result<()> {
             return Err(Error::Usage("give --als, --footprints and --out (direct mode) or --dataset".into()))
         }
     };
+    if matches!(a.profile, ProfileArg::Gedirat) && a.density == DensityArg::Pulses {
+        return Err(Error::Usage(
+            "--density pulses is not gediRat's normalisation: use it with --profile default".into(),
+        ));
+    }
     let opts = SimulateOptions {
         source,
         profile: match a.profile {
@@ -108,6 +124,10 @@ pub fn simulate(a: SimulateArgs) -> Result<()> {
         },
         fsigma: a.fsigma,
         normalise_density: !a.no_norm,
+        density_count: match a.density {
+            DensityArg::LastReturns => DensityCount::LastReturns,
+            DensityArg::Pulses => DensityCount::Pulses,
+        },
         pulse_before: a.pulse_before,
         pulse: a.pulse.model("gaussian", a.psigma),
     };

@@ -11,7 +11,9 @@ use crate::dataset::offsets::AppliedOffset;
 use crate::dataset::sim::{sim_batch, sim_metadata, sim_schema};
 use crate::dataset::{self, tables, AtomicParquet, Dataset};
 use crate::error::{Error, Result};
-use crate::kernels::sim::{self, AlsPoints, Footprint, Profile, PulseModel, PulseTiming, SimConfig, Weighting};
+use crate::kernels::sim::{
+    self, AlsPoints, DensityCount, Footprint, Profile, PulseModel, PulseTiming, SimConfig, Weighting,
+};
 use crate::ops::progress::{Progress, Step};
 
 /// What `gedisim simulate` reads and where it writes.
@@ -34,6 +36,8 @@ pub struct SimulateOptions {
     /// Footprint Gaussian σ (m).
     pub fsigma: f32,
     pub normalise_density: bool,
+    /// What the density normalisation counts (gediRat's last returns, or pulses).
+    pub density_count: DensityCount,
     /// Convolve each return with the pulse while binning instead of after.
     pub pulse_before: bool,
     pub pulse: PulseModel,
@@ -52,6 +56,7 @@ pub fn sim_config(opts: &SimulateOptions) -> Result<SimConfig> {
     let mut cfg = SimConfig::new(opts.profile);
     cfg.fsigma = opts.fsigma;
     cfg.normalise_density = opts.normalise_density;
+    cfg.density_count = opts.density_count;
     if opts.pulse_before {
         cfg.pulse_timing = PulseTiming::BeforeBinning;
     }

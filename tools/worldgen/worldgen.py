@@ -458,15 +458,25 @@ def load_tile(path):
     t.dtm = np.nan_to_num(dtm, nan=0.0)       # cell centres at -half + (i+0.5)*res
     t.h = zd - _dtm_interp(t, u, v)
     # density weights: each pulse carries 1/number_of_returns of its energy; each 2 m cell gets
-    # the same total weight whatever its pulse density (inverse first-return density)
+    # the same total weight whatever its pulse density. A pulse is counted once, in the cell of its
+    # first return, and all its returns share that cell's count: a pulse's returns lie metres apart
+    # on a slanted ALS ray, and dividing each return by the count of its own cell (our first
+    # choice) weighed ground returns up by 4-8 % in the ground/canopy odds (see README, "Density").
     dres = 2.0
     nd = int(math.ceil(t.size / dres)) + 1
     dx_ = np.clip(((u + half) / dres).astype(int), 0, nd - 1)
     dy_ = np.clip(((v + half) / dres).astype(int), 0, nd - 1)
     first = t.fields["return_number"] == 1
-    cnt = np.zeros((nd, nd))
-    np.add.at(cnt, (dx_[first], dy_[first]), 1)
-    ncell = cnt[dx_, dy_]
+    pulse_key = np.rec.fromarrays([t.fields["gps_time"], t.fields["point_source_id"],
+                                   t.fields["scanner_channel"]])
+    _, pid = np.unique(pulse_key, return_inverse=True)
+    pid = pid.ravel()
+    # the pulse's cell: its first return's, or (first return missing) its earliest return's
+    order = np.lexsort((t.fields["return_number"], pid))
+    lead = order[np.r_[0, np.flatnonzero(np.diff(pid[order])) + 1]]   # one per pulse, by pulse id
+    pcell = dx_[lead] * nd + dy_[lead]
+    cnt = np.bincount(pcell, minlength=nd * nd)
+    ncell = cnt[pcell][pid]
     nret = np.maximum(t.fields["number_of_returns"].astype(float), 1.0)
     t.bw = (1.0 / nret) / np.maximum(ncell, 1.0)
     t.first = first

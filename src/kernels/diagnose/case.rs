@@ -4,6 +4,7 @@
 //! the collocated position and, for short segments, at nearby positions).
 
 use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
+use crate::kernels::scenario::effects::NOMINAL_DENSITY;
 use crate::kernels::sim::{self, Profile, SimConfig, Weighting, N_WEIGHTINGS};
 use crate::kernels::waveform::l2a::Noise;
 
@@ -214,8 +215,9 @@ pub fn rh_ok(rh: &[f32]) -> bool {
 pub const PAD_M: f64 = 16.0;
 
 /// The simulator settings of the diagnosis: the study's nominal one (15 ns pulse, σ_f 5.5 m,
-/// default profile) and, for every width of [`FSIGMA_GRID`], the same without pulse (the chain
-/// convolves its own) and without the coverage skip (the nominal run decides coverage).
+/// default profile) and, for every width of [`FSIGMA_GRID`], the nominal chain's: without pulse
+/// (the chain convolves its own), without the coverage skip (the nominal run decides coverage),
+/// density normalised by pulse ([`NOMINAL_DENSITY`]).
 pub fn configs() -> (SimConfig, Vec<SimConfig>) {
     let nominal = SimConfig::new(Profile::Default);
     let variants = FSIGMA_GRID
@@ -224,6 +226,7 @@ pub fn configs() -> (SimConfig, Vec<SimConfig>) {
             fsigma: f as f32,
             pulse: sim::Pulse::dirac(),
             min_covered_fraction: None,
+            density_count: NOMINAL_DENSITY,
             ..nominal.clone()
         })
         .collect();

@@ -10,7 +10,7 @@
 
 use std::fmt;
 
-use crate::kernels::sim::{SimConfig, Weighting};
+use crate::kernels::sim::{DensityCount, SimConfig, Weighting};
 
 /// Footprint σ of the nominal physics (m), gediRat's default.
 pub const NOMINAL_FSIGMA_M: f64 = 5.5;
@@ -23,6 +23,11 @@ pub const NOMINAL_PULSE_SIGMA_M: f64 = 15.0 * 0.2998 / 2.0 / 2.35482;
 /// the footprint; `count` gives a pulse of four returns four times the energy of a single ground
 /// hit (docs/diagnosis.md, "Nominal weighting").
 pub const NOMINAL_WEIGHTING: Weighting = Weighting::Frac;
+/// Density normalisation of the nominal physics: by pulse, each pulse counted once at its first
+/// return and its returns sharing that count, instead of gediRat's per-return count of last
+/// returns, which weighs canopy returns up on slanted ALS rays (docs/diagnosis.md, "Density
+/// normalisation").
+pub const NOMINAL_DENSITY: DensityCount = DensityCount::Pulses;
 /// Lower bound of the band the `occlusion` effect scales (m above ground).
 pub const OCCLUSION_FLOOR_M: f64 = 0.5;
 
@@ -40,12 +45,12 @@ pub struct Physics {
 
 impl Physics {
     /// The nominal ("true" by default) physics: intensity-free [`NOMINAL_WEIGHTING`], ρg/ρv = 1,
-    /// Gaussian pulse of 15 ns FWHM, σ_f 5.5 m, default simulator profile: the `frac` columns of
-    /// `gedisim simulate --profile default`, so a `none` world is a control of the diagnosis's
-    /// nominal chain.
+    /// Gaussian pulse of 15 ns FWHM, σ_f 5.5 m, default simulator profile with the density
+    /// normalised by pulse ([`NOMINAL_DENSITY`]), so a `none` world is a control of the
+    /// diagnosis's nominal chain.
     pub fn nominal() -> Physics {
         Physics {
-            sim: SimConfig::new(crate::kernels::sim::Profile::Default),
+            sim: SimConfig { density_count: NOMINAL_DENSITY, ..SimConfig::new(crate::kernels::sim::Profile::Default) },
             weighting: NOMINAL_WEIGHTING,
             rho_ground_over_veg: 1.0,
         }

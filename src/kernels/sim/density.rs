@@ -99,3 +99,54 @@ pub struct Densities {
 pub fn is_last_return(points: &AlsPoints, i: usize) -> bool {
     points.return_number[i] == points.number_of_returns[i]
 }
+
+/// How the density normalisation counts pulses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DensityCount {
+    /// gediRat (§1.5): every return is divided by the last returns of its own 1.5 m cell.
+    LastReturns,
+    /// Every pulse is counted once, at its first return, and all its returns are divided by the
+    /// count of that cell. On a slanted ALS ray a pulse's returns lie metres apart, so dividing
+    /// each return by its own cell's count weighs the canopy (counting last returns) or the ground
+    /// (counting first returns) up (docs/diagnosis.md, "Density normalisation"). Pulses are found
+    /// by GPS time and flight line; a return whose pulse is not found (no GPS time, first return
+    /// outside the box, two pulses with one key) uses its own cell.
+    Pulses,
+}
+
+/// Identity of a return's pulse: GPS time and flight line (`None` without a GPS time).
+pub fn pulse_key(points: &AlsPoints, i: usize) -> Option<(u64, u16)> {
+    let t = points.gps_time[i];
+    (t.is_finite() && t != 0.0).then(|| (t.to_bits(), points.point_source_id[i]))
+}
+
+/// Pulse count of the cell of each pulse's first return, looked up by [`pulse_key`].
+#[derive(Debug, Default)]
+pub struct PulseCells {
+    /// (key, first return position) while counting; then (key, count), sorted, unique keys.
+    firsts: Vec<((u64, u16), (f64, f64))>,
+    counts: Vec<((u64, u16), u32)>,
+}
+
+impl PulseCells {
+    /// Records the first return of a pulse.
+    pub fn add_first(&mut self, key: (u64, u16), x: f64, y: f64) {
+        self.firsts.push((key, (x, y)));
+    }
+
+    /// Looks up every recorded pulse's cell in `grid` (counting done); keys seen twice are dropped.
+    pub fn resolve(&mut self, grid: &DensityGrid) {
+        self.firsts.sort_unstable_by_key(|a| a.0);
+        let f = &self.firsts;
+        self.counts = (0..f.len())
+            .filter(|&k| (k == 0 || f[k - 1].0 != f[k].0) && (k + 1 == f.len() || f[k + 1].0 != f[k].0))
+            .map(|k| (f[k].0, grid.pulses_at(f[k].1 .0, f[k].1 .1)))
+            .collect();
+        self.firsts = Vec::new();
+    }
+
+    /// Pulse count of the cell of this pulse's first return, if the pulse was recorded once.
+    pub fn count(&self, key: (u64, u16)) -> Option<u32> {
+        self.counts.binary_search_by(|e| e.0.cmp(&key)).ok().map(|k| self.counts[k].1)
+    }
+}

@@ -24,7 +24,8 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::kernels::waveform::rh::{rh_profile_by, N_RH};
 
-use density::{is_last_return, Densities, DensityGrid};
+pub use density::DensityCount;
+use density::{is_last_return, pulse_key, Densities, DensityGrid, PulseCells};
 use footprint::{footprint_weight, gauss_sep, I_THRESH};
 use index::{CellGrid, Octree};
 use wave::{Contribution, Sample, WaveSet};
@@ -135,8 +136,11 @@ pub struct SimConfig {
     pub res: f64,
     /// Transmitted pulse.
     pub pulse: Pulse,
-    /// Divide each return's weight by the pulses in its 1.5 m cell (§1.5).
+    /// Divide each return's weight by the pulses in its cell (§1.5).
     pub normalise_density: bool,
+    /// What that normalisation counts: gediRat's last returns per return, or pulses (the
+    /// nominal physics of the diagnosis, `scenario::effects::NOMINAL_DENSITY`).
+    pub density_count: DensityCount,
     /// Convolution after or before binning.
     pub pulse_timing: PulseTiming,
     /// Remove below-ground and above-canopy outliers (§1.9; gediRat does it with `-ground`).
@@ -158,6 +162,7 @@ impl SimConfig {
             res,
             pulse: Pulse::from_fwhm_ns(15.0, res as f32).expect("the default pulse is valid"),
             normalise_density: true,
+            density_count: DensityCount::LastReturns,
             pulse_timing: PulseTiming::AfterBinning,
             clean_outliers: true,
             min_covered_fraction: match profile {
@@ -344,6 +349,8 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
     // Pass 1 (gediIO determineALScoverage): pulses on the 1.5 m grid and densities within 2σ,
     // over the candidates inside the footprint box.
     let mut grid = DensityGrid::new(x0, y0, half, q.shifted_density_grid);
+    let by_pulse = cfg.density_count == DensityCount::Pulses;
+    let mut pulse_cells = PulseCells::default();
     let dense_rad_sq = ((cfg.fsigma * cfg.fsigma) as f64 * 4.0) as f32;
     let (mut n_dense, mut n_dense_last) = (0f32, 0f32);
     let (mut z_lo, mut z_hi) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -357,7 +364,14 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
         }
         if x >= x0 - half && x <= x0 + half && y >= y0 - half && y <= y0 + half {
             let last = is_last_return(p, i);
-            if last {
+            if by_pulse {
+                if p.return_number[i] == 1 {
+                    grid.add_pulse(x, y);
+                    if let Some(key) = pulse_key(p, i) {
+                        pulse_cells.add_first(key, x, y);
+                    }
+                }
+            } else if last {
                 grid.add_pulse(x, y);
             }
             let (dx, dy) = (x - x0, y - y0);
@@ -369,6 +383,9 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
     }
     if n_dense == 0.0 {
         grid.clear();
+    }
+    if by_pulse {
+        pulse_cells.resolve(&grid);
     }
     let area = (std::f64::consts::PI * dense_rad_sq as f64) as f32;
     let densities = Densities { point: n_dense / area, beam: n_dense_last / area };
@@ -395,7 +412,9 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
             continue;
         }
         if cfg.normalise_density {
-            let n = grid.pulses_at(p.x[i], p.y[i]);
+            let own = || grid.pulses_at(p.x[i], p.y[i]);
+            let n =
+                if by_pulse { pulse_key(p, i).and_then(|k| pulse_cells.count(k)).unwrap_or_else(own) } else { own() };
             if n > 0 {
                 r /= n as f32;
             }
@@ -665,6 +684,76 @@ mod tests {
         let near: Vec<u32> = (0..p.len() as u32).filter(|&i| (p.x[i as usize] - 25.0).abs() < 20.0).collect();
         let subset = simulate(&p.permuted(&near), &[fp("a", 25.0, 31.0)], &cfg).unwrap();
         assert_eq!(alone, subset);
+    }
+
+    /// Ground share of the `frac` waveform of one footprint at (30, 30).
+    fn ground_share(p: &AlsPoints, density_count: DensityCount) -> f64 {
+        let cfg = SimConfig { density_count, ..SimConfig::new(Profile::Default) };
+        let out = simulate(p, &[fp("a", 30.0, 30.0)], &cfg).unwrap();
+        let w = out[0].as_ref().unwrap().get(Weighting::Frac);
+        w.ground.iter().map(|&v| f64::from(v)).sum::<f64>() / w.wave.iter().map(|&v| f64::from(v)).sum::<f64>()
+    }
+
+    /// Pulses slanted 7° along y over a 15 m canopy on a 4 m checkerboard: a pulse meeting the
+    /// canopy returns there first, 1.84 m further in y than its ground return. `striped`: scan
+    /// lines 4× denser in every other 3 m band of y; otherwise uniform. Each pulse has its own
+    /// GPS time unless `no_gps_time`.
+    fn slanted_scene(striped: bool, no_gps_time: bool) -> AlsPoints {
+        let mut p = AlsPoints::with_capacity(200_000);
+        let mut pulse = 0.0;
+        let mut push = |x: f64, y: f64, z: f64, rn: u8, nr: u8, class: u8| {
+            if rn == 1 {
+                pulse += 1.0;
+            }
+            p.x.push(x);
+            p.y.push(y);
+            p.z.push(z);
+            p.intensity.push(100);
+            p.return_number.push(rn);
+            p.number_of_returns.push(nr);
+            p.classification.push(class);
+            p.scan_angle_deg.push(7.0);
+            p.gps_time.push(if no_gps_time { f64::NAN } else { pulse });
+            p.point_source_id.push(1);
+        };
+        let shift = 15.0 * 7f64.to_radians().tan();
+        let canopy = |x: f64, y: f64| ((x / 4.0).floor() + (y / 4.0).floor()) as i64 % 2 == 0;
+        let mut y = 0.0;
+        while y < 60.0 {
+            for i in 0..300 {
+                let x = i as f64 * 0.2;
+                if canopy(x, y + shift) {
+                    push(x, y + shift, 115.0, 1, 2, 5);
+                    push(x, y, 100.0, 2, 2, 2);
+                } else {
+                    push(x, y, 100.0, 1, 1, 2);
+                }
+            }
+            let dense = (y / 3.0).floor() as i64 % 2 == 0;
+            y += if !striped {
+                0.16
+            } else if dense {
+                0.1
+            } else {
+                0.4
+            };
+        }
+        p
+    }
+
+    #[test]
+    fn counting_pulses_removes_the_slant_bias() {
+        let truth = ground_share(&slanted_scene(false, false), DensityCount::LastReturns);
+        let striped = slanted_scene(true, false);
+        let per_return = ground_share(&striped, DensityCount::LastReturns);
+        let per_pulse = ground_share(&striped, DensityCount::Pulses);
+        // gediRat divides a canopy return by the pulses of the band it is shifted into, not of
+        // its own pulse's band: canopy weighed up. Counting pulses gives all returns one count.
+        assert!(per_return < truth - 0.03, "per return: {per_return} vs {truth}");
+        assert!((per_pulse - truth).abs() < 0.01, "per pulse: {per_pulse} vs {truth}");
+        // Without GPS times no pulse is found: each return uses its own cell (first returns).
+        let no_gps = ground_share(&slanted_scene(true, true), DensityCount::Pulses);
+        assert!((no_gps - per_pulse).abs() > 0.03, "{no_gps} vs {per_pulse}");
     }
 
     #[test]
