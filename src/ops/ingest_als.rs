@@ -84,14 +84,12 @@ pub fn ingest_tiles(
     for f in files {
         let reader = TileReader::open(f)?;
         let epsg = resolve_epsg(reader.header(), opts, existing)?;
-        if let Some(((first, _), at)) = headers.first().zip(files.first()) {
-            if *first != epsg {
-                return Err(Error::field(
-                    f,
-                    "CRS",
-                    format!("EPSG:{epsg} differs from EPSG:{first} of {} in the same call", at.display()),
-                ));
-            }
+        if let Some(&(first, _)) = headers.first().filter(|&&(first, _)| first != epsg) {
+            return Err(Error::field(
+                f,
+                "CRS",
+                format!("EPSG:{epsg} differs from EPSG:{first} of {} in the same call", files[0].display()),
+            ));
         }
         headers.push((epsg, reader.header().number_of_points));
     }

@@ -120,33 +120,37 @@ pub fn pulse_key(points: &AlsPoints, i: usize) -> Option<(u64, u16)> {
     (t.is_finite() && t != 0.0).then(|| (t.to_bits(), points.point_source_id[i]))
 }
 
-/// Pulse count of the cell of each pulse's first return, looked up by [`pulse_key`].
+/// The first returns of the pulses in a footprint's box, by [`pulse_key`], while the grid counts.
 #[derive(Debug, Default)]
-pub struct PulseCells {
-    /// (key, first return position) while counting; then (key, count), sorted, unique keys.
-    firsts: Vec<((u64, u16), (f64, f64))>,
-    counts: Vec<((u64, u16), u32)>,
+pub struct PulseFirsts(Vec<((u64, u16), (f64, f64))>);
+
+impl PulseFirsts {
+    /// Records the first return of a pulse.
+    pub fn add(&mut self, key: (u64, u16), x: f64, y: f64) {
+        self.0.push((key, (x, y)));
+    }
+
+    /// The pulse count of each recorded pulse's cell in `grid` (counting done); a key recorded
+    /// twice (two pulses, one key) is dropped.
+    pub fn counts(mut self, grid: &DensityGrid) -> PulseCounts {
+        self.0.sort_unstable_by_key(|a| a.0);
+        let f = &self.0;
+        PulseCounts(
+            (0..f.len())
+                .filter(|&k| (k == 0 || f[k - 1].0 != f[k].0) && (k + 1 == f.len() || f[k + 1].0 != f[k].0))
+                .map(|k| (f[k].0, grid.pulses_at(f[k].1 .0, f[k].1 .1)))
+                .collect(),
+        )
+    }
 }
 
-impl PulseCells {
-    /// Records the first return of a pulse.
-    pub fn add_first(&mut self, key: (u64, u16), x: f64, y: f64) {
-        self.firsts.push((key, (x, y)));
-    }
+/// Pulse count of the cell of each pulse's first return, sorted by [`pulse_key`].
+#[derive(Debug, Default)]
+pub struct PulseCounts(Vec<((u64, u16), u32)>);
 
-    /// Looks up every recorded pulse's cell in `grid` (counting done); keys seen twice are dropped.
-    pub fn resolve(&mut self, grid: &DensityGrid) {
-        self.firsts.sort_unstable_by_key(|a| a.0);
-        let f = &self.firsts;
-        self.counts = (0..f.len())
-            .filter(|&k| (k == 0 || f[k - 1].0 != f[k].0) && (k + 1 == f.len() || f[k + 1].0 != f[k].0))
-            .map(|k| (f[k].0, grid.pulses_at(f[k].1 .0, f[k].1 .1)))
-            .collect();
-        self.firsts = Vec::new();
-    }
-
+impl PulseCounts {
     /// Pulse count of the cell of this pulse's first return, if the pulse was recorded once.
-    pub fn count(&self, key: (u64, u16)) -> Option<u32> {
-        self.counts.binary_search_by(|e| e.0.cmp(&key)).ok().map(|k| self.counts[k].1)
+    pub fn get(&self, key: (u64, u16)) -> Option<u32> {
+        self.0.binary_search_by(|e| e.0.cmp(&key)).ok().map(|k| self.0[k].1)
     }
 }

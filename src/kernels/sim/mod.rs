@@ -25,7 +25,7 @@ use crate::error::{Error, Result};
 use crate::kernels::waveform::rh::{rh_profile_by, N_RH};
 
 pub use density::DensityCount;
-use density::{is_last_return, pulse_key, Densities, DensityGrid, PulseCells};
+use density::{is_last_return, pulse_key, Densities, DensityGrid, PulseFirsts};
 use footprint::{footprint_weight, gauss_sep, I_THRESH};
 use index::{CellGrid, Octree};
 use wave::{Contribution, Sample, WaveSet};
@@ -349,8 +349,8 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
     // Pass 1 (gediIO determineALScoverage): pulses on the 1.5 m grid and densities within 2σ,
     // over the candidates inside the footprint box.
     let mut grid = DensityGrid::new(x0, y0, half, q.shifted_density_grid);
-    let by_pulse = cfg.density_count == DensityCount::Pulses;
-    let mut pulse_cells = PulseCells::default();
+    let by_pulse = cfg.normalise_density && cfg.density_count == DensityCount::Pulses;
+    let mut firsts = PulseFirsts::default();
     let dense_rad_sq = ((cfg.fsigma * cfg.fsigma) as f64 * 4.0) as f32;
     let (mut n_dense, mut n_dense_last) = (0f32, 0f32);
     let (mut z_lo, mut z_hi) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -368,7 +368,7 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
                 if p.return_number[i] == 1 {
                     grid.add_pulse(x, y);
                     if let Some(key) = pulse_key(p, i) {
-                        pulse_cells.add_first(key, x, y);
+                        firsts.add(key, x, y);
                     }
                 }
             } else if last {
@@ -384,9 +384,7 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
     if n_dense == 0.0 {
         grid.clear();
     }
-    if by_pulse {
-        pulse_cells.resolve(&grid);
-    }
+    let pulse_counts = if by_pulse { firsts.counts(&grid) } else { Default::default() };
     let area = (std::f64::consts::PI * dense_rad_sq as f64) as f32;
     let densities = Densities { point: n_dense / area, beam: n_dense_last / area };
     let covered_fraction = grid.covered_fraction(x0, y0, 10f64.min(cfg.fsigma as f64));
@@ -414,7 +412,7 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
         if cfg.normalise_density {
             let own = || grid.pulses_at(p.x[i], p.y[i]);
             let n =
-                if by_pulse { pulse_key(p, i).and_then(|k| pulse_cells.count(k)).unwrap_or_else(own) } else { own() };
+                if by_pulse { pulse_key(p, i).and_then(|k| pulse_counts.get(k)).unwrap_or_else(own) } else { own() };
             if n > 0 {
                 r /= n as f32;
             }
@@ -599,21 +597,27 @@ pub fn tap_offsets(pulse: &Pulse, cfg: &SimConfig) -> Vec<i64> {
 mod tests {
     use super::*;
 
+    /// Appends one return (intensity 100, flight line 1): position, (return number, number of
+    /// returns, class), scan angle and GPS time.
+    fn push_return(p: &mut AlsPoints, (x, y, z): (f64, f64, f64), (rn, nr, class): (u8, u8, u8), scan: f32, gps: f64) {
+        p.x.push(x);
+        p.y.push(y);
+        p.z.push(z);
+        p.intensity.push(100);
+        p.return_number.push(rn);
+        p.number_of_returns.push(nr);
+        p.classification.push(class);
+        p.scan_angle_deg.push(scan);
+        p.gps_time.push(gps);
+        p.point_source_id.push(1);
+    }
+
     /// A flat ground at z = 100 m with 25 single-return pulses per m² over [0, 60]², and a 10 m
     /// high canopy return above every fourth pulse (those pulses then have two returns).
     fn synthetic_plot() -> AlsPoints {
         let mut p = AlsPoints::with_capacity(100_000);
         let mut push = |x: f64, y: f64, z: f64, rn: u8, nr: u8, class: u8| {
-            p.x.push(x);
-            p.y.push(y);
-            p.z.push(z);
-            p.intensity.push(100);
-            p.return_number.push(rn);
-            p.number_of_returns.push(nr);
-            p.classification.push(class);
-            p.scan_angle_deg.push(-3.0);
-            p.gps_time.push(0.0);
-            p.point_source_id.push(1);
+            push_return(&mut p, (x, y, z), (rn, nr, class), -3.0, 0.0)
         };
         for i in 0..300 {
             for j in 0..300 {
@@ -705,16 +709,7 @@ mod tests {
             if rn == 1 {
                 pulse += 1.0;
             }
-            p.x.push(x);
-            p.y.push(y);
-            p.z.push(z);
-            p.intensity.push(100);
-            p.return_number.push(rn);
-            p.number_of_returns.push(nr);
-            p.classification.push(class);
-            p.scan_angle_deg.push(7.0);
-            p.gps_time.push(if no_gps_time { f64::NAN } else { pulse });
-            p.point_source_id.push(1);
+            push_return(&mut p, (x, y, z), (rn, nr, class), 7.0, if no_gps_time { f64::NAN } else { pulse });
         };
         let shift = 15.0 * 7f64.to_radians().tan();
         let canopy = |x: f64, y: f64| ((x / 4.0).floor() + (y / 4.0).floor()) as i64 % 2 == 0;
