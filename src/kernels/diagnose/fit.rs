@@ -2,7 +2,7 @@
 //! calibration set: closed forms where the effect has one (datum, ground detection, noise); for
 //! the effects that reshape the waveform (weighting, pulse, footprint, canopy_change, occlusion)
 //! a coarse grid refined by golden-section search minimising the waveform-level gap
-//! ([`profile::chi2`]), which sees the shape of the waveform that RH percentiles blur.
+//! ([`profile::ProfileSums::chi2_against`]), which sees the shape of the waveform that RH percentiles blur.
 
 use rayon::prelude::*;
 
@@ -185,7 +185,9 @@ fn mean_square_move(cases: &[&ShotCase], from: &Model, to: &Model) -> Option<f64
 
 /// Fit the effect `name` on top of `base` (positions as `base` places them) to `cases`.
 fn fit_placed(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
-    let obj = |e: Effect| profile::chi2(cases, &base.with(e));
+    // Every parameter value weighed against the base model's between-shot variance.
+    let reference = profile::sums(cases, base);
+    let obj = |e: Effect| profile::sums(cases, &base.with(e)).chi2_against(&reference);
     match name {
         "datum" => {
             // The collocation's vertical offsets come from whole waveforms, so a GEDI ground

@@ -130,19 +130,31 @@ impl ProfileSums {
         self.sdd.iter_mut().zip(&o.sdd).for_each(|(a, b)| *a += b);
     }
 
-    /// χ² of the mean difference, Σ mean² / (var / n) over the bins of groups with ≥ 3 shots;
-    /// bins whose difference never varies (no energy on either side) count nothing. Its
-    /// expectation is about the number of bins used when the model is right.
+    /// χ² of the mean difference, Σ mean² / (var / n) over the bins of groups with ≥ 3 shots,
+    /// against its own between-shot variance ([`ProfileSums::chi2_against`]).
     pub fn chi2(&self) -> f64 {
+        self.chi2_against(self)
+    }
+
+    /// χ² of this set's mean difference against the between-shot variance of `reference` (the
+    /// same shots under a reference model): Σ mean² / (var_ref / n) over the bins of groups with
+    /// ≥ 3 shots; bins whose reference difference never varies (no energy on either side) count
+    /// nothing. Its expectation is about the number of bins used when the model is right.
+    ///
+    /// Hypotheses are compared against one fixed variance: against its own, a model that fits
+    /// every shot worse widens the scatter of d and so lowers its χ² (docs/diagnosis.md, "The
+    /// waveform misfit is weighed by one variance").
+    pub fn chi2_against(&self, reference: &ProfileSums) -> f64 {
         let mut chi2 = 0.0;
         for g in 0..PROFILE_GROUPS {
-            let n = self.n[g];
-            if n < 3.0 {
+            let (n, nr) = (self.n[g], reference.n[g]);
+            if n < 3.0 || nr < 3.0 {
                 continue;
             }
             for i in g * PROFILE_BINS..(g + 1) * PROFILE_BINS {
                 let mean = self.sd[i] / n;
-                let var = (self.sdd[i] / n - mean * mean).max(0.0) * n / (n - 1.0);
+                let mean_ref = reference.sd[i] / nr;
+                let var = (reference.sdd[i] / nr - mean_ref * mean_ref).max(0.0) * nr / (nr - 1.0);
                 if var > 1e-18 {
                     chi2 += mean * mean / (var / n);
                 }
@@ -152,13 +164,13 @@ impl ProfileSums {
     }
 }
 
-/// The profile χ² of `model` on `cases` (in parallel).
-pub fn chi2(cases: &[&ShotCase], model: &Model) -> f64 {
+/// The profile sums of `model` on `cases` (in parallel).
+pub fn sums(cases: &[&ShotCase], model: &Model) -> ProfileSums {
     use rayon::prelude::*;
     let profiles: Vec<Option<ShotProfile>> = cases.par_iter().map(|c| shot_profile(c, model)).collect();
     let mut s = ProfileSums::default();
     profiles.iter().flatten().for_each(|p| s.add(p));
-    s.chi2()
+    s
 }
 
 #[cfg(test)]
@@ -192,5 +204,27 @@ mod tests {
         merged.merge(&off);
         assert_eq!(merged.chi2(), off.chi2());
         assert!(off.chi2() > 100.0, "{}", off.chi2());
+    }
+
+    #[test]
+    fn scatter_does_not_lower_chi2_against_a_fixed_variance() {
+        // The same mean misfit (0.01 at one bin), once with tight and once with wide scatter.
+        let set = |spread: f32| {
+            let mut s = ProfileSums::default();
+            for i in 0..20 {
+                let sign = if i % 2 == 0 { 1.0 } else { -1.0 };
+                s.add(&ShotProfile {
+                    group: 0,
+                    diff: (0..PROFILE_BINS).map(|k| if k == 20 { 0.01 + sign * spread } else { 0.0 }).collect(),
+                });
+            }
+            s
+        };
+        let (tight, wide) = (set(5e-4), set(5e-3));
+        // Against its own variance the scattered model looks 100 times better…
+        assert!(wide.chi2() < 0.02 * tight.chi2(), "{} vs {}", wide.chi2(), tight.chi2());
+        // …against the reference's it is what it is: the same mean misfit.
+        let (a, b) = (wide.chi2_against(&tight), tight.chi2());
+        assert!((a - b).abs() < 1e-6 * b, "{a} vs {b}");
     }
 }

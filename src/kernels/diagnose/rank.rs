@@ -137,7 +137,8 @@ pub struct Comparison {
     pub gain_ci95: [f64; 2],
     /// 1 − after/before of the raw `mean_abs_bias` (noise floor included).
     pub shrink_mean_abs_bias: f64,
-    /// Waveform-level gap (`profile::ProfileSums::chi2`) before and after.
+    /// Waveform-level gap before and after, both against the between-shot variance before
+    /// (`profile::ProfileSums::chi2_against`).
     pub profile_chi2: [f64; 2],
     /// For an effect judged on spread (`geolocation`): the excess MSD over the noise-twin floor,
     /// from which `shrink`, `ci95` and `gain_ci95` then come.
@@ -220,7 +221,8 @@ pub fn compare(folds: &Folds, before: &[ShotGap], after: &[ShotGap], seed_label:
             gains.push(bb.systematic - aa.systematic);
         }
     }
-    let profile_chi2 = [profile_sums(before).chi2(), profile_sums(after).chi2()];
+    let profile_before = profile_sums(before);
+    let profile_chi2 = [profile_before.chi2(), profile_sums(after).chi2_against(&profile_before)];
     Comparison {
         before: b,
         after: a,
