@@ -185,9 +185,12 @@ fn mean_square_move(cases: &[&ShotCase], from: &Model, to: &Model) -> Option<f64
 
 /// Fit the effect `name` on top of `base` (positions as `base` places them) to `cases`.
 fn fit_placed(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
-    // Every parameter value weighed against the base model's between-shot variance.
-    let reference = profile::sums(cases, base);
-    let obj = |e: Effect| profile::sums(cases, &base.with(e)).chi2_against(&reference);
+    // Every parameter value weighed against the base model's between-shot variance (computed
+    // once, and only for the effects fitted on the waveforms).
+    let reference = std::cell::OnceCell::new();
+    let obj = |e: Effect| {
+        profile::sums(cases, &base.with(e)).chi2_against(reference.get_or_init(|| profile::sums(cases, base)))
+    };
     match name {
         "datum" => {
             // The collocation's vertical offsets come from whole waveforms, so a GEDI ground

@@ -164,13 +164,19 @@ impl ProfileSums {
     }
 }
 
+impl<'a> FromIterator<&'a ShotProfile> for ProfileSums {
+    fn from_iter<I: IntoIterator<Item = &'a ShotProfile>>(profiles: I) -> ProfileSums {
+        let mut s = ProfileSums::default();
+        profiles.into_iter().for_each(|p| s.add(p));
+        s
+    }
+}
+
 /// The profile sums of `model` on `cases` (in parallel).
 pub fn sums(cases: &[&ShotCase], model: &Model) -> ProfileSums {
     use rayon::prelude::*;
-    let profiles: Vec<Option<ShotProfile>> = cases.par_iter().map(|c| shot_profile(c, model)).collect();
-    let mut s = ProfileSums::default();
-    profiles.iter().flatten().for_each(|p| s.add(p));
-    s
+    let profiles: Vec<ShotProfile> = cases.par_iter().filter_map(|c| shot_profile(c, model)).collect();
+    profiles.iter().collect()
 }
 
 #[cfg(test)]

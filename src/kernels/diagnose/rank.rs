@@ -119,9 +119,7 @@ fn sum_of(t: &[GapSums], pick: &[usize]) -> GapSums {
 
 /// The waveform-level sums of a set of shot gaps.
 fn profile_sums(gaps: &[ShotGap]) -> ProfileSums {
-    let mut s = ProfileSums::default();
-    gaps.iter().filter_map(|g| g.profile.as_ref()).for_each(|p| s.add(p));
-    s
+    gaps.iter().filter_map(|g| g.profile.as_ref()).collect()
 }
 
 /// Held-out comparison of two gaps on the same shots.
