@@ -282,16 +282,25 @@ fn compare_spread(folds: &Folds, state: &State, models: &[Model; 2], after: &[Sh
     Comparison { shrink, ci95: interval(shrinks), gain_ci95: interval(gains), spread: Some(spread), ..base }
 }
 
-/// Order trials: those that explain first; within each group those that can be named (fit inside
-/// its range, not equivalent to a simpler effect) first; then by held-out score
-/// ([`Comparison::score`]), best first.
+/// Order trials: credible and nameable first (fit inside its range, not equivalent to a simpler
+/// effect), then credible, then nameable; within each group by held-out score
+/// ([`Comparison::score`]), best first. Whether the gap is explained at all is decided apart
+/// ([`explained`]): once it is, the best-scoring credible candidate is named, even when its own
+/// gain interval is too wide to clear [`MIN_GAIN_M`] alone.
 fn order(trials: &mut [Trial]) {
-    trials.sort_by(|a, b| {
-        b.explains()
-            .cmp(&a.explains())
-            .then(b.nameable().cmp(&a.nameable()))
-            .then(b.held_out.score().total_cmp(&a.held_out.score()))
-    });
+    let tier = |t: &Trial| match (t.credible(), t.nameable()) {
+        (true, true) => 0,
+        (true, false) => 1,
+        (false, true) => 2,
+        (false, false) => 3,
+    };
+    trials.sort_by(|a, b| tier(a).cmp(&tier(b)).then(b.held_out.score().total_cmp(&a.held_out.score())));
+}
+
+/// Some trial explains the gap ([`Trial::explains`]); the first of trials ordered by [`order`] is
+/// then credible and is the one named.
+fn explained(trials: &[Trial]) -> bool {
+    trials.iter().any(Trial::explains)
 }
 
 /// 95 % bootstrap interval (over tracks, paired) of shrink(a) − shrink(b), both against `before`.
@@ -308,16 +317,19 @@ fn shrink_difference_ci(folds: &Folds, before: &[ShotGap], a: &[ShotGap], b: &[S
     interval(d)
 }
 
-/// The effects that explain as well as the first within noise: nameable, explaining, judged on
-/// the systematic gap like it, and the paired interval of their shrink difference with the first
+/// The effects that explain as well as the first within noise: nameable, credible, judged on the
+/// systematic gap like it, and the paired interval of their shrink difference with the first
 /// contains 0.
 fn near_ties(folds: &Folds, before: &[ShotGap], trials: &[Trial]) -> Vec<String> {
-    let Some(first) = trials.first().filter(|t| t.explains() && t.held_out.spread.is_none()) else {
+    if !explained(trials) {
+        return Vec::new();
+    }
+    let Some(first) = trials.first().filter(|t| t.held_out.spread.is_none()) else {
         return Vec::new();
     };
     trials[1..]
         .iter()
-        .filter(|t| t.explains() && t.nameable() && t.held_out.spread.is_none())
+        .filter(|t| t.credible() && t.nameable() && t.held_out.spread.is_none())
         .filter(|t| {
             let ci = shrink_difference_ci(folds, before, &first.gaps, &t.gaps);
             ci[0] <= 0.0 && ci[1] >= 0.0
@@ -348,16 +360,20 @@ pub struct Trial {
 }
 
 impl Trial {
-    /// The intervals admit a real gain: shrink ≥ [`MIN_SHRINK_LOWER`] and gain ≥ [`MIN_GAIN_M`]
-    /// at their lower ends.
-    /// An effect judged on spread (`geolocation`) must also be resolved: its per-shot offsets,
-    /// fitted on each calibration fold, at least [`MIN_SHOT_SIGMA_M`].
-    pub fn explains(&self) -> bool {
+    /// A candidate the intervals support: shrink ≥ [`MIN_SHRINK_LOWER`] and a gain above 0 at
+    /// their lower ends. An effect judged on spread (`geolocation`) must also be resolved: its
+    /// per-shot offsets, fitted on each calibration fold, at least [`MIN_SHOT_SIGMA_M`].
+    pub fn credible(&self) -> bool {
         let resolved = self.held_out.spread.is_none()
             || self.fold_effects.iter().all(
                 |e| matches!(e, Some(Effect::Geolocation { shot_sigma_m, .. }) if *shot_sigma_m >= MIN_SHOT_SIGMA_M),
             );
-        resolved && self.held_out.ci95[0] >= MIN_SHRINK_LOWER && self.held_out.gain_ci95[0] >= MIN_GAIN_M
+        resolved && self.held_out.ci95[0] >= MIN_SHRINK_LOWER && self.held_out.gain_ci95[0] > 0.0
+    }
+
+    /// The intervals admit a real gain: credible, and a gain ≥ [`MIN_GAIN_M`] at the lower end.
+    pub fn explains(&self) -> bool {
+        self.credible() && self.held_out.gain_ci95[0] >= MIN_GAIN_M
     }
 
     /// The fitted parameter on a bound of its range ([`super::fit::at_bound`]), if any.
@@ -439,7 +455,7 @@ pub fn rank(folds: &Folds, names: &[&str], on_step: &dyn Fn(&str)) -> Ranking {
         })
         .collect();
     order(&mut effects);
-    let unexplained = !effects.first().is_some_and(Trial::explains);
+    let unexplained = !explained(&effects);
     let ambiguous_with = near_ties(folds, &nominal.gaps, &effects);
     let mut ladder: Vec<Trial> = Vec::new();
     if !unexplained {
@@ -457,13 +473,12 @@ pub fn rank(folds: &Folds, names: &[&str], on_step: &dyn Fn(&str)) -> Ranking {
                 })
                 .collect();
             order(&mut step);
-            match step.into_iter().next() {
-                Some(t) if t.explains() => {
-                    state = advance(&state, &t);
-                    ladder.push(t);
-                }
-                _ => break,
+            if !explained(&step) {
+                break;
             }
+            let t = step.swap_remove(0);
+            state = advance(&state, &t);
+            ladder.push(t);
         }
     }
     Ranking { effects, ladder, unexplained, ambiguous_with, nominal_gaps: nominal.gaps }
@@ -506,6 +521,40 @@ mod tests {
         assert_eq!(c([1000.0, 1000.0]).profile_shrink(), None);
         assert_eq!(c([1000.0, 1000.0]).score(), 0.6);
         assert!((c([1000.0, 800.0]).score() - 0.4).abs() < 1e-12);
+    }
+
+    fn trial(effect: Effect, shrink: f64, ci95: [f64; 2], gain_ci95: [f64; 2]) -> Trial {
+        let held_out = Comparison {
+            before: GapMetrics::default(),
+            after: GapMetrics::default(),
+            shrink,
+            ci95,
+            gain_ci95,
+            shrink_mean_abs_bias: shrink,
+            profile_chi2: [1000.0, 1000.0],
+            spread: None,
+        };
+        Trial { effect, fold_effects: [None, None], held_out, gaps: Vec::new() }
+    }
+
+    #[test]
+    fn the_best_credible_candidate_is_named_once_the_gap_is_explained() {
+        // The occlusion world of the independent generator (docs/diagnosis.md, "Naming"):
+        // occlusion fits best but its gain interval starts below MIN_GAIN_M; a weaker
+        // canopy change clears it.
+        let occlusion = || trial(Effect::Occlusion { height_m: 5.2, gain: 0.3 }, 0.73, [0.13, 0.78], [0.007, 0.097]);
+        let canopy = trial(Effect::CanopyChange { height_m: 6.5, fraction: 0.1 }, 0.3, [0.15, 0.4], [0.03, 0.05]);
+        let noise = trial(Effect::Noise { noise_sigma_factor: 1.2 }, 0.9, [0.05, 0.95], [-0.01, 0.2]);
+        let mut trials = vec![noise.clone(), canopy.clone(), occlusion()];
+        order(&mut trials);
+        assert!(explained(&trials));
+        let names: Vec<&str> = trials.iter().map(|t| t.effect.name()).collect();
+        assert_eq!(names, ["occlusion", "canopy_change", "noise"]);
+        // Without an effect that clears both bars, nothing is named.
+        let mut trials = vec![noise, occlusion()];
+        order(&mut trials);
+        assert!(!explained(&trials));
+        assert_eq!(trials[0].effect.name(), "occlusion");
     }
 
     #[test]
