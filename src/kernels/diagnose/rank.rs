@@ -1,7 +1,7 @@
 //! Which effect: every effect fitted on calibration tracks and scored on held-out tracks (two-fold
 //! cross-fitting, split by track, never by shot), with bootstrap confidence intervals over tracks;
-//! a greedy ladder for combined causes; `unexplained` when even the best effect's interval
-//! admits no real gain.
+//! a greedy ladder for combined causes; `unexplained` when no effect's interval
+//! admits a real gain.
 //!
 //! The sim-to-real gap is observed twice: in the RH metrics and in the waveforms themselves
 //! ([`super::profile`]). Effects that reshape the waveform can move the RH percentiles alike —
