@@ -131,6 +131,7 @@ def main():
             if r.returncode != 0:
                 print(f"{w.name}: diagnose failed: {r.stderr.strip().splitlines()[-1:]}", file=sys.stderr)
                 continue
+            (w / "diag" / "summary.txt").write_text(r.stdout)  # the summary as a scientist reads it
             print(f"{w.name}: diagnosed in {time.time() - t0:.0f} s", file=sys.stderr)
         row = score(w, truth, json.loads(diag.read_text()))
         rows.append(row)
