@@ -288,12 +288,7 @@ fn compare_spread(folds: &Folds, state: &State, models: &[Model; 2], after: &[Sh
 /// ([`explained`]): once it is, the best-scoring credible candidate is named, even when its own
 /// gain interval is too wide to clear [`MIN_GAIN_M`] alone.
 fn order(trials: &mut [Trial]) {
-    let tier = |t: &Trial| match (t.credible(), t.nameable()) {
-        (true, true) => 0,
-        (true, false) => 1,
-        (false, true) => 2,
-        (false, false) => 3,
-    };
+    let tier = |t: &Trial| (!t.credible(), !t.nameable());
     trials.sort_by(|a, b| tier(a).cmp(&tier(b)).then(b.held_out.score().total_cmp(&a.held_out.score())));
 }
 
@@ -321,10 +316,7 @@ fn shrink_difference_ci(folds: &Folds, before: &[ShotGap], a: &[ShotGap], b: &[S
 /// systematic gap like it, and the paired interval of their shrink difference with the first
 /// contains 0.
 fn near_ties(folds: &Folds, before: &[ShotGap], trials: &[Trial]) -> Vec<String> {
-    if !explained(trials) {
-        return Vec::new();
-    }
-    let Some(first) = trials.first().filter(|t| t.held_out.spread.is_none()) else {
+    let Some(first) = trials.first().filter(|t| explained(trials) && t.held_out.spread.is_none()) else {
         return Vec::new();
     };
     trials[1..]
@@ -539,13 +531,13 @@ mod tests {
 
     #[test]
     fn the_best_credible_candidate_is_named_once_the_gap_is_explained() {
-        // The occlusion world of the independent generator (docs/diagnosis.md, "Naming"):
+        // The occlusion world of the independent generator (docs/diagnosis.md, "Ranking"):
         // occlusion fits best but its gain interval starts below MIN_GAIN_M; a weaker
         // canopy change clears it.
         let occlusion = || trial(Effect::Occlusion { height_m: 5.2, gain: 0.3 }, 0.73, [0.13, 0.78], [0.007, 0.097]);
         let canopy = trial(Effect::CanopyChange { height_m: 6.5, fraction: 0.1 }, 0.3, [0.15, 0.4], [0.03, 0.05]);
         let noise = trial(Effect::Noise { noise_sigma_factor: 1.2 }, 0.9, [0.05, 0.95], [-0.01, 0.2]);
-        let mut trials = vec![noise.clone(), canopy.clone(), occlusion()];
+        let mut trials = vec![noise.clone(), canopy, occlusion()];
         order(&mut trials);
         assert!(explained(&trials));
         let names: Vec<&str> = trials.iter().map(|t| t.effect.name()).collect();
