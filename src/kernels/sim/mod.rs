@@ -25,7 +25,7 @@ use crate::error::{Error, Result};
 use crate::kernels::waveform::rh::{rh_profile_by, N_RH};
 
 pub use density::DensityCount;
-use density::{is_last_return, pulse_key, Densities, DensityGrid, PulseFirsts};
+use density::{is_last_return, Densities, DensityGrid, PulseIndex, Square};
 use footprint::{footprint_weight, gauss_sep, I_THRESH};
 use index::{CellGrid, Octree};
 use wave::{Contribution, Sample, WaveSet};
@@ -287,16 +287,19 @@ pub fn simulate(
     let half = (max_sep * max_sep).sqrt();
     let sim: fn(&Job) -> Outcome =
         if cfg.quirks.f32_sums { simulate_footprint::<f32> } else { simulate_footprint::<f64> };
-    let run = |fp: &Footprint, pts: &AlsPoints, cand: Vec<u32>| {
+    let by_pulse = cfg.normalise_density && cfg.density_count == DensityCount::Pulses;
+    let run = |fp: &Footprint, pts: &AlsPoints, pulses: &PulseIndex, cand: Vec<u32>| {
         if !(fp.x.is_finite() && fp.y.is_finite()) {
             return Err(SkipReason::NoPoints);
         }
-        sim(&Job { points: pts, candidates: &cand, footprint: fp, cfg, half })
+        sim(&Job { points: pts, pulses: by_pulse.then_some(pulses), candidates: &cand, footprint: fp, cfg, half })
     };
+    let pulses_of = |pts: &AlsPoints| if by_pulse { PulseIndex::build(pts, half) } else { PulseIndex::default() };
     Ok(if cfg.quirks.batch_grid {
         let centres: Vec<(f64, f64)> =
             footprints.iter().map(|f| (f.x, f.y)).filter(|c| c.0.is_finite() && c.1.is_finite()).collect();
         let octree = Octree::build(points, &centres, max_sep);
+        let pulses = pulses_of(points);
         footprints
             .par_iter()
             .map(|fp| {
@@ -304,18 +307,19 @@ pub fn simulate(
                 if let Some(o) = &octree {
                     o.candidates(fp.x, fp.y, half, &mut cand);
                 }
-                run(fp, points, cand)
+                run(fp, points, &pulses, cand)
             })
             .collect()
     } else {
         let grid = CellGrid::build(points, INDEX_CELL);
         let sorted = points.permuted(grid.order());
+        let pulses = pulses_of(&sorted);
         footprints
             .par_iter()
             .map(|fp| {
                 let mut cand = Vec::new();
                 grid.candidates(fp.x, fp.y, half, &mut cand);
-                run(fp, &sorted, cand)
+                run(fp, &sorted, &pulses, cand)
             })
             .collect()
     })
@@ -327,6 +331,8 @@ type Outcome = std::result::Result<SimulatedFootprint, SkipReason>;
 /// Inputs of one footprint's simulation.
 struct Job<'a> {
     points: &'a AlsPoints,
+    /// The points' pulses when the density normalisation counts pulses.
+    pulses: Option<&'a PulseIndex>,
     candidates: &'a [u32],
     footprint: &'a Footprint,
     cfg: &'a SimConfig,
@@ -339,7 +345,7 @@ const WAVE_BUFFER: f64 = 35.0;
 
 /// Simulates one footprint, accumulating in `T` (f32 for the reference, f64 otherwise).
 fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
-    let Job { points: p, candidates, footprint: fp, cfg, half } = *job;
+    let Job { points: p, pulses, candidates, footprint: fp, cfg, half } = *job;
     let q = cfg.quirks;
     let (x0, y0) = (fp.x, fp.y);
     if candidates.is_empty() {
@@ -349,8 +355,7 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
     // Pass 1 (gediIO determineALScoverage): pulses on the 1.5 m grid and densities within 2σ,
     // over the candidates inside the footprint box.
     let mut grid = DensityGrid::new(x0, y0, half, q.shifted_density_grid);
-    let by_pulse = cfg.normalise_density && cfg.density_count == DensityCount::Pulses;
-    let mut firsts = PulseFirsts::default();
+    let square = Square { x0, y0, half };
     let dense_rad_sq = ((cfg.fsigma * cfg.fsigma) as f64 * 4.0) as f32;
     let (mut n_dense, mut n_dense_last) = (0f32, 0f32);
     let (mut z_lo, mut z_hi) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -362,14 +367,11 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
             z_lo = z_lo.min(p.z[i]);
             z_hi = z_hi.max(p.z[i]);
         }
-        if x >= x0 - half && x <= x0 + half && y >= y0 - half && y <= y0 + half {
+        if square.contains(x, y) {
             let last = is_last_return(p, i);
-            if by_pulse {
+            if pulses.is_some() {
                 if p.return_number[i] == 1 {
                     grid.add_pulse(x, y);
-                    if let Some(key) = pulse_key(p, i) {
-                        firsts.add(key, x, y);
-                    }
                 }
             } else if last {
                 grid.add_pulse(x, y);
@@ -384,7 +386,6 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
     if n_dense == 0.0 {
         grid.clear();
     }
-    let pulse_counts = if by_pulse { firsts.counts(&grid) } else { Default::default() };
     let area = (std::f64::consts::PI * dense_rad_sq as f64) as f32;
     let densities = Densities { point: n_dense / area, beam: n_dense_last / area };
     let covered_fraction = grid.covered_fraction(x0, y0, 10f64.min(cfg.fsigma as f64));
@@ -410,9 +411,10 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
             continue;
         }
         if cfg.normalise_density {
-            let own = || grid.pulses_at(p.x[i], p.y[i]);
-            let n =
-                if by_pulse { pulse_key(p, i).and_then(|k| pulse_counts.get(k)).unwrap_or_else(own) } else { own() };
+            // The cell of the return's pulse (its one first return in the box), else its own.
+            let own = (p.x[i], p.y[i]);
+            let (x, y) = pulses.and_then(|ps| ps.first_return(i, own, square)).unwrap_or(own);
+            let n = grid.pulses_at(x, y);
             if n > 0 {
                 r /= n as f32;
             }
