@@ -221,7 +221,17 @@ fn in_square(sorted: &[(f64, f64)], square: Square) -> impl Iterator<Item = &(f6
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kernels::scenario::rng::Stream;
+    use rand_chacha::rand_core::{RngCore, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// Uniform in [0, 1).
+    struct Stream(ChaCha8Rng);
+
+    impl Stream {
+        fn uniform(&mut self) -> f64 {
+            (self.0.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
 
     /// Points of `pulses` pulses of 1–3 returns, the returns of a pulse up to 4 m apart; each
     /// pulse copied (same key) 0–2 more times, some copies 5 m away, some 150 m; some returns without
@@ -270,7 +280,7 @@ mod tests {
 
     #[test]
     fn a_returns_first_return_is_the_only_one_of_its_key_in_the_box() {
-        let mut rng = Stream::new(5, &["pulse-index"]);
+        let mut rng = Stream(ChaCha8Rng::seed_from_u64(5));
         let p = mosaic(400, &mut rng);
         let half = 12.0;
         let index = PulseIndex::build(&p, half);
