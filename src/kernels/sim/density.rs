@@ -132,15 +132,22 @@ impl Square {
     }
 }
 
+/// The first returns of one pulse key found in a square.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Found {
+    None,
+    One((f64, f64)),
+    Several,
+}
+
 /// Every point's pulse (by [`pulse_key`]) and the first returns of each pulse, over one point set:
 /// built once per simulation so that a footprint finds a return's first return without sorting.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct PulseIndex {
-    /// Per point: the position of the only first return of its pulse within twice `half` (plus a
-    /// metre against rounding) of it
-    /// (infinite when there is none; NaN when there are several, or the point has no pulse key).
-    /// Read in the points' order, it answers the common case without another lookup.
-    near: Vec<(f64, f64)>,
+    /// Per point: the first returns of its pulse within twice `half` (plus a metre against
+    /// rounding) of it; `Several` also for a point without a pulse key. Read in the points' order,
+    /// it answers the common case (`None` or `One`) without another lookup.
+    near: Vec<Found>,
     /// The largest box half-width for which `near` decides.
     half: f64,
     /// Pulse of each point ([`NO_PULSE`] without a GPS time).
@@ -162,7 +169,7 @@ impl PulseIndex {
             (0..n).filter_map(|i| pulse_key(points, i).map(|k| (k, i as u32))).collect();
         keyed.sort_unstable_by_key(|e| e.0);
         let mut index = PulseIndex {
-            near: vec![(f64::NAN, f64::NAN); n],
+            near: vec![Found::Several; n],
             half,
             pulse: vec![NO_PULSE; n],
             starts: vec![0],
@@ -181,13 +188,7 @@ impl PulseIndex {
             firsts.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
             for &(_, i) in group {
                 let (x, y) = (points.x[i as usize], points.y[i as usize]);
-                let reach = Square { x0: x, y0: y, half: 2.0 * half + 1.0 };
-                let mut found = in_square(firsts, reach);
-                index.near[i as usize] = match (found.next(), found.next()) {
-                    (None, _) => (f64::INFINITY, f64::INFINITY),
-                    (Some(&xy), None) => xy,
-                    _ => (f64::NAN, f64::NAN),
-                };
+                index.near[i as usize] = in_square(firsts, Square { x0: x, y0: y, half: 2.0 * half + 1.0 });
             }
             index.starts.push(index.firsts.len() as u32);
         }
@@ -199,23 +200,29 @@ impl PulseIndex {
     pub fn first_return(&self, i: usize, (x, y): (f64, f64), square: Square) -> Option<(f64, f64)> {
         let near = *self.near.get(i)?;
         // Every first return in a box holding (x, y) lies within twice its half-width of (x, y).
-        if !near.0.is_nan() && square.half <= self.half && square.contains(x, y) {
-            return square.contains(near.0, near.1).then_some(near);
-        }
-        let k = *self.pulse.get(i)? as usize;
-        let firsts = self.firsts.get(*self.starts.get(k)? as usize..*self.starts.get(k + 1)? as usize)?;
-        let mut found = in_square(firsts, square);
-        match (found.next(), found.next()) {
-            (Some(&xy), None) => Some(xy),
+        let found = if near != Found::Several && square.half <= self.half && square.contains(x, y) {
+            near
+        } else {
+            let k = *self.pulse.get(i)? as usize;
+            in_square(self.firsts.get(*self.starts.get(k)? as usize..*self.starts.get(k + 1)? as usize)?, square)
+        };
+        match found {
+            Found::One(xy) if square.contains(xy.0, xy.1) => Some(xy),
             _ => None,
         }
     }
 }
 
-/// The positions (sorted by x) that lie in `square`.
-fn in_square(sorted: &[(f64, f64)], square: Square) -> impl Iterator<Item = &(f64, f64)> {
+/// Which of the positions (sorted by x) lie in `square`.
+fn in_square(sorted: &[(f64, f64)], square: Square) -> Found {
     let from = sorted.partition_point(|p| p.0 < square.x0 - square.half);
-    sorted[from..].iter().take_while(move |p| p.0 <= square.x0 + square.half).filter(move |p| square.contains(p.0, p.1))
+    let mut inside =
+        sorted[from..].iter().take_while(|p| p.0 <= square.x0 + square.half).filter(|p| square.contains(p.0, p.1));
+    match (inside.next(), inside.next()) {
+        (None, _) => Found::None,
+        (Some(&xy), None) => Found::One(xy),
+        _ => Found::Several,
+    }
 }
 
 #[cfg(test)]
@@ -291,8 +298,8 @@ mod tests {
                 let expected = brute(&p, i, square);
                 assert_eq!(index.first_return(i, (p.x[i], p.y[i]), square), expected, "point {i}");
                 found += usize::from(expected.is_some());
-                shared += usize::from(index.near[i].0.is_nan());
-                alone += usize::from(!index.near[i].0.is_nan());
+                shared += usize::from(index.near[i] == Found::Several);
+                alone += usize::from(index.near[i] != Found::Several);
             }
         }
         // Both paths were taken, and returns found their first return.

@@ -288,13 +288,13 @@ pub fn simulate(
     let sim: fn(&Job) -> Outcome =
         if cfg.quirks.f32_sums { simulate_footprint::<f32> } else { simulate_footprint::<f64> };
     let by_pulse = cfg.normalise_density && cfg.density_count == DensityCount::Pulses;
-    let run = |fp: &Footprint, pts: &AlsPoints, pulses: &PulseIndex, cand: Vec<u32>| {
+    let run = |fp: &Footprint, pts: &AlsPoints, pulses: Option<&PulseIndex>, cand: Vec<u32>| {
         if !(fp.x.is_finite() && fp.y.is_finite()) {
             return Err(SkipReason::NoPoints);
         }
-        sim(&Job { points: pts, pulses: by_pulse.then_some(pulses), candidates: &cand, footprint: fp, cfg, half })
+        sim(&Job { points: pts, pulses, candidates: &cand, footprint: fp, cfg, half })
     };
-    let pulses_of = |pts: &AlsPoints| if by_pulse { PulseIndex::build(pts, half) } else { PulseIndex::default() };
+    let pulses_of = |pts: &AlsPoints| by_pulse.then(|| PulseIndex::build(pts, half));
     Ok(if cfg.quirks.batch_grid {
         let centres: Vec<(f64, f64)> =
             footprints.iter().map(|f| (f.x, f.y)).filter(|c| c.0.is_finite() && c.1.is_finite()).collect();
@@ -307,7 +307,7 @@ pub fn simulate(
                 if let Some(o) = &octree {
                     o.candidates(fp.x, fp.y, half, &mut cand);
                 }
-                run(fp, points, &pulses, cand)
+                run(fp, points, pulses.as_ref(), cand)
             })
             .collect()
     } else {
@@ -319,7 +319,7 @@ pub fn simulate(
             .map(|fp| {
                 let mut cand = Vec::new();
                 grid.candidates(fp.x, fp.y, half, &mut cand);
-                run(fp, &sorted, &pulses, cand)
+                run(fp, &sorted, pulses.as_ref(), cand)
             })
             .collect()
     })
