@@ -2,8 +2,9 @@
 
 use std::path::PathBuf;
 
-/// Errors of gedisim. `Display` is a single line: `<file>: <field>: <what>`.
-#[derive(Debug, thiserror::Error)]
+/// Errors of gedisim. `Display` is a single line: `<file>: <field>: <what>`. Serde carries one from
+/// a child process (`ops::ingest_gedi::child`).
+#[derive(Debug, thiserror::Error, serde::Serialize, serde::Deserialize)]
 pub enum Error {
     /// A problem with one field (dataset, column, header entry) of one input file.
     #[error("{}: {field}: {message}", path.display())]

@@ -15,6 +15,11 @@ fn main() -> ExitCode {
         std::env::set_var("HDF5_USE_FILE_LOCKING", "FALSE");
     }
     let cli = cli::Cli::parse();
+    // A corrupt granule can crash the HDF5 C library: granules are read in child processes of this
+    // binary, so that such a crash ends as one error line (gedisim::ops::ingest_gedi::child).
+    if let Ok(exe) = std::env::current_exe() {
+        gedisim::ops::ingest_gedi::child::read_in_children_of(exe);
+    }
     // Errors are one line. A panic is a bug: it too ends with one line (and exit code 101), and a
     // panic the library catches (the LAZ decoder's, see io::las) prints nothing. RUST_BACKTRACE
     // keeps Rust's own report for debugging.

@@ -8,6 +8,7 @@ mod diagnose;
 mod export;
 mod ingest;
 mod l2a;
+mod read_granule;
 mod report;
 mod reporters;
 mod run;
@@ -78,6 +79,9 @@ pub enum Command {
     /// Measurements used by the benchmarks.
     #[command(subcommand, hide = true)]
     Bench(BenchCommand),
+    /// The child process that reads one GEDI granule for the other commands (gedisim::ops::ingest_gedi::child).
+    #[command(name = gedisim::ops::ingest_gedi::child::COMMAND, hide = true)]
+    ReadGranule { request: String },
 }
 
 #[derive(Subcommand)]
@@ -120,5 +124,6 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Scenario(a) => scenario::scenario(a),
         Command::Diagnose(a) => diagnose::diagnose(a),
         Command::Bench(BenchCommand::Decode { file }) => bench::bench_decode(file),
+        Command::ReadGranule { request } => read_granule::read_granule(request),
     }
 }

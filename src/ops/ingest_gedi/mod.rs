@@ -27,11 +27,13 @@ use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
 use crate::kernels::geo::projection::Projector;
 use crate::ops::progress::{Progress, Step};
 
+pub mod child;
+
 /// Maximum rows per emitted batch (a beam larger than this is split).
 pub const BATCH_ROWS: usize = 8192;
 
 /// Options of the GEDI ingest.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GediOptions {
     /// Target projected CRS of the `x`, `y` columns (default 2154, Lambert-93).
     pub epsg: u32,
@@ -49,7 +51,7 @@ impl Default for GediOptions {
 }
 
 /// One granule to read: an L1B file, an L2A file, or both.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct GranulePair {
     /// The `granule` column: the L1B file stem, or the L2A file stem when there is no L1B file.
     pub granule: String,
@@ -60,7 +62,7 @@ pub struct GranulePair {
 }
 
 /// Shot counts of one beam of one granule, and the shots found on one side only.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct BeamReport {
     /// The `granule` value.
     pub granule: String,
@@ -274,7 +276,20 @@ pub fn pair_granules(l1b: &[PathBuf], l2a: &[PathBuf]) -> Result<(Vec<GranulePai
 }
 
 /// Read one granule, beam by beam, handing each batch to `sink`; returns one report per beam.
+/// In a child process when the command line asked for it (`ops::ingest_gedi::child`).
 pub fn read_granule(
+    pair: &GranulePair,
+    opts: &GediOptions,
+    sink: &mut dyn FnMut(RecordBatch) -> Result<()>,
+) -> Result<Vec<BeamReport>> {
+    match child::executable() {
+        Some(exe) => child::read(exe, pair, opts, sink),
+        None => read_granule_in_process(pair, opts, sink),
+    }
+}
+
+/// [`read_granule`] in this process.
+pub fn read_granule_in_process(
     pair: &GranulePair,
     opts: &GediOptions,
     sink: &mut dyn FnMut(RecordBatch) -> Result<()>,

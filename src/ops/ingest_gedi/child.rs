@@ -1,0 +1,256 @@
+//! GEDI granules read in a child process, so that a corrupt file ends as one error line.
+//!
+//! gedisim reads HDF5 through the HDF5 C library, which cannot be made safe against a corrupt
+//! file: Debian's 1.10.8 segfaults on a corrupt global-heap reference (docs/robustness.md,
+//! "HDF5"). No validation on our side can reach inside the library's structures, so the command
+//! line reads each granule in a child process (`gedisim read-granule`, hidden) and takes its shots
+//! back as Arrow IPC over a pipe: a crash kills the child only, and the parent reports it as one
+//! line naming the file.
+//!
+//! The protocol on the child's stdout is a sequence of frames: a tag byte, a little-endian u64
+//! length, then the payload — [`BATCH`] (one Arrow IPC stream holding one batch) any number of
+//! times, then one [`RESULT`] (the JSON of `Result<Vec<BeamReport>>`).
+
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::OnceLock;
+
+use arrow::array::RecordBatch;
+use arrow::ipc::reader::StreamReader;
+use arrow::ipc::writer::StreamWriter;
+use serde::{Deserialize, Serialize};
+
+use super::{read_granule_in_process, BeamReport, GediOptions, GranulePair};
+use crate::error::{Error, Result};
+
+/// The hidden subcommand the child runs.
+pub const COMMAND: &str = "read-granule";
+
+/// Frame tags.
+const BATCH: u8 = 1;
+const RESULT: u8 = 2;
+
+static READER: OnceLock<PathBuf> = OnceLock::new();
+
+/// From now on, read granules in child processes of `exe` (a gedisim binary): the command line
+/// calls it first. Without it (the library in other programs) granules are read in-process.
+pub fn read_in_children_of(exe: PathBuf) {
+    let _ = READER.set(exe);
+}
+
+/// The executable granules are read by, if [`read_in_children_of`] was called.
+pub fn executable() -> Option<&'static Path> {
+    READER.get().map(PathBuf::as_path)
+}
+
+/// What the parent asks of the child (its one argument, as JSON).
+#[derive(Serialize, Deserialize)]
+struct Request {
+    pair: GranulePair,
+    opts: GediOptions,
+}
+
+/// The child: read `request`'s granule in this process, writing frames to `out`. A read error
+/// travels in the result frame; only a failure to write to `out` is returned.
+pub fn serve(request: &str, out: impl Write) -> Result<()> {
+    let mut out = BufWriter::new(out);
+    let pipe = |e: std::io::Error| Error::Usage(format!("{COMMAND}: writing to the parent: {e}"));
+    let result = serde_json::from_str::<Request>(request)
+        .map_err(|e| Error::Usage(format!("{COMMAND}: a malformed request: {e}")))
+        .and_then(|r| {
+            read_granule_in_process(&r.pair, &r.opts, &mut |batch| {
+                let mut bytes = Vec::new();
+                let mut w = StreamWriter::try_new(&mut bytes, &batch.schema())
+                    .and_then(|mut w| w.write(&batch).and_then(|_| w.finish()));
+                w.as_mut().map_err(|e| Error::Usage(format!("{COMMAND}: encoding a batch: {e}")))?;
+                frame(&mut out, BATCH, &bytes).map_err(pipe)
+            })
+        });
+    let json = serde_json::to_vec(&result)
+        .or_else(|e| serde_json::to_vec(&Result::<Vec<BeamReport>>::Err(Error::Usage(e.to_string()))))
+        .map_err(|e| Error::Usage(e.to_string()))?;
+    frame(&mut out, RESULT, &json).and_then(|_| out.flush()).map_err(pipe)
+}
+
+fn frame(out: &mut impl Write, tag: u8, payload: &[u8]) -> std::io::Result<()> {
+    out.write_all(&[tag])?;
+    out.write_all(&(payload.len() as u64).to_le_bytes())?;
+    out.write_all(payload)
+}
+
+/// The parent: read `pair` in a child process of `exe`, handing its batches to `sink`.
+pub fn read(
+    exe: &Path,
+    pair: &GranulePair,
+    opts: &GediOptions,
+    sink: &mut dyn FnMut(RecordBatch) -> Result<()>,
+) -> Result<Vec<BeamReport>> {
+    let first = pair.l1b.as_deref().or(pair.l2a.as_deref()).unwrap_or(Path::new(""));
+    let request = serde_json::to_string(&Request { pair: pair.clone(), opts: opts.clone() })
+        .map_err(|e| Error::file(first, format!("a path gedisim cannot pass to its granule reader: {e}")))?;
+    let mut child = Command::new(exe)
+        .args([COMMAND, &request])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(|e| Error::file(exe, format!("starting the granule reader: {e}")))?;
+    let (stdout, mut stderr) = (child.stdout.take().expect("piped"), child.stderr.take().expect("piped"));
+    // Drained beside the frames, so that a child writing to stderr never blocks.
+    let errors = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = stderr.read_to_string(&mut s);
+        s
+    });
+    let received = receive(BufReader::new(stdout), sink);
+    if received.is_err() {
+        let _ = child.kill();
+    }
+    let status = child.wait().map_err(|e| Error::file(first, format!("waiting for the granule reader: {e}")))?;
+    let stderr = errors.join().unwrap_or_default();
+    match received {
+        Err(e) => Err(e),
+        Ok(Some(result)) => result,
+        Ok(None) => Err(crashed(exe, pair, opts, status, &stderr)),
+    }
+}
+
+/// The frames of a child: batches to `sink`; the result, or `None` when the child ended first.
+fn receive(
+    mut from: impl Read,
+    sink: &mut dyn FnMut(RecordBatch) -> Result<()>,
+) -> Result<Option<Result<Vec<BeamReport>>>> {
+    let bad = |what: String| Error::Usage(format!("the granule reader's output: {what}"));
+    loop {
+        let mut head = [0u8; 9];
+        match from.read_exact(&mut head) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => return Ok(None),
+            Err(e) => return Err(bad(e.to_string())),
+        }
+        let len = u64::from_le_bytes(head[1..].try_into().expect("8 bytes"));
+        let mut payload = Vec::new();
+        let got = from.by_ref().take(len).read_to_end(&mut payload).map_err(|e| bad(e.to_string()))?;
+        if got as u64 != len {
+            return Ok(None);
+        }
+        match head[0] {
+            BATCH => {
+                for batch in StreamReader::try_new(payload.as_slice(), None).map_err(|e| bad(e.to_string()))? {
+                    sink(batch.map_err(|e| bad(e.to_string()))?)?;
+                }
+            }
+            RESULT => {
+                return serde_json::from_slice(&payload).map(Some).map_err(|e| bad(e.to_string()));
+            }
+            tag => return Err(bad(format!("unknown frame {tag}"))),
+        }
+    }
+}
+
+/// The error of a child that ended without a result: which file of the pair it died on (each
+/// file read alone again, when there are two), and how it ended.
+fn crashed(
+    exe: &Path,
+    pair: &GranulePair,
+    opts: &GediOptions,
+    status: std::process::ExitStatus,
+    stderr: &str,
+) -> Error {
+    let how = match signal(status) {
+        Some(s) => format!("the HDF5 library crashed reading this file ({s}): it is corrupt; download it again"),
+        None => {
+            let last = stderr.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("").trim();
+            format!("the granule reader ended without a result ({status}: {last})")
+        }
+    };
+    let alone = |l1b: Option<&PathBuf>, l2a: Option<&PathBuf>| GranulePair {
+        granule: pair.granule.clone(),
+        l1b: l1b.cloned(),
+        l2a: l2a.cloned(),
+    };
+    match (&pair.l1b, &pair.l2a) {
+        (Some(l1b), Some(l2a)) => {
+            let fails = |p: GranulePair| read(exe, &p, opts, &mut |_| Ok(())).is_err();
+            if fails(alone(Some(l1b), None)) {
+                Error::file(l1b, how)
+            } else if fails(alone(None, Some(l2a))) {
+                Error::file(l2a, how)
+            } else {
+                Error::file(l1b, format!("read with {}: {how} (each file alone reads)", l2a.display()))
+            }
+        }
+        (Some(p), None) | (None, Some(p)) => Error::file(p, how),
+        (None, None) => Error::Usage(how),
+    }
+}
+
+/// The signal that ended a process, named.
+fn signal(status: std::process::ExitStatus) -> Option<String> {
+    #[cfg(unix)]
+    if let Some(signal) = std::os::unix::process::ExitStatusExt::signal(&status) {
+        let name = match signal {
+            6 => ", SIGABRT",
+            7 => ", SIGBUS",
+            9 => ", SIGKILL",
+            11 => ", SIGSEGV",
+            _ => "",
+        };
+        return Some(format!("signal {signal}{name}"));
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ops::ingest_gedi::{expand_granule_inputs, pair_granules};
+
+    fn bundled_pair() -> GranulePair {
+        let dir = [PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/gedi")];
+        let l1b = expand_granule_inputs(&dir, "GEDI01_B").unwrap();
+        let l2a = expand_granule_inputs(&dir, "GEDI02_A").unwrap();
+        pair_granules(&l1b, &l2a).unwrap().0.remove(0)
+    }
+
+    /// What the child writes, the parent reads back: the same batches and reports as a read in
+    /// this process; a stream cut short is a child that ended without a result.
+    #[test]
+    fn the_frames_carry_the_granule_unchanged() {
+        let pair = bundled_pair();
+        let opts = GediOptions::default();
+        let mut here = Vec::new();
+        let reports = read_granule_in_process(&pair, &opts, &mut |b| {
+            here.push(b);
+            Ok(())
+        })
+        .unwrap();
+        let mut bytes = Vec::new();
+        serve(&serde_json::to_string(&Request { pair: pair.clone(), opts }).unwrap(), &mut bytes).unwrap();
+        let mut there = Vec::new();
+        let result = receive(bytes.as_slice(), &mut |b| {
+            there.push(b);
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(result.unwrap().unwrap(), reports);
+        assert!(!here.is_empty());
+        assert_eq!(there, here);
+        assert!(receive(&bytes[..bytes.len() - 3], &mut |_| Ok(())).unwrap().is_none());
+    }
+
+    /// A read error travels back as the same error, not as a crash.
+    #[test]
+    fn a_read_error_comes_back_as_it_was() {
+        let pair =
+            GranulePair { granule: "g".into(), l1b: Some(PathBuf::from("/nonexistent/GEDI01_B_x.h5")), l2a: None };
+        let opts = GediOptions::default();
+        let expected = read_granule_in_process(&pair, &opts, &mut |_| Ok(())).unwrap_err().to_string();
+        let mut bytes = Vec::new();
+        serve(&serde_json::to_string(&Request { pair, opts }).unwrap(), &mut bytes).unwrap();
+        let got = receive(bytes.as_slice(), &mut |_| Ok(())).unwrap().unwrap().unwrap_err();
+        assert_eq!(got.to_string(), expected);
+        assert!(matches!(got, Error::File { .. } | Error::Field { .. }), "{got:?}");
+    }
+}
