@@ -18,7 +18,8 @@ fn main() -> ExitCode {
     // A corrupt granule can crash the HDF5 C library: granules are read in child processes of this
     // binary, so that such a crash ends as one error line (gedisim::ops::ingest_gedi::child).
     if let Ok(exe) = std::env::current_exe() {
-        gedisim::ops::ingest_gedi::child::read_in_children_of(exe);
+        use gedisim::ops::ingest_gedi::child;
+        child::read_in_children(child::Reader { exe, stall_limit: child::STALL_LIMIT });
     }
     // Errors are one line. A panic is a bug: it too ends with one line (and exit code 101), and a
     // panic the library catches (the LAZ decoder's, see io::las) prints nothing. RUST_BACKTRACE

@@ -222,8 +222,7 @@ fn read_granule(l1b: Option<&Path>, l2a: Option<&Path>) -> Result<(), Error> {
 
 #[test]
 fn fuzz_gedi_granules() {
-    // As the command line does: a crash of the HDF5 library ends the child, not this test.
-    gedisim::ops::ingest_gedi::child::read_in_children_of(PathBuf::from(env!("CARGO_BIN_EXE_gedisim")));
+    read_in_children();
     let dir = tempfile::tempdir().unwrap();
     let (l1b, l2a) = small_granule(dir.path(), 4);
     read_granule(Some(&l1b), Some(&l2a)).expect("the unmutated pair reads");
@@ -248,16 +247,29 @@ fn fuzz_gedi_granules() {
     }
 }
 
-/// The case that crashed HDF5 1.10.8 inside `ingest gedi` (seed 7, case 544 of 3000: one byte of
-/// the L1B's global-heap reference set to 0xff): now the child that reads the granule dies, and
-/// the command ends with one line naming that file, exit code 1 and no shots file.
+/// As the command line does: a crash or a hang of the HDF5 library ends the child, not this test.
+/// The stall limit is short: these granules read in milliseconds.
+fn read_in_children() {
+    use gedisim::ops::ingest_gedi::child;
+    let exe = PathBuf::from(env!("CARGO_BIN_EXE_gedisim"));
+    child::read_in_children(child::Reader { exe, stall_limit: std::time::Duration::from_secs(10) });
+}
+
+/// Case `case` of `seed` of [`fuzz`] over `original` (the L1B is fuzzed first, with `hot` 4096).
+fn replay(seed: u64, case: usize, original: &[u8]) -> Vec<u8> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    (0..case).for_each(|_| drop(mutate(&mut rng, original, 4096)));
+    mutate(&mut rng, original, 4096).0
+}
+
+/// Seed 7's L1B case 544 (byte 895, in a global-heap reference, set to 0xff) crashed HDF5 1.10.8
+/// inside `ingest gedi`: now the child that reads the granule dies, and the command ends with one
+/// line naming that file, exit code 1 and no shots file.
 #[test]
 fn a_granule_that_crashes_hdf5_ends_as_one_line() {
     let dir = tempfile::tempdir().unwrap();
     let (l1b, l2a) = small_granule(dir.path(), 4);
-    let mut bytes = std::fs::read(&l1b).unwrap();
-    bytes[895] = 0xff;
-    std::fs::write(&l1b, &bytes).unwrap();
+    std::fs::write(&l1b, replay(7, 544, &std::fs::read(&l1b).unwrap())).unwrap();
     let ds = dir.path().join("ds");
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_gedisim"))
         .args(["ingest", "gedi", "--out"])
@@ -277,6 +289,23 @@ fn a_granule_that_crashes_hdf5_ends_as_one_line() {
         assert!(lines[0].contains("the HDF5 library crashed reading this file (signal 11, SIGSEGV)"), "{stderr}");
     }
     assert!(files_with_suffix(&ds.join("shots"), "").is_empty(), "a shots file was left behind");
+}
+
+/// Seed 7's L1B case 3067 made HDF5 1.10.8 loop for ever reading the `short_name` attribute (in
+/// `H5HG_read`, the global heap): the child is stopped after the stall limit, and the read ends
+/// with one line naming the L1B.
+#[test]
+fn a_granule_that_hangs_hdf5_ends_as_one_line() {
+    read_in_children();
+    let dir = tempfile::tempdir().unwrap();
+    let (l1b, l2a) = small_granule(dir.path(), 4);
+    std::fs::write(&l1b, replay(7, 3067, &std::fs::read(&l1b).unwrap())).unwrap();
+    let err = read_granule(Some(&l1b), Some(&l2a)).expect_err("the corrupt L1B does not read").to_string();
+    assert!(!err.contains('\n'), "{err}");
+    assert!(err.starts_with(&*l1b.display().to_string()), "{err}");
+    if hdf5::library_version() == (1, 10, 8) {
+        assert!(err.contains("made no progress reading this file for 10 s and was stopped"), "{err}");
+    }
 }
 
 #[test]

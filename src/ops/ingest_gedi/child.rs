@@ -14,7 +14,9 @@
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::sync::OnceLock;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, OnceLock};
+use std::time::{Duration, Instant};
 
 use arrow::array::RecordBatch;
 use arrow::ipc::reader::StreamReader;
@@ -31,17 +33,32 @@ pub const COMMAND: &str = "read-granule";
 const BATCH: u8 = 1;
 const RESULT: u8 = 2;
 
-static READER: OnceLock<PathBuf> = OnceLock::new();
-
-/// From now on, read granules in child processes of `exe` (a gedisim binary): the command line
-/// calls it first. Without it (the library in other programs) granules are read in-process.
-pub fn read_in_children_of(exe: PathBuf) {
-    let _ = READER.set(exe);
+/// Where granules are read, once the command line has said so.
+#[derive(Debug, Clone)]
+pub struct Reader {
+    /// A gedisim binary; its hidden [`COMMAND`] reads one granule.
+    pub exe: PathBuf,
+    /// How long the parent waits for the child's next bytes before it stops the child as hung:
+    /// the longest a healthy child takes to open the files and read one beam.
+    pub stall_limit: Duration,
 }
 
-/// The executable granules are read by, if [`read_in_children_of`] was called.
-pub fn executable() -> Option<&'static Path> {
-    READER.get().map(PathBuf::as_path)
+/// The default [`Reader::stall_limit`]: far above what opening a granule and reading one beam
+/// should take (a child sends each beam as soon as it has read it), short enough that a scheduled
+/// job fails instead of hanging.
+pub const STALL_LIMIT: Duration = Duration::from_secs(300);
+
+static READER: OnceLock<Reader> = OnceLock::new();
+
+/// From now on, read granules in child processes (the command line calls it first). Without it
+/// (the library in other programs) granules are read in-process.
+pub fn read_in_children(reader: Reader) {
+    let _ = READER.set(reader);
+}
+
+/// Where granules are read, if [`read_in_children`] was called.
+pub fn reader() -> Option<&'static Reader> {
+    READER.get()
 }
 
 /// What the parent asks of the child (its one argument, as JSON).
@@ -79,9 +96,9 @@ fn frame(out: &mut impl Write, tag: u8, payload: &[u8]) -> std::io::Result<()> {
     out.write_all(payload)
 }
 
-/// The parent: read `pair` in a child process of `exe`, handing its batches to `sink`.
+/// The parent: read `pair` in a child process, handing its batches to `sink`.
 pub fn read(
-    exe: &Path,
+    reader: &Reader,
     pair: &GranulePair,
     opts: &GediOptions,
     sink: &mut dyn FnMut(RecordBatch) -> Result<()>,
@@ -89,13 +106,13 @@ pub fn read(
     let first = pair.l1b.as_deref().or(pair.l2a.as_deref()).unwrap_or(Path::new(""));
     let request = serde_json::to_string(&Request { pair: pair.clone(), opts: opts.clone() })
         .map_err(|e| Error::file(first, format!("a path gedisim cannot pass to its granule reader: {e}")))?;
-    let mut child = Command::new(exe)
+    let mut child = Command::new(&reader.exe)
         .args([COMMAND, &request])
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .map_err(|e| Error::file(exe, format!("starting the granule reader: {e}")))?;
+        .map_err(|e| Error::file(&reader.exe, format!("starting the granule reader: {e}")))?;
     let (stdout, mut stderr) = (child.stdout.take().expect("piped"), child.stderr.take().expect("piped"));
     // Drained beside the frames, so that a child writing to stderr never blocks.
     let errors = std::thread::spawn(move || {
@@ -103,7 +120,11 @@ pub fn read(
         let _ = stderr.read_to_string(&mut s);
         s
     });
-    let received = receive(BufReader::new(stdout), sink);
+    let child = Arc::new(Mutex::new(child));
+    let watch = Watch::new(reader.stall_limit, Arc::clone(&child));
+    let received = receive(BufReader::new(Watched { inner: stdout, watch: &watch }), sink);
+    let stalled = watch.stop();
+    let mut child = child.lock().unwrap_or_else(|e| e.into_inner());
     if received.is_err() {
         let _ = child.kill();
     }
@@ -112,7 +133,66 @@ pub fn read(
     match received {
         Err(e) => Err(e),
         Ok(Some(result)) => result,
-        Ok(None) => Err(crashed(exe, pair, opts, status, &stderr)),
+        Ok(None) => Err(failed(reader, pair, opts, status, stalled, &stderr)),
+    }
+}
+
+/// Stops a child that the parent has waited on for longer than the stall limit: only the time the
+/// parent spends waiting for bytes counts, not the time it spends writing what it received.
+struct Watch {
+    /// Milliseconds since `start` at which the parent began waiting (0: not waiting).
+    waiting_since: Arc<AtomicU64>,
+    start: Instant,
+    done: Arc<AtomicBool>,
+    stalled: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Watch {
+    fn new(limit: Duration, child: Arc<Mutex<std::process::Child>>) -> Watch {
+        let waiting_since = Arc::new(AtomicU64::new(0));
+        let (done, stalled) = (Arc::new(AtomicBool::new(false)), Arc::new(AtomicBool::new(false)));
+        let start = Instant::now();
+        let (w, d, s) = (Arc::clone(&waiting_since), Arc::clone(&done), Arc::clone(&stalled));
+        let tick = (limit / 10).clamp(Duration::from_millis(10), Duration::from_secs(1));
+        let thread = std::thread::spawn(move || {
+            while !d.load(Ordering::Acquire) {
+                std::thread::park_timeout(tick);
+                let since = w.load(Ordering::Acquire);
+                if since > 0 && start.elapsed().as_millis() as u64 > since + limit.as_millis() as u64 {
+                    s.store(true, Ordering::Release);
+                    let _ = child.lock().unwrap_or_else(|e| e.into_inner()).kill();
+                    return;
+                }
+            }
+        });
+        Watch { waiting_since, start, done, stalled, thread: Some(thread) }
+    }
+
+    /// Ends the watch; whether it stopped the child.
+    fn stop(mut self) -> bool {
+        self.done.store(true, Ordering::Release);
+        if let Some(t) = self.thread.take() {
+            t.thread().unpark();
+            let _ = t.join();
+        }
+        self.stalled.load(Ordering::Acquire)
+    }
+}
+
+/// The child's stdout, telling its [`Watch`] when the parent waits on it.
+struct Watched<'w, R> {
+    inner: R,
+    watch: &'w Watch,
+}
+
+impl<R: Read> Read for Watched<'_, R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let now = self.watch.start.elapsed().as_millis() as u64;
+        self.watch.waiting_since.store(now.max(1), Ordering::Release);
+        let n = self.inner.read(buf);
+        self.watch.waiting_since.store(0, Ordering::Release);
+        n
     }
 }
 
@@ -151,14 +231,20 @@ fn receive(
 
 /// The error of a child that ended without a result: which file of the pair it died on (each
 /// file read alone again, when there are two), and how it ended.
-fn crashed(
-    exe: &Path,
+fn failed(
+    reader: &Reader,
     pair: &GranulePair,
     opts: &GediOptions,
     status: std::process::ExitStatus,
+    stalled: bool,
     stderr: &str,
 ) -> Error {
     let how = match signal(status) {
+        _ if stalled => format!(
+            "the HDF5 library made no progress reading this file for {} s and was stopped: it is corrupt \
+             (download it again), or its storage stalled",
+            reader.stall_limit.as_secs_f64()
+        ),
         Some(s) => format!("the HDF5 library crashed reading this file ({s}): it is corrupt; download it again"),
         None => {
             let last = stderr.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("").trim();
@@ -172,7 +258,7 @@ fn crashed(
     };
     match (&pair.l1b, &pair.l2a) {
         (Some(l1b), Some(l2a)) => {
-            let fails = |p: GranulePair| read(exe, &p, opts, &mut |_| Ok(())).is_err();
+            let fails = |p: GranulePair| read(reader, &p, opts, &mut |_| Ok(())).is_err();
             if fails(alone(Some(l1b), None)) {
                 Error::file(l1b, how)
             } else if fails(alone(None, Some(l2a))) {

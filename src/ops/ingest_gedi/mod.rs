@@ -282,8 +282,8 @@ pub fn read_granule(
     opts: &GediOptions,
     sink: &mut dyn FnMut(RecordBatch) -> Result<()>,
 ) -> Result<Vec<BeamReport>> {
-    match child::executable() {
-        Some(exe) => child::read(exe, pair, opts, sink),
+    match child::reader() {
+        Some(reader) => child::read(reader, pair, opts, sink),
         None => read_granule_in_process(pair, opts, sink),
     }
 }
