@@ -728,22 +728,33 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
             100.0 * c.ci95[1]
         ));
     }
+    // What a trial changed, in the unit it is judged in.
+    let gap = |t: &crate::kernels::diagnose::rank::Trial| match &t.held_out.spread {
+        Some(s) => format!("held-out MSD above the noise floor {:.2} → {:.2} m²", s.excess()[0], s.excess()[1]),
+        None => {
+            format!("held-out gap {:.2} → {:.2} m", t.held_out.before.mean_abs_bias, t.held_out.after.mean_abs_bias)
+        }
+    };
     if d.ranking.unexplained {
         let best = d.ranking.effects.first();
         lines.push(match best {
-            Some(t) => {
-                format!(
-                "Which: unexplained — the best candidate, {}, shrinks the held-out {} by {:.0} % (95 % CI {:.0} to \
-                    {:.0} %), not enough to name it{}.",
+            Some(t) => format!(
+                "Which: unexplained — the best candidate, {} ({}), shrink {:.0} % (95 % CI {:.0} to {:.0} %), is not \
+                 enough to name it{}.",
                 t.effect.name(),
-                if t.held_out.spread.is_some() { "excess spread" } else { "gap" },
+                gap(t),
                 100.0 * t.held_out.shrink,
                 100.0 * t.held_out.ci95[0],
                 100.0 * t.held_out.ci95[1],
-                if t.held_out.spread.is_some() { format!(" (or its per-shot offsets are under {} m)",
-                    crate::kernels::diagnose::rank::MIN_SHOT_SIGMA_M) } else { String::new() }
-            )
-            }
+                if t.held_out.spread.is_some() {
+                    format!(
+                        " (or its per-shot offsets are under {} m)",
+                        crate::kernels::diagnose::rank::MIN_SHOT_SIGMA_M
+                    )
+                } else {
+                    String::new()
+                }
+            ),
             None => "Which: unexplained — no effect could be fitted.".into(),
         });
     } else {
@@ -757,13 +768,7 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
                     other => format!("{k} = {other}"),
                 })
                 .collect();
-            let gap = match &t.held_out.spread {
-                Some(s) => format!("held-out MSD above the noise floor {:.2} → {:.2} m²", s.excess()[0], s.excess()[1]),
-                None => format!(
-                    "held-out gap {:.2} → {:.2} m",
-                    t.held_out.before.mean_abs_bias, t.held_out.after.mean_abs_bias
-                ),
-            };
+            let gap = gap(t);
             let caveat = match (t.at_bound(), t.equivalent()) {
                 (_, Some(e)) => format!(" — equivalent to the simpler {}", e.name()),
                 (Some(b), None) => format!(" — fit on the edge of its range ({b}): the effect may not be this one"),
