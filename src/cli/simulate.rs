@@ -12,7 +12,7 @@ use super::reporters::{peak_rss_mb, Bars};
 
 #[derive(Args)]
 pub struct SimulateArgs {
-    /// LAS/LAZ file (direct mode).
+    /// LAS/LAZ file (direct mode); a COPC file is decoded only around the footprints.
     #[arg(long, requires_all = ["footprints", "out"], conflicts_with = "dataset")]
     als: Option<PathBuf>,
     /// CSV with a header naming id, x, y (direct mode; in dataset mode, footprints to simulate
@@ -139,6 +139,19 @@ pub fn simulate(a: SimulateArgs) -> Result<()> {
         r.skipped,
         r.out.display()
     );
+    if let Some(c) = &r.copc {
+        eprintln!(
+            "COPC: {} of {} octree nodes decoded ({} of {} points, {} compressed bytes), {} points within the \
+             footprints' read radius{}",
+            c.nodes,
+            c.nodes_in_tile,
+            c.points_decoded,
+            c.points_in_tile,
+            c.bytes_decoded,
+            c.points_kept,
+            if c.read_whole { " (the octree's node bounds did not hold: every node decoded)" } else { "" }
+        );
+    }
     if a.stats {
         let s = start.elapsed().as_secs_f64();
         let n = r.simulated + r.skipped;

@@ -34,7 +34,7 @@ impl BlockSimulation {
     /// Prepare the blocks of `footprints` (the first block is read now).
     pub fn new(ds: &Dataset, footprints: Vec<(Footprint, Option<AppliedOffset>)>, cfg: SimConfig) -> Result<Self> {
         let als = AlsTable::open(ds)?;
-        let half = sim::footprint::gauss_sep(cfg.fsigma, sim::footprint::I_THRESH) as f64 + 1.0;
+        let half = sim::footprint::read_radius(cfg.fsigma);
         let mut blocks = blocks(footprints).into_iter();
         let first = blocks.next();
         let mut this = BlockSimulation { als, cfg, half, blocks, current: None };

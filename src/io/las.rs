@@ -30,6 +30,19 @@ pub struct TileHeader {
     pub extra_bytes: Vec<String>,
     /// Number of EVLRs (stored after the points).
     pub n_evlrs: usize,
+    /// The header carries the COPC info VLR: the points are an octree of LAZ chunks (`io::copc`).
+    pub copc: bool,
+}
+
+/// Where a file's parts lie, as checked by [`check_layout`].
+#[derive(Debug, Clone)]
+pub(crate) struct Layout {
+    /// First byte of the point data.
+    pub data_start: u64,
+    pub file_len: u64,
+    /// (file offset, bytes) of the data of each COPC hierarchy EVLR (`copc`/1000): COPC 1.0 has
+    /// one holding every page, copclib writes one per page.
+    pub copc_hierarchy: Vec<(u64, u64)>,
 }
 
 /// A tile opened for streaming.
@@ -133,7 +146,7 @@ impl TileReader {
 /// the point count equal to what the point bytes hold (LAS) or within the chunk table's capacity
 /// (LAZ; an understatement smaller than one chunk of a fixed-chunk file is not detectable here).
 /// Leaves `file` at its start.
-fn check_layout(path: &Path, file: &mut std::fs::File) -> Result<()> {
+pub(crate) fn check_layout(path: &Path, file: &mut std::fs::File) -> Result<Layout> {
     use std::io::{Read, Seek, SeekFrom};
     let bad = |field: &str, msg: String| Error::field(path, field, msg);
     let io = |e: std::io::Error| Error::field(path, "header", format!("cannot read: {e}"));
@@ -190,6 +203,7 @@ fn check_layout(path: &Path, file: &mut std::fs::File) -> Result<()> {
     }
     // EVLRs: after the points, each inside the file.
     let mut points_end = file_len;
+    let mut copc_hierarchy = Vec::new();
     if let Some(evlr) = h.evlr.filter(|e| e.number_of_evlrs > 0) {
         let mut at = evlr.start_of_first_evlr;
         if at < data_start || at > file_len {
@@ -209,6 +223,10 @@ fn check_layout(path: &Path, file: &mut std::fs::File) -> Result<()> {
                 )
             })?;
             let len = u64::from_le_bytes(head[20..28].try_into().expect("8 bytes"));
+            let user = String::from_utf8_lossy(&head[2..18]);
+            if user.trim_end_matches('\0') == "copc" && head[18..20] == 1000u16.to_le_bytes() {
+                copc_hierarchy.push((at + 60, len));
+            }
             at = at.checked_add(60).and_then(|a| a.checked_add(len)).filter(|&a| a <= file_len).ok_or_else(|| {
                 bad("EVLR", format!("EVLR {i} announces {len} bytes, past the end of the file ({file_len} bytes)"))
             })?;
@@ -302,7 +320,7 @@ fn check_layout(path: &Path, file: &mut std::fs::File) -> Result<()> {
         }
     }
     file.seek(SeekFrom::Start(0)).map_err(io)?;
-    Ok(())
+    Ok(Layout { data_start, file_len, copc_hierarchy })
 }
 
 /// Read every point (every class) of a LAS/LAZ file.
@@ -311,7 +329,7 @@ pub fn read_points(path: &Path) -> Result<AlsPoints> {
 }
 
 /// Copy the columns gedisim uses out of a decoded block.
-fn columns(pd: &PointData) -> AlsPoints {
+pub(crate) fn columns(pd: &PointData) -> AlsPoints {
     let n = pd.len();
     let mut p = AlsPoints::with_capacity(n);
     p.x.extend(pd.x());
@@ -330,7 +348,7 @@ fn columns(pd: &PointData) -> AlsPoints {
     p
 }
 
-fn tile_header(path: &Path, h: &las::Header) -> Result<TileHeader> {
+pub(crate) fn tile_header(path: &Path, h: &las::Header) -> Result<TileHeader> {
     let b = h.bounds();
     let crs_wkt = h
         .get_wkt_crs_bytes()
@@ -365,6 +383,7 @@ fn tile_header(path: &Path, h: &las::Header) -> Result<TileHeader> {
         crs_wkt,
         extra_bytes,
         n_evlrs: h.evlrs().len(),
+        copc: h.copc_info_vlr().is_some(),
     })
 }
 

@@ -1,6 +1,7 @@
 //! I/O adapters: foreign formats (LAS/LAZ, GEDI HDF5, footprint CSV) read into kernel types and
 //! written from them. No sequencing of steps (that is `ops`), no Parquet tables (that is `dataset`).
 
+pub mod copc;
 pub mod footprints;
 pub mod gedi;
 pub mod granule;

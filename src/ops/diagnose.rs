@@ -279,7 +279,7 @@ fn simulate_cases(
     }
     let (nominal, variants) = configs();
     let fmax = FSIGMA_GRID[FSIGMA_GRID.len() - 1] as f32;
-    let half = sim::footprint::gauss_sep(fmax, sim::footprint::I_THRESH) as f64 + 1.0;
+    let half = sim::footprint::read_radius(fmax);
     let grid = site_grid();
     // Site 0 at the collocated position, then the grid around the short segment's re-collocated
     // centre (every width) or around the collocated position (a long segment: nominal width).

@@ -397,9 +397,7 @@ impl StudyInputs {
         Ok(StudyInputs {
             als: AlsTable::open(ds)?,
             cover_radius: 2.0 * cfg.fsigma as f64,
-            read_radius: crate::kernels::sim::footprint::gauss_sep(cfg.fsigma, crate::kernels::sim::footprint::I_THRESH)
-                as f64
-                + 1.0,
+            read_radius: crate::kernels::sim::footprint::read_radius(cfg.fsigma),
             cfg,
             offsets: read_offsets(ds)?,
             r_after: read_r_after(ds)?,

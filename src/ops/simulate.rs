@@ -11,6 +11,8 @@ use crate::dataset::offsets::AppliedOffset;
 use crate::dataset::sim::{sim_batch, sim_metadata, sim_schema};
 use crate::dataset::{self, tables, AtomicParquet, Dataset};
 use crate::error::{Error, Result};
+use crate::io::copc::{CopcRead, CopcTile};
+use crate::kernels::geo::cells::Cells;
 use crate::kernels::sim::{
     self, AlsPoints, DensityCount, Footprint, Profile, PulseModel, PulseTiming, SimConfig, Weighting,
 };
@@ -20,7 +22,8 @@ use crate::ops::progress::{Progress, Step};
 #[derive(Debug, Clone)]
 pub enum Source {
     /// Direct mode: one LAS/LAZ file and a footprint CSV, into `out`. With the `default` profile the
-    /// classes the ingest drops are dropped too, unless `keep_all_classes`.
+    /// classes the ingest drops are dropped too, unless `keep_all_classes`. A COPC file is read
+    /// only around the footprints ([`read_around`]).
     Direct { als: PathBuf, footprints: PathBuf, out: PathBuf, keep_all_classes: bool },
     /// Dataset mode: every ingested shot (moved by its collocation offset) into
     /// `<dataset>/sim/shots.parquet`, or the `footprints` CSV into `out` (default
@@ -49,6 +52,20 @@ pub struct SimulateReport {
     pub simulated: usize,
     pub skipped: usize,
     pub out: PathBuf,
+    /// Direct mode from a COPC tile: what its read decoded.
+    pub copc: Option<CopcRead>,
+}
+
+/// The points of a LAS/LAZ file that `footprints` need: a COPC tile is read only in the cells
+/// within the read radius of a footprint (and says what it decoded), any other file whole.
+pub fn read_around(als: &Path, footprints: &[Footprint], fsigma: f32) -> Result<(AlsPoints, Option<CopcRead>)> {
+    let reader = crate::io::las::TileReader::open(als)?;
+    if !reader.header().copc {
+        return Ok((reader.read_all()?, None));
+    }
+    let cells = Cells::around(footprints.iter().map(|f| (f.x, f.y)), sim::footprint::read_radius(fsigma));
+    let (points, read) = CopcTile::open(als)?.read(Some(&cells))?;
+    Ok((points, Some(read)))
 }
 
 /// The simulator settings of `opts` (profile, footprint, density normalisation, pulse).
@@ -73,6 +90,7 @@ pub fn sim_config(opts: &SimulateOptions) -> Result<SimConfig> {
 pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<SimulateReport> {
     let cfg = sim_config(opts)?;
     let profile = opts.profile;
+    let mut copc = None;
     let ((simulated, skipped), out) = match &opts.source {
         Source::Dataset { dataset, footprints, out } => {
             let ds = Dataset::open(dataset)?;
@@ -124,14 +142,15 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
         )),
         Source::Direct { als, footprints, out, keep_all_classes } => {
             let footprints = crate::io::footprints::read_footprints_csv(footprints)?;
-            let mut points = crate::io::las::read_points(als)?;
+            let (mut points, read) = read_around(als, &footprints, cfg.fsigma)?;
+            copc = read;
             if profile == Profile::Default && !keep_all_classes {
                 points = drop_ingest_classes(&points);
             }
             (simulate_direct(&points, &footprints, &cfg, profile, out)?, out.clone())
         }
     };
-    Ok(SimulateReport { simulated, skipped, out })
+    Ok(SimulateReport { simulated, skipped, out, copc })
 }
 
 /// Give every shot footprint its recorded pulse and every other footprint (no shot, or a shot

@@ -1,3 +1,4 @@
-//! Projections (pure Rust) and vertical-datum handling.
+//! Projections (pure Rust), vertical-datum handling, and the cells a read of a tile needs.
 
+pub mod cells;
 pub mod projection;

@@ -34,6 +34,12 @@ pub fn gauss_sep(fsigma: f32, thresh: f32) -> f32 {
     x
 }
 
+/// Radius (m) of the ALS a footprint's simulation reads: the search box of [`gauss_sep`] at the
+/// default cut-off, plus 1 m so that the 1.5 m density normalisation sees its neighbours.
+pub fn read_radius(fsigma: f32) -> f64 {
+    gauss_sep(fsigma, I_THRESH) as f64 + 1.0
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

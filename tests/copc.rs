@@ -1,0 +1,163 @@
+//! COPC tiles written by another tool (copclib, tests/data/als-copc/PROVENANCE.md) read through
+//! their hierarchy: every point of the LAZ original when the whole tile is asked for, exactly the
+//! points of the cells asked for otherwise, decoding fewer nodes than the tile holds.
+
+mod common;
+
+use common::{data, TILES};
+use gedisim::io::copc::CopcTile;
+use gedisim::io::las::read_points;
+use gedisim::kernels::geo::cells::Cells;
+use gedisim::kernels::sim::AlsPoints;
+
+/// A point as a comparable record: coordinates on the 1 cm grid, GPS time bits, intensity, return
+/// number, number of returns, class, point source, scan angle in m°.
+type Record = (i64, i64, i64, u64, u16, u8, u8, u8, u16, i32);
+
+/// Every point as a record, sorted.
+fn canonical(p: &AlsPoints) -> Vec<Record> {
+    let mut v: Vec<_> = (0..p.len())
+        .map(|i| {
+            (
+                (p.x[i] * 100.0).round() as i64,
+                (p.y[i] * 100.0).round() as i64,
+                (p.z[i] * 100.0).round() as i64,
+                p.gps_time[i].to_bits(),
+                p.intensity[i],
+                p.return_number[i],
+                p.number_of_returns[i],
+                p.classification[i],
+                p.point_source_id[i],
+                (p.scan_angle_deg[i] * 1000.0).round() as i32,
+            )
+        })
+        .collect();
+    v.sort_unstable();
+    v
+}
+
+fn in_cells(p: &AlsPoints, cells: &Cells) -> AlsPoints {
+    let keep: Vec<u32> = (0..p.len() as u32).filter(|&i| cells.contains(p.x[i as usize], p.y[i as usize])).collect();
+    p.permuted(&keep)
+}
+
+/// Footprint-sized squares (18.4 m: the simulation's read radius) around three positions of a tile.
+fn some_cells(p: &AlsPoints) -> Cells {
+    let (x0, y0) =
+        (p.x.iter().copied().fold(f64::INFINITY, f64::min), p.y.iter().copied().fold(f64::INFINITY, f64::min));
+    Cells::around([(x0 + 12.0, y0 + 15.0), (x0 + 31.0, y0 + 40.0), (x0 + 70.0, y0 + 80.0)], 18.4)
+}
+
+#[test]
+fn a_whole_copc_tile_holds_the_points_of_its_laz_original() {
+    for tile in TILES {
+        let laz = read_points(&data(&format!("als/{tile}.laz"))).unwrap();
+        let copc = CopcTile::open(&data(&format!("als-copc/{tile}.copc.laz"))).unwrap();
+        assert!(copc.header().copc, "{tile}: the COPC info VLR is found");
+        let (points, read) = copc.read(None).unwrap();
+        assert_eq!(read.nodes, read.nodes_in_tile);
+        assert_eq!(read.points_decoded, laz.len() as u64);
+        assert!(canonical(&points) == canonical(&laz), "{tile}: the COPC points differ from the LAZ points");
+    }
+}
+
+#[test]
+fn the_cells_asked_for_are_read_and_only_their_nodes_decoded() {
+    let cases = [
+        // copclib files with an info VLR that records no cube (zeros): the cube is taken from the
+        // header bounds, and checked against every decoded point.
+        ("als-copc/lidarforfuel_1_42.copc.laz", "als/lidarforfuel_1_42.laz", true),
+        ("als-copc/lidarforfuel_2_bas_lig.copc.laz", "als/lidarforfuel_2_bas_lig.laz", true),
+        // Depth 6, 29 hierarchy pages, the cube recorded.
+        (
+            "als-copc/pdal-ign-plugin_mnx_input_crop_2.depth6-paged.copc.laz",
+            "als/pdal-ign-plugin_mnx_input_crop_2.laz",
+            false,
+        ),
+    ];
+    for (copc, laz, inferred) in cases {
+        let laz = read_points(&data(laz)).unwrap();
+        let tile = CopcTile::open(&data(copc)).unwrap();
+        assert_eq!(tile.cube_inferred(), inferred, "{copc}");
+        let cells = some_cells(&laz);
+        let (points, read) = tile.read(Some(&cells)).unwrap();
+        let want = in_cells(&laz, &cells);
+        assert!(!want.is_empty() && want.len() < laz.len());
+        assert!(
+            canonical(&points) == canonical(&want),
+            "{copc}: {} points read, {} in the cells",
+            points.len(),
+            want.len()
+        );
+        assert!(!read.read_whole, "{copc}: the node bounds hold");
+        assert!(read.nodes < read.nodes_in_tile, "{copc}: {} of {} nodes decoded", read.nodes, read.nodes_in_tile);
+        assert!(read.points_decoded < read.points_in_tile);
+        eprintln!(
+            "{copc}: {} of {} nodes, {} of {} points decoded, {} kept",
+            read.nodes, read.nodes_in_tile, read.points_decoded, read.points_in_tile, read.points_kept
+        );
+        assert_eq!(read.points_kept, want.len() as u64);
+    }
+}
+
+#[test]
+fn a_cube_that_cannot_be_inferred_costs_a_whole_read_not_a_point() {
+    // copclib file whose octree cube has its corner at the bounds' minimum (0.46 m off the centred
+    // cube that is inferred) and is not recorded in the info VLR.
+    let laz = read_points(&data("als/pdal-ign-plugin_mnx_input_crop_2.laz")).unwrap();
+    let tile =
+        CopcTile::open(&data("als-copc/pdal-ign-plugin_mnx_input_crop_2.corner-cube-unrecorded.copc.laz")).unwrap();
+    assert!(tile.cube_inferred());
+    let cells = some_cells(&laz);
+    let (points, read) = tile.read(Some(&cells)).unwrap();
+    assert!(read.read_whole, "a point outside its inferred node is found");
+    assert_eq!(read.nodes, read.nodes_in_tile);
+    assert!(canonical(&points) == canonical(&in_cells(&laz, &cells)));
+}
+
+#[test]
+fn a_plain_laz_file_is_not_taken_for_copc() {
+    let e = CopcTile::open(&data("als/lidarforfuel_1_42.laz")).unwrap_err().to_string();
+    assert!(e.contains("COPC info VLR") && e.contains("lidarforfuel_1_42.laz"), "{e}");
+}
+
+#[test]
+fn simulate_from_copc_equals_simulate_from_the_laz_original() {
+    use arrow::array::{Array, AsArray};
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("plots.csv");
+    std::fs::write(&csv, "id,x,y\na,817600,6460800\nb,817640,6460830\nc,817575,6460850\n").unwrap();
+    let mut tables = Vec::new();
+    for (name, als) in [("laz", "als/lidarforfuel_1_42.laz"), ("copc", "als-copc/lidarforfuel_1_42.copc.laz")] {
+        let out = dir.path().join(format!("{name}.parquet"));
+        let (ok, _, err) = common::gedisim(&[
+            "simulate",
+            "--als",
+            data(als).to_str().unwrap(),
+            "--footprints",
+            csv.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(ok, "{err}");
+        assert_eq!(err.contains("COPC: "), name == "copc", "{err}");
+        let file = std::fs::File::open(&out).unwrap();
+        let reader =
+            parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap().build().unwrap();
+        let batches: Vec<_> = reader.map(|b| b.unwrap()).collect();
+        tables.push(arrow::compute::concat_batches(&batches[0].schema(), &batches).unwrap());
+    }
+    let (laz, copc) = (&tables[0], &tables[1]);
+    assert_eq!(laz.num_rows(), 9);
+    for (i, field) in laz.schema().fields().iter().enumerate() {
+        let (a, b) = (laz.column(i), copc.column(i));
+        if field.name() == "mean_scan_angle_deg" {
+            // An f32 mean summed in point order, and COPC stores the points in another order.
+            let (a, b) =
+                (a.as_primitive::<arrow::datatypes::Float32Type>(), b.as_primitive::<arrow::datatypes::Float32Type>());
+            assert!((0..a.len()).all(|r| (a.value(r) - b.value(r)).abs() <= 1e-5 * a.value(r).abs()));
+        } else {
+            assert_eq!(a.to_data(), b.to_data(), "column {}", field.name());
+        }
+    }
+}
