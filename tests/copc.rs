@@ -5,7 +5,7 @@
 mod common;
 
 use common::{data, TILES};
-use gedisim::io::copc::CopcTile;
+use gedisim::io::copc::{Attributes, CopcTile};
 use gedisim::io::las::read_points;
 use gedisim::kernels::geo::cells::Cells;
 use gedisim::kernels::sim::AlsPoints;
@@ -54,7 +54,8 @@ fn a_whole_copc_tile_holds_the_points_of_its_laz_original() {
         let laz = read_points(&data(&format!("als/{tile}.laz"))).unwrap();
         let copc = CopcTile::open(&data(&format!("als-copc/{tile}.copc.laz"))).unwrap();
         assert!(copc.header().copc, "{tile}: the COPC info VLR is found");
-        let (points, read) = copc.read(None).unwrap();
+        let (points, read) = copc.read(None, Attributes::All).unwrap();
+
         assert_eq!(read.nodes, read.nodes_in_tile);
         assert_eq!(read.points_decoded, laz.len() as u64);
         assert!(canonical(&points) == canonical(&laz), "{tile}: the COPC points differ from the LAZ points");
@@ -80,7 +81,7 @@ fn the_cells_asked_for_are_read_and_only_their_nodes_decoded() {
         let tile = CopcTile::open(&data(copc)).unwrap();
         assert_eq!(tile.cube_inferred(), inferred, "{copc}");
         let cells = some_cells(&laz);
-        let (points, read) = tile.read(Some(&cells)).unwrap();
+        let (points, read) = tile.read(Some(&cells), Attributes::All).unwrap();
         let want = in_cells(&laz, &cells);
         assert!(!want.is_empty() && want.len() < laz.len());
         assert!(
@@ -101,6 +102,22 @@ fn the_cells_asked_for_are_read_and_only_their_nodes_decoded() {
 }
 
 #[test]
+fn a_read_without_the_pulse_identity_skips_gps_time_and_point_source_only() {
+    let tile = CopcTile::open(&data("als-copc/lidarforfuel_2_bas_lig.copc.laz")).unwrap();
+    let (all, _) = tile.read(None, Attributes::All).unwrap();
+    let (some, _) = tile.read(None, Attributes::WithoutPulseIdentity).unwrap();
+    assert!(some.gps_time.iter().all(|t| t.is_nan()) && some.point_source_id.iter().all(|&s| s == 0));
+    assert!(all.gps_time.iter().all(|t| t.is_finite()) && all.point_source_id.iter().any(|&s| s != 0));
+    let strip = |p: &AlsPoints| {
+        let mut p = p.clone();
+        p.gps_time.fill(0.0);
+        p.point_source_id.fill(0);
+        p
+    };
+    assert!(strip(&all) == strip(&some), "every other attribute decoded alike");
+}
+
+#[test]
 fn a_cube_that_cannot_be_inferred_costs_a_whole_read_not_a_point() {
     // copclib file whose octree cube has its corner at the bounds' minimum (0.46 m off the centred
     // cube that is inferred) and is not recorded in the info VLR.
@@ -109,7 +126,7 @@ fn a_cube_that_cannot_be_inferred_costs_a_whole_read_not_a_point() {
         CopcTile::open(&data("als-copc/pdal-ign-plugin_mnx_input_crop_2.corner-cube-unrecorded.copc.laz")).unwrap();
     assert!(tile.cube_inferred());
     let cells = some_cells(&laz);
-    let (points, read) = tile.read(Some(&cells)).unwrap();
+    let (points, read) = tile.read(Some(&cells), Attributes::All).unwrap();
     assert!(read.read_whole, "a point outside its inferred node is found");
     assert_eq!(read.nodes, read.nodes_in_tile);
     assert!(canonical(&points) == canonical(&in_cells(&laz, &cells)));

@@ -28,6 +28,31 @@ const MAX_LEVEL: i32 = 24;
 /// Size of one hierarchy entry (COPC 1.0: key 16, offset 8, byte size 4, point count 4).
 const ENTRY_BYTES: usize = 32;
 
+/// The point attributes a read decodes. Each attribute is a layer of its own in a COPC chunk, and a
+/// layer not asked for is skipped, not decoded (`laz`'s selective decompression).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Attributes {
+    /// Every attribute of [`AlsPoints`].
+    All,
+    /// All but the pulse identity: GPS time (NaN) and point source (0), which only density
+    /// normalisation by pulse uses. GPS time is the costliest layer to decode.
+    WithoutPulseIdentity,
+}
+
+impl Attributes {
+    fn selection(self) -> laz::DecompressionSelection {
+        let s = laz::DecompressionSelection::base()
+            .decompress_z()
+            .decompress_classification()
+            .decompress_intensity()
+            .decompress_scan_angle();
+        match self {
+            Attributes::All => s.decompress_point_source_id().decompress_gps_time(),
+            Attributes::WithoutPulseIdentity => s,
+        }
+    }
+}
+
 /// An opened COPC tile: its header facts and its octree's data nodes, checked.
 #[derive(Debug, Clone)]
 pub struct CopcTile {
@@ -149,7 +174,7 @@ impl CopcTile {
     ///
     /// Every decoded point is checked against its node's bounds: if one lies outside, the
     /// hierarchy cannot say where points are, and every node is decoded (`read_whole`).
-    pub fn read(&self, cells: Option<&Cells>) -> Result<(AlsPoints, CopcRead)> {
+    pub fn read(&self, cells: Option<&Cells>, attributes: Attributes) -> Result<(AlsPoints, CopcRead)> {
         let selected: Vec<Node> = match cells {
             Some(c) => self
                 .nodes
@@ -162,9 +187,9 @@ impl CopcTile {
                 .collect(),
             None => self.nodes.clone(),
         };
-        let (mut points, mut stats, outside) = self.decode(&selected, cells)?;
+        let (mut points, mut stats, outside) = self.decode(&selected, cells, attributes)?;
         if outside && cells.is_some() {
-            (points, stats, _) = self.decode(&self.nodes, cells)?;
+            (points, stats, _) = self.decode(&self.nodes, cells, attributes)?;
             stats.read_whole = true;
         }
         stats.nodes_in_tile = self.nodes.len();
@@ -175,7 +200,12 @@ impl CopcTile {
 
     /// Decode `nodes` (in file order), keeping the points in `cells`; also says whether a point
     /// lay outside its node.
-    fn decode(&self, nodes: &[Node], cells: Option<&Cells>) -> Result<(AlsPoints, CopcRead, bool)> {
+    fn decode(
+        &self,
+        nodes: &[Node],
+        cells: Option<&Cells>,
+        attributes: Attributes,
+    ) -> Result<(AlsPoints, CopcRead, bool)> {
         let path = &self.header.path;
         let open = || -> Result<_> {
             let file = std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
@@ -189,7 +219,7 @@ impl CopcTile {
             .par_iter()
             .map_init(open, |decompressor, node| {
                 let decompressor = decompressor.as_mut().map_err(|e| Error::file(path, e.to_string()))?;
-                self.decode_node(decompressor, node, cells)
+                self.decode_node(decompressor, node, cells, attributes)
             })
             .collect();
         let mut points = AlsPoints::default();
@@ -214,6 +244,7 @@ impl CopcTile {
         d: &mut LayeredPointRecordDecompressor<'_, R>,
         node: &Node,
         cells: Option<&Cells>,
+        attributes: Attributes,
     ) -> Result<(AlsPoints, bool)> {
         let cannot =
             |why: String| Error::field(&self.header.path, "points", format!("cannot decode COPC node {node}: {why}"));
@@ -225,6 +256,7 @@ impl CopcTile {
             d.get_mut().seek(SeekFrom::Start(node.offset))?;
             d.reset();
             d.set_fields_from(self.laz.items()).map_err(std::io::Error::other)?;
+            d.set_selection(attributes.selection());
             d.decompress_many(&mut buf)
         }));
         decoded
@@ -234,7 +266,12 @@ impl CopcTile {
             .for_header(&self.las_header)
             .build_from_bytes(buf)
             .map_err(|e| cannot(crate::error::one_line(&e.to_string())))?;
-        let p = columns(&data);
+        let mut p = columns(&data);
+        if attributes == Attributes::WithoutPulseIdentity {
+            // A layer skipped keeps its chunk's first value: cleared so that nothing reads it.
+            p.gps_time.fill(f64::NAN);
+            p.point_source_id.fill(0);
+        }
         let b = self.bounds(node);
         let inside = |i: usize| {
             (b[0]..=b[3]).contains(&p.x[i]) && (b[1]..=b[4]).contains(&p.y[i]) && (b[2]..=b[5]).contains(&p.z[i])

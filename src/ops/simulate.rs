@@ -11,7 +11,7 @@ use crate::dataset::offsets::AppliedOffset;
 use crate::dataset::sim::{sim_batch, sim_metadata, sim_schema};
 use crate::dataset::{self, tables, AtomicParquet, Dataset};
 use crate::error::{Error, Result};
-use crate::io::copc::{CopcRead, CopcTile};
+use crate::io::copc::{Attributes, CopcRead, CopcTile};
 use crate::kernels::geo::cells::Cells;
 use crate::kernels::sim::{
     self, AlsPoints, DensityCount, Footprint, Profile, PulseModel, PulseTiming, SimConfig, Weighting,
@@ -56,15 +56,18 @@ pub struct SimulateReport {
     pub copc: Option<CopcRead>,
 }
 
-/// The points of a LAS/LAZ file that `footprints` need: a COPC tile is read only in the cells
-/// within the read radius of a footprint (and says what it decoded), any other file whole.
-pub fn read_around(als: &Path, footprints: &[Footprint], fsigma: f32) -> Result<(AlsPoints, Option<CopcRead>)> {
+/// The points of a LAS/LAZ file that `footprints` need under `cfg`: a COPC tile is read only in the
+/// cells within the read radius of a footprint, without the pulse identity unless the density is
+/// counted by pulse (and says what it decoded); any other file is read whole.
+pub fn read_around(als: &Path, footprints: &[Footprint], cfg: &SimConfig) -> Result<(AlsPoints, Option<CopcRead>)> {
     let reader = crate::io::las::TileReader::open(als)?;
     if !reader.header().copc {
         return Ok((reader.read_all()?, None));
     }
-    let cells = Cells::around(footprints.iter().map(|f| (f.x, f.y)), sim::footprint::read_radius(fsigma));
-    let (points, read) = CopcTile::open(als)?.read(Some(&cells))?;
+    let cells = Cells::around(footprints.iter().map(|f| (f.x, f.y)), sim::footprint::read_radius(cfg.fsigma));
+    let by_pulse = cfg.normalise_density && cfg.density_count == DensityCount::Pulses;
+    let attributes = if by_pulse { Attributes::All } else { Attributes::WithoutPulseIdentity };
+    let (points, read) = CopcTile::open(als)?.read(Some(&cells), attributes)?;
     Ok((points, Some(read)))
 }
 
@@ -142,7 +145,7 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
         )),
         Source::Direct { als, footprints, out, keep_all_classes } => {
             let footprints = crate::io::footprints::read_footprints_csv(footprints)?;
-            let (mut points, read) = read_around(als, &footprints, cfg.fsigma)?;
+            let (mut points, read) = read_around(als, &footprints, &cfg)?;
             copc = read;
             if profile == Profile::Default && !keep_all_classes {
                 points = drop_ingest_classes(&points);
