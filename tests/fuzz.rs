@@ -1,8 +1,9 @@
 //! Seeded mutation fuzzing of every file format gedisim reads: small files made from the real
-//! bundled data (LAZ and LAS points of a LiDAR HD tile, an L1B/L2A granule pair of real shots, a
-//! land-cover GeoTIFF, a footprint CSV), truncated, bit-flipped and with fields overwritten by
-//! extreme values. Every case must end in `Ok` or a one-line error: no panic, no abort, and for
-//! ALS ingest no table file without its registry row and no temporary file.
+//! bundled data (LAZ and LAS points of a LiDAR HD tile, a COPC tile written by copclib, an
+//! L1B/L2A granule pair of real shots, a land-cover GeoTIFF, a footprint CSV), truncated,
+//! bit-flipped and with fields overwritten by extreme values. Every case must end in `Ok` or a
+//! one-line error: no panic, no abort, and for ALS ingest no table file without its registry row
+//! and no temporary file.
 //!
 //! `cargo test --test fuzz` runs a bounded number of cases per format (seconds). More cases, a
 //! nightly-style run: `GEDISIM_FUZZ_CASES=20000 cargo test --test fuzz` (cases per format);
@@ -78,7 +79,16 @@ fn fuzz(name: &str, original: &[u8], hot: usize, cases: usize, read: impl Fn(&Pa
         let (bytes, what) = mutate(&mut rng, original, hot);
         let path = dir.path().join(format!("case{case}.{ext}"));
         std::fs::write(&path, &bytes).unwrap();
-        match catch_unwind(AssertUnwindSafe(|| read(&path, case))) {
+        let t0 = std::time::Instant::now();
+        let result = catch_unwind(AssertUnwindSafe(|| read(&path, case)));
+        if t0.elapsed().as_secs_f64() > 0.3 {
+            eprintln!(
+                "SLOW {name} case {case} ({what}): {:.2} s {:?}",
+                t0.elapsed().as_secs_f64(),
+                result.as_ref().map(|r| r.as_ref().err().map(|e| e.to_string()))
+            );
+        }
+        match result {
             Ok(Ok(())) => ok += 1,
             Ok(Err(e)) => {
                 let line = e.to_string();
@@ -151,6 +161,46 @@ fn fuzz_laz_tiles() {
     read_tile(&tile, 0).expect("the unmutated tile reads");
     let offset = u32::from_le_bytes(original[96..100].try_into().unwrap()) as usize;
     fuzz("small.laz", &original, offset + 64, cases(1500), read_tile);
+}
+
+/// A small COPC tile written by copclib (4000 real points, 102 nodes, 8 hierarchy pages) mutated
+/// in its header and VLRs or in its hierarchy (the EVLRs at its end), then read whole and around
+/// two footprints. Fewer cases than the other formats: each read starts 102 LAZ chunks, whose
+/// decoders set up their models anew (≈ 70 ms a case).
+#[test]
+fn fuzz_copc_tiles() {
+    use gedisim::io::copc::{Attributes, CopcTile};
+    use gedisim::kernels::geo::cells::Cells;
+    let original = std::fs::read(data("als-copc/small-4000.depth3-paged.copc.laz")).unwrap();
+    let header = las::raw::Header::read_from(original.as_slice()).unwrap();
+    let evlrs = header.evlr.expect("COPC has EVLRs").start_of_first_evlr as usize;
+    let cells = Cells::around([(689_410.0, 6_735_460.0), (689_440.0, 6_735_490.0)], 18.4);
+    let read = |path: &Path, _: usize| -> Result<(), Error> {
+        let tile = CopcTile::open(path)?;
+        tile.read(Some(&cells), Attributes::All)?;
+        tile.read(None, Attributes::WithoutPulseIdentity)?;
+        Ok(())
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let whole = dir.path().join("small.copc.laz");
+    std::fs::write(&whole, &original).unwrap();
+    read(&whole, 0).expect("the unmutated tile reads");
+    // The header and VLRs (hot: the first 1000 bytes) as they are, and the hierarchy moved to the
+    // front so that `mutate`'s overwrites aim at it: mutated, then put back.
+    fuzz("small.copc.laz", &original, 1000, cases(250), read);
+    let (points, hierarchy) = original.split_at(evlrs);
+    let rotated = [hierarchy, points].concat();
+    fuzz("hierarchy.copc.laz", &rotated, hierarchy.len(), cases(250), |path, case| {
+        let mut b = std::fs::read(path).unwrap();
+        if b.len() >= hierarchy.len() {
+            b.rotate_left(hierarchy.len());
+        }
+        let back = path.with_extension("back.laz");
+        std::fs::write(&back, &b).unwrap();
+        let r = read(&back, case);
+        let _ = std::fs::remove_file(&back);
+        r
+    });
 }
 
 #[test]

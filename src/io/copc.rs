@@ -59,6 +59,11 @@ pub struct CopcTile {
     header: TileHeader,
     las_header: las::Header,
     laz: laz::LazVlr,
+    /// Bytes of one point record.
+    record: usize,
+    /// Layers in a chunk (COPC's point formats 6–8: 9 for the point, 1 for RGB, 1 for NIR, 1 per
+    /// extra byte).
+    layers: usize,
     /// The octree's cube: centre (x, y, z) and half the side.
     cube: [f64; 4],
     /// The cube was not recorded in the COPC info VLR and was taken from the header bounds.
@@ -118,9 +123,11 @@ impl CopcTile {
             file.seek(SeekFrom::Start(offset)).and_then(|_| file.read_exact(&mut buf)).map_err(|e| e.to_string())?;
             Ok(buf)
         };
-        let nodes =
-            hierarchy_nodes((root_at, root_size), read_page, |n| check_node(n, layout.data_start, layout.file_len))
-                .map_err(|m| bad("COPC hierarchy", m))?;
+        let record = usize::from(h.point_format().len());
+        let nodes = hierarchy_nodes((root_at, root_size), read_page, |n| {
+            check_node(n, record, layout.data_start, layout.file_len)
+        })
+        .map_err(|m| bad("COPC hierarchy", m))?;
         let announced = header.number_of_points;
         let held: u64 = nodes.iter().map(|n| n.points).sum();
         if held != announced {
@@ -146,7 +153,22 @@ impl CopcTile {
             ([(b[0] + b[3]) / 2.0, (b[1] + b[4]) / 2.0, (b[2] + b[5]) / 2.0, half], true)
         };
         let laz = h.laz_vlr().map_err(|e| bad("laszip VLR", crate::error::one_line(&e.to_string())))?;
-        Ok(CopcTile { header, las_header: h, laz, cube, cube_inferred, nodes, slack })
+        let layers = laz
+            .items()
+            .iter()
+            .map(|item| match item.item_type() {
+                laz::LazItemType::Point14 => Some(9),
+                laz::LazItemType::RGB14 => Some(1),
+                laz::LazItemType::RGBNIR14 => Some(2),
+                laz::LazItemType::Byte14(n) => Some(usize::from(n)),
+                _ => None,
+            })
+            .sum::<Option<usize>>()
+            .filter(|_| (6..=8).contains(&header.point_format))
+            .ok_or_else(|| {
+                bad("point_format", format!("{}: COPC stores point formats 6, 7 and 8 only", header.point_format))
+            })?;
+        Ok(CopcTile { header, las_header: h, laz, record, layers, cube, cube_inferred, nodes, slack })
     }
 
     /// The header facts.
@@ -207,19 +229,14 @@ impl CopcTile {
         attributes: Attributes,
     ) -> Result<(AlsPoints, CopcRead, bool)> {
         let path = &self.header.path;
-        let open = || -> Result<_> {
-            let file = std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
-            let mut d = LayeredPointRecordDecompressor::new(std::io::BufReader::new(file));
-            d.set_fields_from(self.laz.items()).map_err(|e| Error::field(path, "laszip VLR", e))?;
-            Ok(d)
-        };
+        let open = || std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")));
         let mut nodes = nodes.to_vec();
         nodes.sort_by_key(|n| n.offset);
         let parts: Vec<Result<(AlsPoints, bool)>> = nodes
             .par_iter()
-            .map_init(open, |decompressor, node| {
-                let decompressor = decompressor.as_mut().map_err(|e| Error::file(path, e.to_string()))?;
-                self.decode_node(decompressor, node, cells, attributes)
+            .map_init(open, |file, node| {
+                let file = file.as_mut().map_err(|e| Error::file(path, e.to_string()))?;
+                self.decode_node(file, node, cells, attributes)
             })
             .collect();
         let mut points = AlsPoints::default();
@@ -239,22 +256,25 @@ impl CopcTile {
     }
 
     /// One node's points in `cells`, and whether one of its points lay outside its bounds.
-    fn decode_node<R: Read + Seek + Send + Sync>(
+    fn decode_node(
         &self,
-        d: &mut LayeredPointRecordDecompressor<'_, R>,
+        file: &mut std::fs::File,
         node: &Node,
         cells: Option<&Cells>,
         attributes: Attributes,
     ) -> Result<(AlsPoints, bool)> {
         let cannot =
             |why: String| Error::field(&self.header.path, "points", format!("cannot decode COPC node {node}: {why}"));
-        let record = usize::from(self.las_header.point_format().len());
-        let mut buf = vec![0u8; node.points as usize * record];
-        // A COPC chunk starts a fresh LAZ layered chunk. The `laz` decoder panics on some corrupt
-        // streams: caught and reported, as in `io::las`.
+        let mut chunk = vec![0u8; node.bytes as usize];
+        file.seek(SeekFrom::Start(node.offset))
+            .and_then(|_| file.read_exact(&mut chunk))
+            .map_err(|e| cannot(e.to_string()))?;
+        self.check_chunk(&chunk, node).map_err(cannot)?;
+        let mut buf = vec![0u8; node.points as usize * self.record];
+        // A COPC chunk is a LAZ layered chunk of its own, decoded from memory. The `laz` decoder
+        // panics on some corrupt streams: caught and reported, as in `io::las`.
         let decoded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> std::io::Result<()> {
-            d.get_mut().seek(SeekFrom::Start(node.offset))?;
-            d.reset();
+            let mut d = LayeredPointRecordDecompressor::new(std::io::Cursor::new(chunk.as_slice()));
             d.set_fields_from(self.laz.items()).map_err(std::io::Error::other)?;
             d.set_selection(attributes.selection());
             d.decompress_many(&mut buf)
@@ -293,6 +313,28 @@ impl CopcTile {
     }
 }
 
+impl CopcTile {
+    /// A chunk's layout checked before the decoder trusts it: its first point, its point count
+    /// (equal to the node's) and its layer sizes (inside the chunk; the decoder allocates what
+    /// they announce).
+    fn check_chunk(&self, chunk: &[u8], node: &Node) -> std::result::Result<(), String> {
+        let head = self.record + 4 + 4 * self.layers;
+        if chunk.len() < head {
+            return Err(format!("a chunk of {} bytes cannot hold its {head}-byte head", chunk.len()));
+        }
+        let u32_at = |i: usize| u64::from(u32::from_le_bytes(chunk[i..i + 4].try_into().expect("4 bytes")));
+        let count = u32_at(self.record);
+        if count != node.points {
+            return Err(format!("the chunk holds {count} points, the hierarchy says {}", node.points));
+        }
+        let layers: u64 = (0..self.layers).map(|l| u32_at(self.record + 4 + 4 * l)).sum();
+        if layers > (chunk.len() - head) as u64 {
+            return Err(format!("its layers announce {layers} bytes, the chunk holds {}", chunk.len() - head));
+        }
+        Ok(())
+    }
+}
+
 /// One data node of the octree: its key, and where its LAZ chunk lies.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Node {
@@ -310,11 +352,19 @@ impl std::fmt::Display for Node {
     }
 }
 
-/// A data node checked against the file: its chunk inside the point data.
-fn check_node(n: &Node, data_start: u64, file_len: u64) -> std::result::Result<(), String> {
+/// Most point bytes one compressed byte may announce: far above what LAZ achieves (5–10), and a
+/// bound on what a node's count makes the reader allocate.
+const MAX_EXPANSION: u64 = 1000;
+
+/// A data node checked against the file: its chunk inside the point data, its count within what
+/// its bytes can hold (`record`-byte points).
+fn check_node(n: &Node, record: usize, data_start: u64, file_len: u64) -> std::result::Result<(), String> {
     let end = n.offset.checked_add(n.bytes);
     if n.bytes == 0 || n.offset < data_start || end.is_none_or(|end| end > file_len) {
         return Err(format!("node {n}: a chunk of {} bytes at byte {} lies outside the point data", n.bytes, n.offset));
+    }
+    if n.points.saturating_mul(record as u64) > MAX_EXPANSION.saturating_mul(n.bytes) {
+        return Err(format!("node {n}: {} points cannot come from {} compressed bytes", n.points, n.bytes));
     }
     Ok(())
 }
@@ -393,7 +443,7 @@ mod tests {
                 _ => Err(format!("a page of {size} bytes at byte {offset} lies outside the hierarchy records")),
             }
         };
-        hierarchy_nodes((1000, pages[0].len() as u64), read, |n| check_node(n, 100, 900))
+        hierarchy_nodes((1000, pages[0].len() as u64), read, |n| check_node(n, 30, 100, 900))
     }
 
     #[test]
@@ -413,5 +463,7 @@ mod tests {
         assert!(err(&[entry(0, 0, 895, 10, 1)]).contains("outside the point data"));
         assert!(err(&[entry(0, 0, 500, -10, 1)]).contains("bytes"));
         assert!(err(&[entry(0, 0, 500, 10, -7)]).contains("point count"));
+        assert!(err(&[entry(0, 0, 500, 10, 400)]).contains("cannot come from"));
+        // 12,000 bytes from 10
     }
 }

@@ -297,7 +297,10 @@ pub(crate) fn check_layout(path: &Path, file: &mut std::fs::File) -> Result<Layo
                 file.seek(SeekFrom::Start(data_start)).map_err(io)?;
                 let table = laz::laszip::ChunkTable::read_from(&mut *file, &vlr)
                     .map_err(|e| bad("chunk table", crate::error::one_line(&e.to_string())))?;
-                let capacity: u64 = table.as_ref().iter().map(|c| c.point_count).sum();
+                let capacity =
+                    table.as_ref().iter().try_fold(0u64, |sum, c| sum.checked_add(c.point_count)).ok_or_else(|| {
+                        bad("chunk table", "its point counts add up to more than any file holds".into())
+                    })?;
                 let smallest = if vlr.uses_variable_size_chunks() {
                     capacity
                 } else {
