@@ -133,6 +133,24 @@ fn a_cube_that_cannot_be_inferred_costs_a_whole_read_not_a_point() {
 }
 
 #[test]
+fn header_bounds_that_say_nothing_cost_a_whole_read_not_a_point() {
+    // The small copclib tile with its header's maximum x made NaN: the recorded cube no longer holds
+    // the bounds, and a cube inferred from them is not finite, so it can select no node.
+    let mut bytes = std::fs::read(data("als-copc/small-4000.depth3-paged.copc.laz")).unwrap();
+    bytes[179..187].copy_from_slice(&f64::NAN.to_le_bytes()); // max x (LAS 1.4 header)
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("nan-bounds.copc.laz");
+    std::fs::write(&path, &bytes).unwrap();
+    let good = CopcTile::open(&data("als-copc/small-4000.depth3-paged.copc.laz")).unwrap();
+    let (all, _) = good.read(None, Attributes::All).unwrap();
+    let cells = some_cells(&all);
+    let tile = CopcTile::open(&path).unwrap();
+    let (points, read) = tile.read(Some(&cells), Attributes::All).unwrap();
+    assert!(read.read_whole);
+    assert!(canonical(&points) == canonical(&in_cells(&all, &cells)));
+}
+
+#[test]
 fn a_plain_laz_file_is_not_taken_for_copc() {
     let e = CopcTile::open(&data("als/lidarforfuel_1_42.laz")).unwrap_err().to_string();
     assert!(e.contains("COPC info VLR") && e.contains("lidarforfuel_1_42.laz"), "{e}");

@@ -209,8 +209,12 @@ impl CopcTile {
                 .collect(),
             None => self.nodes.clone(),
         };
+        // A cube that says nothing (header bounds not finite) selects nothing: decode everything.
+        let unknown = !self.cube.iter().all(|v| v.is_finite());
+        let selected = if unknown { self.nodes.clone() } else { selected };
         let (mut points, mut stats, outside) = self.decode(&selected, cells, attributes)?;
-        if outside && cells.is_some() {
+        stats.read_whole = unknown;
+        if outside && cells.is_some() && !unknown {
             (points, stats, _) = self.decode(&self.nodes, cells, attributes)?;
             stats.read_whole = true;
         }
