@@ -93,14 +93,20 @@ pub struct CopcRead {
 impl CopcTile {
     /// Open a COPC file: header, COPC info VLR and hierarchy read and checked.
     pub fn open(path: &Path) -> Result<Self> {
+        Self::open_if_copc(path)?.ok_or_else(|| Error::field(path, "COPC info VLR", "missing: not a COPC file"))
+    }
+
+    /// Open a LAS/LAZ file as COPC if its header carries the COPC info VLR; `None` otherwise.
+    pub fn open_if_copc(path: &Path) -> Result<Option<Self>> {
         let bad = |field: &str, msg: String| Error::field(path, field, msg);
         let mut file = std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
         let layout = check_layout(path, &mut file)?;
-        let h = las::Header::new(std::io::BufReader::new(file)).map_err(|e| {
+        let mut file = std::io::BufReader::new(file);
+        let h = las::Header::new(&mut file).map_err(|e| {
             bad("header", format!("cannot read the header or its VLRs: {}", crate::error::one_line(&e.to_string())))
         })?;
         let header = tile_header(path, &h)?;
-        let info = h.copc_info_vlr().ok_or_else(|| bad("COPC info VLR", "missing: not a COPC file".into()))?;
+        let Some(info) = h.copc_info_vlr() else { return Ok(None) };
         // The root page's place (COPC 1.0 info VLR, bytes 40–55), which the crate keeps private.
         let info_data = &h.vlrs().iter().find(|v| v.is_copc_info()).expect("info VLR found above").data;
         let u64_at = |i: usize| info_data.get(i..i + 8).map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")));
@@ -110,7 +116,6 @@ impl CopcTile {
         if layout.copc_hierarchy.is_empty() {
             return Err(bad("COPC hierarchy EVLR", "missing".into()));
         }
-        let mut file = std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
         let read_page = |offset: u64, size: u64| -> std::result::Result<Vec<u8>, String> {
             let inside = layout
                 .copc_hierarchy
@@ -124,10 +129,12 @@ impl CopcTile {
             Ok(buf)
         };
         let record = usize::from(h.point_format().len());
-        let nodes = hierarchy_nodes((root_at, root_size), read_page, |n| {
+        let mut nodes = hierarchy_nodes((root_at, root_size), read_page, |n| {
             check_node(n, record, layout.data_start, layout.file_len)
         })
         .map_err(|m| bad("COPC hierarchy", m))?;
+        // In file order: a read then moves forward through the file.
+        nodes.sort_by_key(|n| n.offset);
         let announced = header.number_of_points;
         let held: u64 = nodes.iter().map(|n| n.points).sum();
         if held != announced {
@@ -168,7 +175,7 @@ impl CopcTile {
             .ok_or_else(|| {
                 bad("point_format", format!("{}: COPC stores point formats 6, 7 and 8 only", header.point_format))
             })?;
-        Ok(CopcTile { header, las_header: h, laz, record, layers, cube, cube_inferred, nodes, slack })
+        Ok(Some(CopcTile { header, las_header: h, laz, record, layers, cube, cube_inferred, nodes, slack }))
     }
 
     /// The header facts.
@@ -197,8 +204,10 @@ impl CopcTile {
     /// Every decoded point is checked against its node's bounds: if one lies outside, the
     /// hierarchy cannot say where points are, and every node is decoded (`read_whole`).
     pub fn read(&self, cells: Option<&Cells>, attributes: Attributes) -> Result<(AlsPoints, CopcRead)> {
+        // A cube that says nothing (header bounds not finite) selects nothing: decode everything.
+        let unknown = !self.cube.iter().all(|v| v.is_finite());
         let selected: Vec<Node> = match cells {
-            Some(c) => self
+            Some(c) if !unknown => self
                 .nodes
                 .iter()
                 .filter(|n| {
@@ -207,11 +216,8 @@ impl CopcTile {
                 })
                 .copied()
                 .collect(),
-            None => self.nodes.clone(),
+            _ => self.nodes.clone(),
         };
-        // A cube that says nothing (header bounds not finite) selects nothing: decode everything.
-        let unknown = !self.cube.iter().all(|v| v.is_finite());
-        let selected = if unknown { self.nodes.clone() } else { selected };
         let (mut points, mut stats, outside) = self.decode(&selected, cells, attributes)?;
         stats.read_whole = unknown;
         if outside && cells.is_some() && !unknown {
@@ -224,8 +230,8 @@ impl CopcTile {
         Ok((points, stats))
     }
 
-    /// Decode `nodes` (in file order), keeping the points in `cells`; also says whether a point
-    /// lay outside its node.
+    /// Decode `nodes` (in file order, as `self.nodes` keeps them), keeping the points in `cells`;
+    /// also says whether a point lay outside its node.
     fn decode(
         &self,
         nodes: &[Node],
@@ -234,8 +240,6 @@ impl CopcTile {
     ) -> Result<(AlsPoints, CopcRead, bool)> {
         let path = &self.header.path;
         let open = || std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")));
-        let mut nodes = nodes.to_vec();
-        nodes.sort_by_key(|n| n.offset);
         let parts: Vec<Result<(AlsPoints, bool)>> = nodes
             .par_iter()
             .map_init(open, |file, node| {

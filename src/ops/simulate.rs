@@ -60,14 +60,12 @@ pub struct SimulateReport {
 /// cells within the read radius of a footprint, without the pulse identity unless the density is
 /// counted by pulse (and says what it decoded); any other file is read whole.
 pub fn read_around(als: &Path, footprints: &[Footprint], cfg: &SimConfig) -> Result<(AlsPoints, Option<CopcRead>)> {
-    let reader = crate::io::las::TileReader::open(als)?;
-    if !reader.header().copc {
-        return Ok((reader.read_all()?, None));
-    }
+    let Some(tile) = CopcTile::open_if_copc(als)? else {
+        return Ok((crate::io::las::read_points(als)?, None));
+    };
     let cells = Cells::around(footprints.iter().map(|f| (f.x, f.y)), sim::footprint::read_radius(cfg.fsigma));
-    let by_pulse = cfg.normalise_density && cfg.density_count == DensityCount::Pulses;
-    let attributes = if by_pulse { Attributes::All } else { Attributes::WithoutPulseIdentity };
-    let (points, read) = CopcTile::open(als)?.read(Some(&cells), attributes)?;
+    let attributes = if cfg.counts_pulses() { Attributes::All } else { Attributes::WithoutPulseIdentity };
+    let (points, read) = tile.read(Some(&cells), attributes)?;
     Ok((points, Some(read)))
 }
 

@@ -1,8 +1,7 @@
 //! The windows of a tile that a piece of work needs, as a set of square cells of [`READ_CELL_M`]:
 //! each footprint or shot asks for the square of ALS around it, and a COPC tile is read only
 //! where its octree nodes meet one of these cells (docs/copc.md). A set of cells, unlike a list of
-//! overlapping squares, can be tested per point in constant time and subtracted from what was
-//! read before.
+//! overlapping squares, can be tested per point in constant time.
 
 use std::collections::HashSet;
 
@@ -38,11 +37,6 @@ impl Cells {
         Cells { set }
     }
 
-    /// The cells from their integer keys (as [`Cells::keys`] gives them).
-    pub fn from_keys(keys: impl IntoIterator<Item = (i64, i64)>) -> Self {
-        Cells { set: keys.into_iter().collect() }
-    }
-
     /// Every cell's (column, row), sorted.
     pub fn keys(&self) -> Vec<(i64, i64)> {
         let mut k: Vec<_> = self.set.iter().copied().collect();
@@ -76,29 +70,6 @@ impl Cells {
             (x0..=x1).any(|ix| (y0..=y1).any(|iy| self.set.contains(&(ix, iy))))
         }
     }
-
-    /// The cells of `self` that `other` lacks.
-    pub fn minus(&self, other: &Cells) -> Cells {
-        Cells { set: self.set.difference(&other.set).copied().collect() }
-    }
-
-    /// The cells of either.
-    pub fn union(&self, other: &Cells) -> Cells {
-        Cells { set: self.set.union(&other.set).copied().collect() }
-    }
-
-    /// The cells that lie in the box [xmin, ymin, xmax, ymax] (a tile's extent) at least in part.
-    pub fn within(&self, b: [f64; 4]) -> Cells {
-        let (x0, x1, y0, y1) = (index(b[0]), index(b[2]), index(b[1]), index(b[3]));
-        Cells {
-            set: self
-                .set
-                .iter()
-                .copied()
-                .filter(|&(ix, iy)| (x0..=x1).contains(&ix) && (y0..=y1).contains(&iy))
-                .collect(),
-        }
-    }
 }
 
 #[cfg(test)]
@@ -123,15 +94,5 @@ mod tests {
         assert!(c.meets([0.0, -1000.0, 1000.0, 1000.0])); // larger than the set: walks the set
         assert!(!c.meets([0.0, 0.0, 99.9, 50.0]));
         assert!(!c.meets([110.0, 0.0, 100.0, 10.0])); // empty box
-    }
-
-    #[test]
-    fn set_algebra() {
-        let a = Cells::around([(5.0, 5.0), (55.0, 5.0)], 1.0);
-        let b = Cells::around([(5.0, 5.0)], 1.0);
-        assert_eq!(a.minus(&b).keys(), vec![(5, 0)]);
-        assert_eq!(b.union(&a.minus(&b)), a);
-        assert_eq!(a.within([0.0, 0.0, 20.0, 20.0]), b);
-        assert_eq!(Cells::from_keys(a.keys()), a);
     }
 }

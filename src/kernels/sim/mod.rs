@@ -171,6 +171,12 @@ impl SimConfig {
             },
         }
     }
+
+    /// Whether the density normalisation counts pulses, which needs each return's pulse identity
+    /// (GPS time and flight line).
+    pub fn counts_pulses(&self) -> bool {
+        self.normalise_density && self.density_count == DensityCount::Pulses
+    }
 }
 
 /// A footprint centre to simulate.
@@ -287,7 +293,7 @@ pub fn simulate(
     let half = (max_sep * max_sep).sqrt();
     let sim: fn(&Job) -> Outcome =
         if cfg.quirks.f32_sums { simulate_footprint::<f32> } else { simulate_footprint::<f64> };
-    let by_pulse = cfg.normalise_density && cfg.density_count == DensityCount::Pulses;
+    let by_pulse = cfg.counts_pulses();
     let run = |fp: &Footprint, pts: &AlsPoints, pulses: Option<&PulseIndex>, cand: Vec<u32>| {
         if !(fp.x.is_finite() && fp.y.is_finite()) {
             return Err(SkipReason::NoPoints);
