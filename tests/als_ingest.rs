@@ -94,7 +94,7 @@ fn real_tiles_counts_attributes_and_metadata() {
     // Keeping every class brings the 250 class-65 points back.
     let tmp2 = tempfile::tempdir().unwrap();
     let crop = data("als/pdal-ign-plugin_mnx_input_crop_2.laz");
-    ingest(tmp2.path(), &[&crop], &AlsOptions { keep_all_classes: true, epsg: None }).unwrap();
+    ingest(tmp2.path(), &[&crop], &AlsOptions { keep_all_classes: true, ..Default::default() }).unwrap();
     assert_eq!(rows(&read_table(&tmp2.path().join("als"))), 221_565);
 }
 

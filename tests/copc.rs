@@ -196,3 +196,202 @@ fn simulate_from_copc_equals_simulate_from_the_laz_original() {
         }
     }
 }
+
+/// Two granules of a world over the COPC tile, and their runs: the first alone, then both.
+mod dataset_path {
+    use super::*;
+    use arrow::array::{Array, AsArray};
+    use arrow::datatypes::{Float32Type, Float64Type, UInt64Type};
+    use gedisim::dataset::als::DROPPED_CLASSES;
+    use gedisim::ops::collocate::CollocateOptions;
+    use gedisim::ops::ingest_als::TileOutcome;
+    use gedisim::ops::progress::NoProgress;
+    use gedisim::ops::run::{run_study, RunOptions, RunReport};
+    use std::path::{Path, PathBuf};
+
+    const COPC: &str = "als-copc/lidarforfuel_1_42.copc.laz";
+    const LAZ: &str = "als/lidarforfuel_1_42.laz";
+
+    fn run(ds: &Path, als: &str, granules: &[PathBuf]) -> RunReport {
+        let opts = RunOptions {
+            als: vec![data(als)],
+            l1b: granules.iter().filter(|f| f.to_string_lossy().contains("GEDI01_B")).cloned().collect(),
+            l2a: granules.iter().filter(|f| f.to_string_lossy().contains("GEDI02_A")).cloned().collect(),
+            collocate: CollocateOptions { min_segment: 1, ..CollocateOptions::default() },
+            ..RunOptions::new(ds)
+        };
+        run_study(&opts, &NoProgress).unwrap()
+    }
+
+    fn table(ds: &Path, name: &str) -> Vec<(PathBuf, arrow::record_batch::RecordBatch)> {
+        common::files_with_suffix(&ds.join(name), ".parquet")
+            .into_iter()
+            .map(|f| {
+                let file = std::fs::File::open(&f).unwrap();
+                let r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap();
+                let batches: Vec<_> = r.build().unwrap().map(|b| b.unwrap()).collect();
+                (f, arrow::compute::concat_batches(&batches[0].schema(), &batches).unwrap())
+            })
+            .collect()
+    }
+
+    /// The cells the tile was read in, from its `tiles/` row.
+    fn read_cells(ds: &Path) -> Cells {
+        let (_, row) = table(ds, "tiles").pop().unwrap();
+        let text = row.column_by_name("read_window").unwrap().as_string::<i32>().value(0).to_string();
+        let cells = Cells::parse(&text, 1 << 20).unwrap();
+        let n = row.column_by_name("read_cells").unwrap().as_primitive::<UInt64Type>().value(0);
+        assert_eq!(n as usize, cells.len());
+        cells
+    }
+
+    /// The points of the LAZ original the ingest keeps (classes not dropped) inside `cells`.
+    fn laz_points_in(cells: &Cells) -> Vec<Record> {
+        let all = read_points(&data(LAZ)).unwrap();
+        let keep: Vec<u32> = (0..all.len() as u32)
+            .filter(|&i| !DROPPED_CLASSES.contains(&all.classification[i as usize]))
+            .filter(|&i| cells.contains(all.x[i as usize], all.y[i as usize]))
+            .collect();
+        canonical(&all.permuted(&keep))
+    }
+
+    fn als_points(ds: &Path) -> Vec<Record> {
+        let mut p = AlsPoints::default();
+        for f in common::files_with_suffix(&ds.join("als"), ".parquet") {
+            p.extend_from(&gedisim::dataset::als::read_file_points(&f).unwrap());
+        }
+        canonical(&p)
+    }
+
+    /// The same columns, but for the f32 mean scan angle (summed in point order, and the tiles store
+    /// their points in different orders).
+    fn assert_same_columns(a: &arrow::record_batch::RecordBatch, b: &arrow::record_batch::RecordBatch) {
+        assert_eq!(a.schema(), b.schema());
+        for (i, field) in a.schema().fields().iter().enumerate() {
+            let (x, y) = (a.column(i), b.column(i));
+            if field.name() == "mean_scan_angle_deg" {
+                let (x, y) = (x.as_primitive::<Float32Type>(), y.as_primitive::<Float32Type>());
+                assert!((0..x.len()).all(|r| (x.value(r) - y.value(r)).abs() <= 1e-5 * x.value(r).abs()));
+            } else {
+                assert_eq!(x.to_data(), y.to_data(), "column {}", field.name());
+            }
+        }
+    }
+
+    /// `simulate --dataset` at `positions`, as one batch.
+    fn simulate_at(dir: &Path, ds: &Path, positions: &[(f64, f64)]) -> arrow::record_batch::RecordBatch {
+        let csv = dir.join("at.csv");
+        let rows: Vec<String> = positions.iter().enumerate().map(|(i, (x, y))| format!("p{i},{x},{y}")).collect();
+        std::fs::write(&csv, format!("id,x,y\n{}\n", rows.join("\n"))).unwrap();
+        let out = dir.join(format!("{}.parquet", ds.file_name().unwrap().to_string_lossy()));
+        let args = ["simulate", "--dataset", ds.to_str().unwrap(), "--footprints", csv.to_str().unwrap()];
+        let (ok, _, err) = common::gedisim(&[&args[..], &["--out", out.to_str().unwrap()]].concat());
+        assert!(ok, "{err}");
+        let file = std::fs::File::open(&out).unwrap();
+        let r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap();
+        let batches: Vec<_> = r.build().unwrap().map(|b| b.unwrap()).collect();
+        arrow::compute::concat_batches(&batches[0].schema(), &batches).unwrap()
+    }
+
+    #[test]
+    fn a_run_reads_copc_only_around_its_shots_tops_up_later_and_simulates_as_from_the_whole_laz() {
+        let tmp = tempfile::tempdir().unwrap();
+        let world = tmp.path().join("world");
+        let (ok, _, err) = common::gedisim(&[
+            "scenario",
+            "--effect",
+            "none",
+            "--als",
+            data(LAZ).to_str().unwrap(),
+            "--passes",
+            "2",
+            "--seed",
+            "3",
+            "--out",
+            world.to_str().unwrap(),
+        ]);
+        assert!(ok, "{err}");
+        let all = common::files_with_suffix(&world.join("gedi"), ".h5");
+        assert_eq!(all.len(), 4);
+        let stamp = |f: &PathBuf| f.file_name().unwrap().to_string_lossy().split('_').nth(2).unwrap().to_string();
+        let first: Vec<PathBuf> = all.iter().filter(|f| stamp(f) == stamp(&all[0])).cloned().collect();
+
+        // The first granule: the tile is read around its shots only.
+        let ds = tmp.path().join("copc");
+        let r1 = run(&ds, COPC, &first);
+        let TileOutcome::Ingested { window: Some(w1), .. } = &r1.tiles[0] else { panic!("{:?}", r1.tiles) };
+        let cells1 = read_cells(&ds);
+        assert_eq!((w1.cells_new, w1.cells_read), (cells1.len(), cells1.len()));
+        assert!(w1.copc.nodes < w1.copc.nodes_in_tile, "{w1:?}");
+        assert!(cells1.len() < 100, "a 100 m tile holds 100 to 121 cells; {} read", cells1.len());
+        let points1 = als_points(&ds);
+        assert_eq!(points1, laz_points_in(&cells1), "exactly the original's points of the cells read");
+
+        // Both granules: only the cells still missing are read, and no point twice.
+        let r2 = run(&ds, COPC, &all);
+        let TileOutcome::Ingested { window: Some(w2), points, .. } = &r2.tiles[0] else { panic!("{:?}", r2.tiles) };
+        let cells2 = read_cells(&ds);
+        assert!(w2.cells_new > 0 && w2.cells_read == cells2.len() && cells2.len() == cells1.len() + w2.cells_new);
+        assert_eq!(cells2.without(&cells1).len(), w2.cells_new);
+        let points2 = als_points(&ds);
+        assert_eq!(points2, laz_points_in(&cells2));
+        assert_eq!(points2.len() as u64, points1.len() as u64 + points);
+
+        // Nothing new: nothing read or rewritten.
+        let als_file = common::files_with_suffix(&ds.join("als"), ".parquet").pop().unwrap();
+        let mtime = std::fs::metadata(&als_file).unwrap().modified().unwrap();
+        let r3 = run(&ds, COPC, &all);
+        assert!(matches!(r3.tiles[0], TileOutcome::AlreadyIngested { .. }), "{:?}", r3.tiles);
+        assert_eq!(std::fs::metadata(&als_file).unwrap().modified().unwrap(), mtime);
+
+        // The whole LAZ tile: the same segments collocated (to float summation order: the tiles
+        // store their points in different orders), and at the same positions the same waveforms
+        // and metrics.
+        let whole = tmp.path().join("laz");
+        let r = run(&whole, LAZ, &all);
+        assert!(matches!(&r.tiles[0], TileOutcome::Ingested { window: None, .. }));
+        assert!(r.shots_simulated() > 0 && r.shots_simulated() == r1.shots_simulated() + r2.shots_simulated());
+        let offsets = |ds: &Path| {
+            let b = table(ds, "offsets").pop().unwrap().1;
+            let f = |c: &str| b.column_by_name(c).unwrap().as_primitive::<Float64Type>().clone();
+            let (id, dx, dy, dz) =
+                (b.column_by_name("segment_id").unwrap().as_string::<i32>(), f("dx"), f("dy"), f("dz"));
+            let rows = (0..b.num_rows()).map(|i| (id.value(i).to_string(), [dx.value(i), dy.value(i), dz.value(i)]));
+            rows.collect::<std::collections::BTreeMap<_, _>>()
+        };
+        let (oa, ob) = (offsets(&ds), offsets(&whole));
+        assert!(!oa.is_empty() && oa.keys().eq(ob.keys()), "{oa:?} {ob:?}");
+        for (k, a) in &oa {
+            assert!(a.iter().zip(ob[k]).all(|(a, b)| (a - b).abs() < 1e-3), "{k}: {a:?} {:?}", ob[k]);
+        }
+        let mut positions = Vec::new();
+        for (_, b) in table(&ds, "sim") {
+            let (x, y) = (b.column_by_name("x").unwrap(), b.column_by_name("y").unwrap());
+            let (x, y) = (x.as_primitive::<Float64Type>(), y.as_primitive::<Float64Type>());
+            positions.extend((0..b.num_rows()).map(|i| (x.value(i), y.value(i))));
+        }
+        positions.dedup();
+        assert!(positions.len() >= 5, "{positions:?}");
+        assert_same_columns(&simulate_at(tmp.path(), &ds, &positions), &simulate_at(tmp.path(), &whole, &positions));
+
+        // A footprint where the tile was not read is refused, naming the file.
+        let csv = tmp.path().join("plots.csv");
+        let missing =
+            (0..100).map(|k| (817572.0 + 10.0 * (k % 10) as f64 + 5.0, 6460768.0 + 10.0 * (k / 10) as f64 + 5.0));
+        let (x, y) = missing.into_iter().find(|&(x, y)| !cells2.contains(x, y)).expect("a cell not read");
+        std::fs::write(&csv, format!("id,x,y\nfar,{x},{y}\n")).unwrap();
+        let (ok, _, err) = common::gedisim(&[
+            "simulate",
+            "--dataset",
+            ds.to_str().unwrap(),
+            "--footprints",
+            csv.to_str().unwrap(),
+            "--out",
+            tmp.path().join("far.parquet").to_str().unwrap(),
+        ]);
+        assert!(
+            !ok && err.trim().lines().count() == 1 && err.contains("was not read") && err.contains("als/"),
+            "{err}"
+        );
+    }
+}

@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use clap::Args;
 
+use gedisim::ops::collocate::CollocateOptions;
 use gedisim::ops::ingest_als::{self as als, AlsOptions, TileOutcome};
 use gedisim::{Error, Result};
 
@@ -24,6 +25,10 @@ pub struct IngestAlsArgs {
     /// EPSG code of tiles that carry no CRS record.
     #[arg(long)]
     epsg: Option<u32>,
+    /// Read COPC tiles whole. By default, once the dataset holds shots, a COPC tile is read only
+    /// around them (docs/copc.md).
+    #[arg(long)]
+    whole_tiles: bool,
     /// Print wall time, points/s and peak memory at the end.
     #[arg(long)]
     stats: bool,
@@ -64,14 +69,35 @@ pub struct IngestStrataArgs {
 pub fn ingest_als(a: IngestAlsArgs) -> Result<()> {
     let start = Instant::now();
     let ds = super::reporters::writer(&a.out)?;
-    let opts = AlsOptions { keep_all_classes: a.keep_all_classes, epsg: a.epsg };
+    let windows = match a.whole_tiles {
+        true => None,
+        false => als::shot_windows(&ds, als::run_window_half(CollocateOptions::default().max_shift))?,
+    };
+    if let Some(w) = &windows {
+        eprintln!(
+            "COPC tiles are read within {:.1} m of the dataset's {} shots (--whole-tiles reads them whole)",
+            w.half(),
+            w.len()
+        );
+    }
+    let opts = AlsOptions { keep_all_classes: a.keep_all_classes, epsg: a.epsg, windows };
     let outcomes = als::ingest(&ds, &a.inputs, &opts, &Bars::new())?;
     let (mut read, mut written) = (0, 0);
     for o in &outcomes {
         match o {
-            TileOutcome::Ingested { tile, points, dropped } => {
+            TileOutcome::Ingested { tile, points, dropped, window } => {
                 (read, written) = (read + points + dropped, written + points);
-                eprintln!("{tile}: {points} points ({dropped} dropped by class)");
+                match window {
+                    None => eprintln!("{tile}: {points} points ({dropped} dropped by class)"),
+                    Some(w) => eprintln!(
+                        "{tile}: {points} points ({dropped} dropped by class) in {} new cells of {} m, {} read so \
+                         far; COPC: {}",
+                        w.cells_new,
+                        gedisim::kernels::geo::cells::READ_CELL_M,
+                        w.cells_read,
+                        w.copc
+                    ),
+                }
             }
             TileOutcome::AlreadyIngested { tile } => eprintln!("{tile}: already ingested (same content), skipped"),
         }

@@ -97,19 +97,6 @@ pub fn run_command(a: RunArgs) -> Result<()> {
 pub fn print_ingest_and_collocation(r: &gedisim::ops::run::RunReport) {
     use gedisim::ops::ingest_als::TileOutcome;
     use gedisim::ops::ingest_gedi::GranuleOutcome;
-    if !r.tiles.is_empty() {
-        let new: Vec<u64> = r
-            .tiles
-            .iter()
-            .filter_map(|t| if let TileOutcome::Ingested { points, .. } = t { Some(*points) } else { None })
-            .collect();
-        eprintln!(
-            "ALS: {} tiles ingested ({} points), {} already ingested",
-            new.len(),
-            new.iter().sum::<u64>(),
-            r.tiles.len() - new.len()
-        );
-    }
     if !r.ingested.is_empty() {
         let new: Vec<usize> = r
             .ingested
@@ -122,6 +109,35 @@ pub fn print_ingest_and_collocation(r: &gedisim::ops::run::RunReport) {
             new.iter().sum::<usize>(),
             r.ingested.len() - new.len()
         );
+    }
+    if !r.tiles.is_empty() {
+        let new: Vec<u64> = r
+            .tiles
+            .iter()
+            .filter_map(|t| if let TileOutcome::Ingested { points, .. } = t { Some(*points) } else { None })
+            .collect();
+        eprintln!(
+            "ALS: {} tiles ingested ({} points), {} already ingested",
+            new.len(),
+            new.iter().sum::<u64>(),
+            r.tiles.len() - new.len()
+        );
+        let windows: Vec<_> = r
+            .tiles
+            .iter()
+            .filter_map(|t| if let TileOutcome::Ingested { window: Some(w), .. } = t { Some(w) } else { None })
+            .collect();
+        if !windows.is_empty() {
+            let sum = |f: fn(&&gedisim::ops::ingest_als::WindowRead) -> u64| windows.iter().map(f).sum::<u64>();
+            eprintln!(
+                "     {} COPC tiles read only around the shots: {} new cells of {} m; {} of {} points decoded",
+                windows.len(),
+                sum(|w| w.cells_new as u64),
+                gedisim::kernels::geo::cells::READ_CELL_M,
+                sum(|w| w.copc.points_decoded),
+                sum(|w| w.copc.points_in_tile),
+            );
+        }
     }
     for w in &r.warnings {
         eprintln!("warning: {w}");

@@ -140,17 +140,7 @@ pub fn simulate(a: SimulateArgs) -> Result<()> {
         r.out.display()
     );
     if let Some(c) = &r.copc {
-        eprintln!(
-            "COPC: {} of {} octree nodes decoded ({} of {} points, {} compressed bytes), {} points within the \
-             footprints' read radius{}",
-            c.nodes,
-            c.nodes_in_tile,
-            c.points_decoded,
-            c.points_in_tile,
-            c.bytes_decoded,
-            c.points_kept,
-            if c.read_whole { " (the octree's node bounds did not hold: every node decoded)" } else { "" }
-        );
+        eprintln!("COPC: {c}, {} points within the footprints' read radius", c.points_kept);
     }
     if a.stats {
         let s = start.elapsed().as_secs_f64();

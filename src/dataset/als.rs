@@ -22,6 +22,7 @@ use rayon::prelude::*;
 use crate::dataset::{tables, Dataset};
 use crate::error::{Error, Result};
 use crate::kernels::collocate::PointCloud;
+use crate::kernels::geo::cells::Cells;
 use crate::kernels::sim::AlsPoints;
 
 /// Axis-aligned box [xmin, ymin, xmax, ymax].
@@ -42,6 +43,68 @@ pub mod meta {
     pub const CRS_WKT: &str = "gedisim:crs_wkt";
     pub const CELL_SIZE: &str = "gedisim:cell_size_m";
     pub const VERTICAL: &str = "gedisim:vertical_reference";
+    /// The [`READ_CELL_M`](crate::kernels::geo::cells::READ_CELL_M) cells of a COPC tile read so
+    /// far ([`Cells::to_text`]); absent when the whole tile was read. Authoritative in the `als/`
+    /// file, copied to the tile's `tiles/` row.
+    pub const READ_CELLS: &str = "gedisim:read_cells";
+    /// The horizontal extent `xmin ymin xmax ymax` of a tile read in windows (its header bounds).
+    pub const TILE_EXTENT: &str = "gedisim:tile_extent";
+}
+
+/// What a COPC tile read in windows holds: the cells read so far, inside the tile's extent.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReadWindow {
+    pub cells: Cells,
+    /// The tile's horizontal extent (header bounds).
+    pub extent: BBox,
+}
+
+impl ReadWindow {
+    /// The file metadata that records it ([`meta::READ_CELLS`], [`meta::TILE_EXTENT`]).
+    pub fn metadata(&self) -> [(String, String); 2] {
+        let e = self.extent;
+        [
+            (meta::READ_CELLS.to_string(), self.cells.to_text()),
+            (meta::TILE_EXTENT.to_string(), format!("{} {} {} {}", e[0], e[1], e[2], e[3])),
+        ]
+    }
+}
+
+/// Most cells a window record may hold (a 20 km × 20 km tile read whole in 10 m cells).
+const MAX_WINDOW_CELLS: usize = 4_000_000;
+
+/// The cells of a COPC tile that its `als/` file holds, from the file's metadata; `None` when the
+/// file holds the whole tile.
+pub fn read_window(path: &Path) -> Result<Option<ReadWindow>> {
+    let kv =
+        super::read::key_value_metadata(path).ok_or_else(|| Error::file(path, "cannot read the Parquet footer"))?;
+    window_of(path, &kv)
+}
+
+fn window_of(path: &Path, kv: &HashMap<String, String>) -> Result<Option<ReadWindow>> {
+    let Some(text) = kv.get(meta::READ_CELLS) else { return Ok(None) };
+    let cells = Cells::parse(text, MAX_WINDOW_CELLS)
+        .ok_or_else(|| Error::field(path, meta::READ_CELLS, "not a list of cells (row:col0-col1,…;…)"))?;
+    let extent: Vec<f64> = kv
+        .get(meta::TILE_EXTENT)
+        .map(|t| t.split_whitespace().filter_map(|v| v.parse().ok()).collect())
+        .unwrap_or_default();
+    match extent[..] {
+        [x0, y0, x1, y1] if x0 <= x1 && y0 <= y1 => Ok(Some(ReadWindow { cells, extent: [x0, y0, x1, y1] })),
+        _ => Err(Error::field(path, meta::TILE_EXTENT, "missing or not four numbers xmin ymin xmax ymax")),
+    }
+}
+
+/// Every point of one `als/` file.
+pub fn read_file_points(path: &Path) -> Result<AlsPoints> {
+    let b = super::read::open(path)?;
+    let mask = parquet::arrow::ProjectionMask::columns(b.parquet_schema(), POINT_COLUMNS.iter().copied());
+    let reader = b.with_projection(mask).with_batch_size(1 << 16).build().map_err(|e| Error::table(path, e))?;
+    let mut out = AlsPoints::default();
+    for batch in reader {
+        append(&mut out, &batch.map_err(|e| Error::table(path, e))?, None, path)?;
+    }
+    Ok(out)
 }
 
 /// The global cell key of a position: row-major over (floor(y/CELL), floor(x/CELL)), so that
@@ -102,6 +165,9 @@ pub fn tiles_schema() -> SchemaRef {
         Field::new("gps_time_max", DataType::Float64, true),
         Field::new("acquisition_start", ts.clone(), true),
         Field::new("acquisition_end", ts, true),
+        Field::new("copc", DataType::Boolean, false),
+        Field::new("read_cells", DataType::UInt64, true),
+        Field::new("read_window", DataType::Utf8, true),
     ]))
 }
 
@@ -131,6 +197,8 @@ struct AlsFile {
     path: PathBuf,
     groups: Vec<BBox>,
     meta: ArrowReaderMetadata,
+    /// What a COPC tile read in windows holds; `None`: the whole tile.
+    window: Option<ReadWindow>,
 }
 
 /// The `als/` table's files and row-group extents, read once.
@@ -139,6 +207,16 @@ pub struct AlsTable {
     /// (file, row group) of the extents meeting each [`COVER_CELL`] cell (extents grown by
     /// [`COVER_TOLERANCE`]).
     cover_index: HashMap<(i64, i64), Vec<(usize, usize)>>,
+    /// The files of tiles read in windows whose extent meets each [`WINDOW_INDEX_CELL`] cell.
+    window_index: HashMap<(i64, i64), Vec<usize>>,
+}
+
+/// Cell of the index of tiles read in windows (m): a LiDAR HD tile's side.
+const WINDOW_INDEX_CELL: f64 = 1000.0;
+
+fn window_index_cells(b: BBox) -> impl Iterator<Item = (i64, i64)> {
+    let cell = |v: f64| (v / WINDOW_INDEX_CELL).floor() as i64;
+    (cell(b[0])..=cell(b[2])).flat_map(move |cx| (cell(b[1])..=cell(b[3])).map(move |cy| (cx, cy)))
 }
 
 /// Cell of the coverage index (m): the ingest's cell size.
@@ -166,11 +244,16 @@ impl AlsTable {
             .map_err(|e| Error::file(&dir, format!("no ALS table ({e}): run `gedisim ingest als`")))?;
         let mut files = Vec::new();
         let mut cover_index: HashMap<(i64, i64), Vec<(usize, usize)>> = HashMap::new();
+        let mut window_index: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
         for path in paths {
             let file = File::open(&path).map_err(|e| Error::file(&path, e))?;
             let meta =
                 ArrowReaderMetadata::load(&file, ArrowReaderOptions::new()).map_err(|e| Error::table(&path, e))?;
             let groups = row_group_boxes(meta.metadata(), &path)?;
+            let kv: HashMap<String, String> = (meta.metadata().file_metadata().key_value_metadata())
+                .map(|kv| kv.iter().filter_map(|k| Some((k.key.clone(), k.value.clone()?))).collect())
+                .unwrap_or_default();
+            let window = window_of(&path, &kv)?;
             for (g, b) in groups.iter().enumerate() {
                 let cell = |v: f64| (v / COVER_CELL).floor() as i64;
                 let t = COVER_TOLERANCE;
@@ -180,9 +263,12 @@ impl AlsTable {
                     }
                 }
             }
-            files.push(AlsFile { path, groups, meta });
+            if let Some(w) = &window {
+                window_index_cells(w.extent).for_each(|c| window_index.entry(c).or_default().push(files.len()));
+            }
+            files.push(AlsFile { path, groups, meta, window });
         }
-        Ok(AlsTable { files, cover_index })
+        Ok(AlsTable { files, cover_index, window_index })
     }
 
     /// Whether the row groups' extents cover the disc of `radius` around (x, y): its centre and
@@ -197,8 +283,12 @@ impl AlsTable {
             let t = COVER_TOLERANCE;
             self.cover_index.get(&key).is_some_and(|v| {
                 v.iter().any(|&(f, g)| {
-                    let b = self.files[f].groups[g];
-                    px >= b[0] - t && px <= b[2] + t && py >= b[1] - t && py <= b[3] + t
+                    let (b, window) = (self.files[f].groups[g], &self.files[f].window);
+                    px >= b[0] - t
+                        && px <= b[2] + t
+                        && py >= b[1] - t
+                        && py <= b[3] + t
+                        && window.as_ref().is_none_or(|w| w.cells.contains(px, py))
                 })
             })
         };
@@ -207,6 +297,25 @@ impl AlsTable {
                 let a = k as f64 * std::f64::consts::FRAC_PI_4;
                 inside(x + radius * a.cos(), y + radius * a.sin())
             })
+    }
+
+    /// The `als/` file of a tile read in windows whose extent the square of half-width `half`
+    /// around (x, y) reaches outside the cells read: the tile's points there were never read, so
+    /// a simulation would see part of the ALS.
+    pub fn unread_window(&self, x: f64, y: f64, half: f64) -> Option<&Path> {
+        if self.window_index.is_empty() || !(x.is_finite() && y.is_finite()) {
+            return None;
+        }
+        let square = [x - half, y - half, x + half, y + half];
+        let cells = Cells::around([(x, y)], half);
+        let mut candidates: Vec<usize> =
+            window_index_cells(square).filter_map(|c| self.window_index.get(&c)).flatten().copied().collect();
+        candidates.sort_unstable();
+        candidates.dedup();
+        candidates.into_iter().map(|i| &self.files[i]).find_map(|f| {
+            let w = f.window.as_ref()?;
+            (!cells.within(w.extent).without(&w.cells).is_empty()).then_some(f.path.as_path())
+        })
     }
 
     /// x, y, z of the points inside any of `boxes` (inclusive), reading only those three columns

@@ -7,7 +7,7 @@ use crate::dataset::als::{cell_key, AlsTable, BBox};
 use crate::dataset::offsets::AppliedOffset;
 use crate::dataset::sim::sim_batch;
 use crate::dataset::Dataset;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::kernels::sim::{self, AlsPoints, Footprint, SimConfig, Weighting};
 
 /// Side of the square blocks of footprints simulated together in dataset mode (m): a block's
@@ -35,6 +35,19 @@ impl BlockSimulation {
     pub fn new(ds: &Dataset, footprints: Vec<(Footprint, Option<AppliedOffset>)>, cfg: SimConfig) -> Result<Self> {
         let als = AlsTable::open(ds)?;
         let half = sim::footprint::read_radius(cfg.fsigma);
+        for (f, _) in &footprints {
+            if let Some(file) = als.unread_window(f.x, f.y, half) {
+                return Err(Error::file(
+                    file,
+                    format!(
+                        "footprint {} at ({:.1}, {:.1}) lies where this COPC tile was not read (it was read only \
+                         around the dataset's shots): ingest it with `gedisim ingest als --whole-tiles`, or simulate \
+                         with `--als <tile>.copc.laz`",
+                        f.id, f.x, f.y
+                    ),
+                ));
+            }
+        }
         let mut blocks = blocks(footprints).into_iter();
         let first = blocks.next();
         let mut this = BlockSimulation { als, cfg, half, blocks, current: None };

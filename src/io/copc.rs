@@ -90,6 +90,22 @@ pub struct CopcRead {
     pub read_whole: bool,
 }
 
+impl std::fmt::Display for CopcRead {
+    /// `N of M octree nodes decoded (a of b points, c compressed bytes)`, and a word when the
+    /// node bounds did not hold.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} of {} octree nodes decoded ({} of {} points, {} compressed bytes)",
+            self.nodes, self.nodes_in_tile, self.points_decoded, self.points_in_tile, self.bytes_decoded
+        )?;
+        if self.read_whole {
+            write!(f, " (the octree's node bounds did not hold: every node decoded)")?;
+        }
+        Ok(())
+    }
+}
+
 impl CopcTile {
     /// Open a COPC file: header, COPC info VLR and hierarchy read and checked.
     pub fn open(path: &Path) -> Result<Self> {
@@ -105,7 +121,7 @@ impl CopcTile {
         let h = las::Header::new(&mut file).map_err(|e| {
             bad("header", format!("cannot read the header or its VLRs: {}", crate::error::one_line(&e.to_string())))
         })?;
-        let header = tile_header(path, &h)?;
+        let header = tile_header(path, &h, &layout)?;
         let Some(info) = h.copc_info_vlr() else { return Ok(None) };
         // The root page's place (COPC 1.0 info VLR, bytes 40–55), which the crate keeps private.
         let info_data = &h.vlrs().iter().find(|v| v.is_copc_info()).expect("info VLR found above").data;

@@ -43,7 +43,13 @@ pub(crate) struct Layout {
     /// (file offset, bytes) of the data of each COPC hierarchy EVLR (`copc`/1000): COPC 1.0 has
     /// one holding every page, copclib writes one per page.
     pub copc_hierarchy: Vec<(u64, u64)>,
+    /// The data of a WKT CRS EVLR (`LASF_Projection`/2112). The `las` crate (0.11) reads only
+    /// the first EVLR, and COPC writers put the hierarchy first (tests/data/als-copc).
+    pub wkt_evlr: Option<Vec<u8>>,
 }
+
+/// Largest WKT CRS record read from an EVLR (bytes).
+const MAX_WKT_BYTES: u64 = 1 << 20;
 
 /// A tile opened for streaming.
 pub struct TileReader {
@@ -62,7 +68,7 @@ impl TileReader {
     /// Open a file; `parallel` decodes LAZ chunks on the rayon pool.
     pub fn open_with(path: &Path, parallel: bool) -> Result<Self> {
         let mut file = std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
-        check_layout(path, &mut file)?;
+        let layout = check_layout(path, &mut file)?;
         let laz_parallelism = if parallel { las::LazParallelism::Yes } else { las::LazParallelism::No };
         let options = las::ReaderOptions::default().with_laz_parallelism(laz_parallelism);
         let reader = Reader::with_options(std::io::BufReader::with_capacity(1 << 20, file), options).map_err(|e| {
@@ -75,7 +81,7 @@ impl TileReader {
                 ),
             )
         })?;
-        let header = tile_header(path, reader.header())?;
+        let header = tile_header(path, reader.header(), &layout)?;
         let buffer = PointDataBuilder::new().for_header(reader.header()).build();
         Ok(TileReader { header, reader, buffer, read_so_far: 0 })
     }
@@ -204,6 +210,7 @@ pub(crate) fn check_layout(path: &Path, file: &mut std::fs::File) -> Result<Layo
     // EVLRs: after the points, each inside the file.
     let mut points_end = file_len;
     let mut copc_hierarchy = Vec::new();
+    let mut wkt_evlr = None;
     if let Some(evlr) = h.evlr.filter(|e| e.number_of_evlrs > 0) {
         let mut at = evlr.start_of_first_evlr;
         if at < data_start || at > file_len {
@@ -226,6 +233,12 @@ pub(crate) fn check_layout(path: &Path, file: &mut std::fs::File) -> Result<Layo
             let user = String::from_utf8_lossy(&head[2..18]);
             if user.trim_end_matches('\0') == "copc" && head[18..20] == 1000u16.to_le_bytes() {
                 copc_hierarchy.push((at + 60, len));
+            }
+            let wkt = user.trim_end_matches('\0') == "LASF_Projection" && head[18..20] == 2112u16.to_le_bytes();
+            if wkt && wkt_evlr.is_none() && len <= MAX_WKT_BYTES && at + 60 + len <= file_len {
+                let mut data = vec![0u8; len as usize];
+                file.read_exact(&mut data).map_err(io)?;
+                wkt_evlr = Some(data);
             }
             at = at.checked_add(60).and_then(|a| a.checked_add(len)).filter(|&a| a <= file_len).ok_or_else(|| {
                 bad("EVLR", format!("EVLR {i} announces {len} bytes, past the end of the file ({file_len} bytes)"))
@@ -323,7 +336,7 @@ pub(crate) fn check_layout(path: &Path, file: &mut std::fs::File) -> Result<Layo
         }
     }
     file.seek(SeekFrom::Start(0)).map_err(io)?;
-    Ok(Layout { data_start, file_len, copc_hierarchy })
+    Ok(Layout { data_start, file_len, copc_hierarchy, wkt_evlr })
 }
 
 /// Read every point (every class) of a LAS/LAZ file.
@@ -351,10 +364,11 @@ pub(crate) fn columns(pd: &PointData) -> AlsPoints {
     p
 }
 
-pub(crate) fn tile_header(path: &Path, h: &las::Header) -> Result<TileHeader> {
+pub(crate) fn tile_header(path: &Path, h: &las::Header, layout: &Layout) -> Result<TileHeader> {
     let b = h.bounds();
     let crs_wkt = h
         .get_wkt_crs_bytes()
+        .or(layout.wkt_evlr.as_deref())
         .map(|bytes| String::from_utf8_lossy(bytes).trim_end_matches('\0').trim().to_string())
         .filter(|s| !s.is_empty());
     let mut epsg = crs_wkt.as_deref().and_then(epsg_from_wkt);

@@ -161,7 +161,11 @@ impl<'a> Collocation<'a> {
             let (granule, mut shots) = read_shot_records(&path)?;
             report.shots += shots.len();
             for s in &mut shots {
-                s.covered = s.x.is_finite() && s.y.is_finite() && als.covers(s.x, s.y, cfg.model.fsigma as f64);
+                // Where a COPC tile was read only in windows, the search's points must all be there.
+                s.covered = s.x.is_finite()
+                    && s.y.is_finite()
+                    && als.covers(s.x, s.y, cfg.model.fsigma as f64)
+                    && als.unread_window(s.x, s.y, cfg.support_half_width()).is_none();
                 if s.skip.is_none() && !s.covered {
                     s.skip = Some("no_als");
                 }

@@ -16,7 +16,7 @@ use crate::error::{Error, Result};
 use crate::kernels::collocate::segments::Level;
 use crate::kernels::diagnose::case::{
     configs, nominal_noise_stddev, site_grid, site_of, RealAlgorithm, RealShot, SimShot, Site, Strata, FSIGMA_GRID,
-    NOMINAL_WIDTH, RECOLLOCATE_SHIFT_M, RECOLLOCATE_STEP_M, SHORT_SEGMENT_SHOTS,
+    NOMINAL_WIDTH, RECOLLOCATE_SHIFT_M, RECOLLOCATE_STEP_M, SHORT_SEGMENT_SHOTS, SITE_HALF, SITE_STEP_M,
 };
 use crate::kernels::diagnose::gap::N_PCT;
 use crate::kernels::diagnose::json::{params, DiagnosisJson};
@@ -404,6 +404,14 @@ pub fn diagnosis_collocation(pulse: &PulseModel) -> CollocateOptions {
     }
 }
 
+/// Half-width (m) of the ALS window a shot's case needs: the largest shift of its sites' centre
+/// (the collocation's, or a short segment's re-collocation around the reported position), the
+/// grid of sites around it, and the read radius of the widest footprint tried.
+pub fn window_half(max_shift: f64) -> f64 {
+    let fmax = FSIGMA_GRID[FSIGMA_GRID.len() - 1] as f32;
+    max_shift.max(RECOLLOCATE_SHIFT_M) + f64::from(SITE_HALF) * SITE_STEP_M + sim::footprint::read_radius(fmax)
+}
+
 /// Where each shot's pulse in the nominal chain comes from.
 enum ShotPulseSource {
     /// The study's Gaussian.
@@ -471,7 +479,9 @@ pub fn diagnose(
     let (root, chain) = match input {
         DiagnoseInput::Dataset(root) => (root, None),
         DiagnoseInput::Chain(opts) => {
-            let opts = RunOptions { out: out.join("dataset"), collocate: diagnosis_collocation(pulse), ..*opts };
+            let collocate = diagnosis_collocation(pulse);
+            let als_window = Some(window_half(collocate.max_shift));
+            let opts = RunOptions { out: out.join("dataset"), collocate, als_window, ..*opts };
             let report = crate::ops::run::ingest_and_collocate(&opts, progress)?;
             (opts.out, Some(report))
         }

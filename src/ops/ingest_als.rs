@@ -1,7 +1,13 @@
 //! `ingest als`: LAS/LAZ tiles into the `als/` table (points clustered by spatial cell) and the
 //! `tiles/` table (one row per file).
 //!
-//! Each file is streamed in chunks. Points are filed by a global square cell (`CELL_SIZE_M`) and
+//! A COPC tile given windows (the squares around the dataset's shots) is read only there: the
+//! octree nodes meeting the windows' cells are decoded, the points inside them kept, and the cells
+//! read recorded with the tile. A later ingest with more shots reads only the cells still missing
+//! and rewrites the tile's file with the points of both (docs/copc.md). Its points are held in
+//! memory: those of the windows of one tile.
+//!
+//! Any other file is streamed in chunks. Points are filed by a global square cell (`CELL_SIZE_M`) and
 //! spilled to a temporary file in runs sorted by cell; the Parquet file is then written cell by
 //! cell, one or more row groups per cell, so that row-group statistics of x and y span one cell
 //! and a bounding-box query reads only the row groups it needs. Peak memory is bounded by the
@@ -21,12 +27,15 @@ use arrow::record_batch::RecordBatch;
 use rayon::prelude::*;
 
 use crate::dataset::als::{
-    als_batch, als_schema, cell_key, meta, tiles_schema, CELL_SIZE_M, DROPPED_CLASSES, MAX_ROW_GROUP_ROWS,
+    self as table, als_batch, als_schema, cell_key, meta, tiles_schema, ReadWindow, CELL_SIZE_M, DROPPED_CLASSES,
+    MAX_ROW_GROUP_ROWS,
 };
-use crate::dataset::{self, tables, AtomicParquet, Dataset};
+use crate::dataset::{self, read, tables, AtomicParquet, Dataset};
 use crate::error::{Error, Result};
+use crate::io::copc::{Attributes, CopcRead, CopcTile};
 use crate::io::las::{TileHeader, TileReader, CHUNK_POINTS};
-use crate::kernels::sim::AlsPoints;
+use crate::kernels::geo::cells::{Cells, Windows};
+use crate::kernels::sim::{self, AlsPoints, Profile, SimConfig};
 use crate::ops::progress::{Progress, Step};
 
 /// Options of `ingest als`.
@@ -36,15 +45,66 @@ pub struct AlsOptions {
     pub keep_all_classes: bool,
     /// CRS for tiles that carry none; must agree with tiles that do.
     pub epsg: Option<u32>,
+    /// Where COPC tiles are read: only the nodes meeting these windows are decoded and only the
+    /// points inside their cells kept. `None`: every tile is read whole.
+    pub windows: Option<Windows>,
+}
+
+/// Half-width (m) of the window a shot needs for `run`: the collocation's largest shift plus the
+/// simulator's read radius at the study's footprint width.
+pub fn run_window_half(max_shift: f64) -> f64 {
+    max_shift + sim::footprint::read_radius(SimConfig::new(Profile::Default).fsigma)
+}
+
+/// The windows of half-width `half` around every shot of the dataset (`None` without shots).
+pub fn shot_windows(ds: &Dataset, half: f64) -> Result<Option<Windows>> {
+    let dir = ds.root().join(tables::SHOTS);
+    let files = dataset::table_files(&dir).unwrap_or_default();
+    if files.is_empty() {
+        return Ok(None);
+    }
+    let mut centres = Vec::new();
+    for f in files {
+        read::for_each_batch(&f, Some(&["x", "y"]), None, |c| {
+            for i in 0..c.num_rows() {
+                if let (Some(x), Some(y)) = (c.f64("x", i)?, c.f64("y", i)?) {
+                    centres.push((x, y));
+                }
+            }
+            Ok(())
+        })?;
+    }
+    Ok(Some(Windows::new(centres, half)))
+}
+
+/// The CRS (EPSG) recorded by the first of the LAS/LAZ files of `inputs` that records one.
+pub fn inputs_epsg(inputs: &[PathBuf]) -> Result<Option<u32>> {
+    for f in expand_inputs(inputs)? {
+        if let Some(epsg) = TileReader::open(&f)?.header().epsg {
+            return Ok(Some(epsg));
+        }
+    }
+    Ok(None)
 }
 
 /// What happened to one input file.
 #[derive(Debug, Clone)]
 pub enum TileOutcome {
-    /// Points written.
-    Ingested { tile: String, points: u64, dropped: u64 },
+    /// Points written (`window`: a COPC tile read in windows; `points` and `dropped` count the
+    /// points of the cells read this time).
+    Ingested { tile: String, points: u64, dropped: u64, window: Option<WindowRead> },
     /// The same content was ingested before (keyed by content hash).
     AlreadyIngested { tile: String },
+}
+
+/// What a read of a COPC tile in windows did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct WindowRead {
+    /// Cells read this time, and read so far (this time included).
+    pub cells_new: usize,
+    pub cells_read: usize,
+    /// What the COPC read decoded.
+    pub copc: CopcRead,
 }
 
 /// Expand folders into the LAS/LAZ files they contain (sorted); files are kept as given.
@@ -80,18 +140,18 @@ pub fn ingest_tiles(
     progress: &dyn Progress,
 ) -> Result<Vec<TileOutcome>> {
     let existing = dataset::dataset_epsg(dataset)?;
-    let mut headers: Vec<(u32, u64)> = Vec::with_capacity(files.len()); // (EPSG, points) per file
+    let mut headers: Vec<(u32, u64, bool)> = Vec::with_capacity(files.len()); // (EPSG, points, COPC) per file
     for f in files {
         let reader = TileReader::open(f)?;
         let epsg = resolve_epsg(reader.header(), opts, existing)?;
-        if let Some(&(first, _)) = headers.first().filter(|&&(first, _)| first != epsg) {
+        if let Some(&(first, ..)) = headers.first().filter(|&&(first, ..)| first != epsg) {
             return Err(Error::field(
                 f,
                 "CRS",
                 format!("EPSG:{epsg} differs from EPSG:{first} of {} in the same call", files[0].display()),
             ));
         }
-        headers.push((epsg, reader.header().number_of_points));
+        headers.push((epsg, reader.header().number_of_points, reader.header().copc));
     }
     progress.set_total(headers.iter().map(|h| h.1).sum());
     let als_dir = dataset.table_dir(tables::ALS)?;
@@ -108,12 +168,16 @@ pub fn ingest_tiles(
         .zip(&hashes)
         .zip(&first_copy)
         .zip(&headers)
-        .map(|(((f, hash), &first), &(epsg, points))| {
+        .map(|(((f, hash), &first), &(epsg, points, copc))| {
             if !first {
                 progress.advance(points);
                 return Ok(TileOutcome::AlreadyIngested { tile: tile_name(f) });
             }
-            ingest_tile(f, hash, &als_dir, &tiles_dir, opts, epsg, parallel_decode, progress)
+            let target = Target { path: f, hash, als_dir: &als_dir, tiles_dir: &tiles_dir, epsg };
+            match &opts.windows {
+                Some(windows) if copc => ingest_windows(&target, opts, windows, progress),
+                _ => ingest_tile(&target, opts, parallel_decode, progress),
+            }
         })
         .collect()
 }
@@ -218,21 +282,177 @@ struct Run {
 /// return number, number of returns, class (u8). A run stores each column contiguously.
 const SPILL_RECORD: usize = 8 * 4 + 4 + 2 * 2 + 3;
 
-#[allow(clippy::too_many_arguments)]
-fn ingest_tile(
-    path: &Path,
-    hash: &str,
-    als_dir: &Path,
-    tiles_dir: &Path,
-    opts: &AlsOptions,
+/// One input file and where its rows go.
+struct Target<'a> {
+    path: &'a Path,
+    hash: &'a str,
+    als_dir: &'a Path,
+    tiles_dir: &'a Path,
     epsg: u32,
-    parallel_decode: bool,
-    progress: &dyn Progress,
-) -> Result<TileOutcome> {
-    let key = &hash[..16];
+}
+
+impl Target<'_> {
+    fn key(&self) -> &str {
+        &self.hash[..16]
+    }
+
+    fn als_file(&self) -> PathBuf {
+        self.als_dir.join(format!("{}.parquet", self.key()))
+    }
+
+    fn tiles_file(&self) -> PathBuf {
+        self.tiles_dir.join(format!("{}.parquet", self.key()))
+    }
+
+    /// The key-value metadata of the tile's `als/` and `tiles/` files.
+    fn metadata(&self, header: &TileHeader, window: Option<&ReadWindow>) -> HashMap<String, String> {
+        let mut m = HashMap::new();
+        m.insert(meta::EPSG.to_string(), self.epsg.to_string());
+        m.insert(meta::CELL_SIZE.to_string(), CELL_SIZE_M.to_string());
+        m.insert(meta::VERTICAL.to_string(), "as stored in the LAS file (IGN69 for LiDAR HD)".to_string());
+        if let Some(wkt) = &header.crs_wkt {
+            m.insert(meta::CRS_WKT.to_string(), wkt.clone());
+        }
+        m.extend(window.map(ReadWindow::metadata).into_iter().flatten());
+        m
+    }
+
+    /// Write the tile's `tiles/` row (after its `als/` file: the points become visible with it).
+    fn write_row(
+        &self,
+        header: &TileHeader,
+        stats: &TileStats,
+        window: Option<&ReadWindow>,
+        metadata: &HashMap<String, String>,
+    ) -> Result<()> {
+        let batch = tiles_batch(header, &tile_name(self.path), self.hash, self.epsg, stats, window)?;
+        dataset::write_parquet(&self.tiles_file(), tiles_schema(), &[batch], metadata).map(|_| ())
+    }
+}
+
+/// Whether point `i` of `chunk` is kept (its class not dropped); its coordinates must be finite.
+fn keep_point(path: &Path, chunk: &AlsPoints, i: usize, opts: &AlsOptions, stats: &mut TileStats) -> Result<bool> {
+    if !opts.keep_all_classes && DROPPED_CLASSES.contains(&chunk.classification[i]) {
+        stats.dropped += 1;
+        return Ok(false);
+    }
+    for (name, v) in [("x", chunk.x[i]), ("y", chunk.y[i]), ("z", chunk.z[i])] {
+        if !v.is_finite() {
+            return Err(Error::field(
+                path,
+                name,
+                format!("non-finite coordinate {v} at point {}", stats.kept + stats.dropped),
+            ));
+        }
+    }
+    stats.add(chunk, i);
+    Ok(true)
+}
+
+/// Write one cell's points as row groups of at most [`MAX_ROW_GROUP_ROWS`].
+fn write_cell(writer: &mut AtomicParquet, points: AlsPoints, tile: &str, cell: u64) -> Result<()> {
+    let batch = als_batch(points, tile, cell)?;
+    for part in (0..batch.num_rows()).step_by(MAX_ROW_GROUP_ROWS) {
+        writer.write_row_group(&batch.slice(part, MAX_ROW_GROUP_ROWS.min(batch.num_rows() - part)))?;
+    }
+    Ok(())
+}
+
+/// Ingest the points of a COPC tile inside `windows`, decoding only the octree nodes that meet
+/// them. A tile read before in other windows is topped up: only the cells not read yet are
+/// decoded, and its `als/` file is rewritten with the points read before and the new ones, then
+/// its `tiles/` row. The cells recorded in the `als/` file are the authority: a run cut between
+/// the two writes leaves a `tiles/` row behind, which the next ingest rewrites.
+fn ingest_windows(t: &Target, opts: &AlsOptions, windows: &Windows, progress: &dyn Progress) -> Result<TileOutcome> {
+    let tile = tile_name(t.path);
+    let copc = CopcTile::open(t.path)?;
+    let header = copc.header().clone();
+    let b = header.bounds;
+    let extent = [b[0], b[1], b[3], b[4]];
+    let (als_file, tiles_file) = (t.als_file(), t.tiles_file());
+    let before = if tiles_file.exists() && als_file.exists() {
+        match table::read_window(&als_file)? {
+            Some(w) => Some(w),
+            None => {
+                progress.advance(header.number_of_points);
+                return Ok(TileOutcome::AlreadyIngested { tile }); // read whole before
+            }
+        }
+    } else {
+        None
+    };
+    let missing = windows.cells_in(extent).without(before.as_ref().map_or(&Cells::default(), |w| &w.cells));
+    let (earlier_dropped, row_cells) = match &before {
+        Some(_) => tiles_row_window(&tiles_file)?,
+        None => (0, None),
+    };
+    if let Some(w) = &before {
+        if missing.is_empty() && row_cells == Some(w.cells.len() as u64) {
+            progress.advance(header.number_of_points);
+            return Ok(TileOutcome::AlreadyIngested { tile });
+        }
+    }
+    let (new, read) = if missing.is_empty() {
+        (AlsPoints::default(), CopcRead::default())
+    } else {
+        copc.read(Some(&missing), Attributes::All)?
+    };
+    progress.advance(header.number_of_points);
+
+    let mut stats = TileStats::new();
+    let mut points = match &before {
+        Some(_) => table::read_file_points(&als_file)?,
+        None => AlsPoints::default(),
+    };
+    for i in 0..points.len() {
+        stats.add(&points, i);
+    }
+    let mut keep = Vec::with_capacity(new.len());
+    for i in 0..new.len() {
+        if keep_point(t.path, &new, i, opts, &mut stats)? {
+            keep.push(i as u32);
+        }
+    }
+    let (points_new, dropped_new) = (keep.len() as u64, stats.dropped);
+    points.extend_from(&new.permuted(&keep));
+    drop(new);
+    stats.dropped += earlier_dropped;
+
+    let window = ReadWindow { cells: before.map(|w| w.cells).unwrap_or_default().union(&missing), extent };
+    let metadata = t.metadata(&header, Some(&window));
+    let props = als_writer_properties(dataset::writer_properties(&metadata, MAX_ROW_GROUP_ROWS));
+    let cells: Vec<u64> = (0..points.len()).map(|i| cell_key(points.x[i], points.y[i])).collect();
+    let mut order: Vec<u32> = (0..points.len() as u32).collect();
+    order.sort_by_key(|&i| cells[i as usize]); // stable: file order within a cell
+    let mut writer = AtomicParquet::create(&als_file, als_schema(), props)?;
+    for run in order.chunk_by(|&a, &b| cells[a as usize] == cells[b as usize]) {
+        write_cell(&mut writer, points.permuted(run), &tile, cells[run[0] as usize])?;
+    }
+    writer.finish()?;
+    t.write_row(&header, &stats, Some(&window), &metadata)?;
+    let window_read = WindowRead { cells_new: missing.len(), cells_read: window.cells.len(), copc: read };
+    Ok(TileOutcome::Ingested { tile, points: points_new, dropped: dropped_new, window: Some(window_read) })
+}
+
+/// The `n_dropped` and `read_cells` of a tile's `tiles/` row.
+fn tiles_row_window(path: &Path) -> Result<(u64, Option<u64>)> {
+    let mut out = (0, None);
+    read::for_each_batch(path, Some(&["n_dropped", "read_cells"]), None, |c| {
+        if c.num_rows() > 0 {
+            out = (c.u64("n_dropped", 0)?.unwrap_or(0), c.u64("read_cells", 0)?);
+        }
+        Ok(())
+    })?;
+    Ok(out)
+}
+
+/// Ingest a whole tile, streamed: decoded chunk by chunk, its points filed by cell and spilled to
+/// disk in sorted runs, then written cell by cell.
+fn ingest_tile(t: &Target, opts: &AlsOptions, parallel_decode: bool, progress: &dyn Progress) -> Result<TileOutcome> {
+    let (path, key, als_dir) = (t.path, t.key(), t.als_dir);
     let tile = tile_name(path);
-    let tiles_file = tiles_dir.join(format!("{key}.parquet"));
-    if tiles_file.exists() {
+    // A tile read in windows before is read again, whole.
+    if t.tiles_file().exists() && table::read_window(&t.als_file())?.is_none() {
         return Ok(TileOutcome::AlreadyIngested { tile });
     }
     let mut reader = TileReader::open_with(path, parallel_decode)?;
@@ -249,21 +469,9 @@ fn ingest_tile(
             progress.advance(chunk.len() as u64);
             let mut keep: Vec<(u64, u32)> = Vec::with_capacity(chunk.len());
             for i in 0..chunk.len() {
-                if !opts.keep_all_classes && DROPPED_CLASSES.contains(&chunk.classification[i]) {
-                    stats.dropped += 1;
-                    continue;
+                if keep_point(path, &chunk, i, opts, &mut stats)? {
+                    keep.push((cell_key(chunk.x[i], chunk.y[i]), i as u32));
                 }
-                for (name, v) in [("x", chunk.x[i]), ("y", chunk.y[i]), ("z", chunk.z[i])] {
-                    if !v.is_finite() {
-                        return Err(Error::field(
-                            path,
-                            name,
-                            format!("non-finite coordinate {v} at point {}", stats.kept + stats.dropped),
-                        ));
-                    }
-                }
-                stats.add(&chunk, i);
-                keep.push((cell_key(chunk.x[i], chunk.y[i]), i as u32));
             }
             keep.sort_unstable_by_key(|&(c, _)| c);
             spill.write_runs(&chunk, &keep, &mut runs)?;
@@ -272,17 +480,9 @@ fn ingest_tile(
 
         // Pass 2: write the Parquet file cell by cell.
         runs.sort_by_key(|r| (r.cell, r.offset));
-        let mut metadata = HashMap::new();
-        metadata.insert(meta::EPSG.to_string(), epsg.to_string());
-        metadata.insert(meta::CELL_SIZE.to_string(), CELL_SIZE_M.to_string());
-        metadata.insert(meta::VERTICAL.to_string(), "as stored in the LAS file (IGN69 for LiDAR HD)".to_string());
-        if let Some(wkt) = &header.crs_wkt {
-            metadata.insert(meta::CRS_WKT.to_string(), wkt.clone());
-        }
-        let props = dataset::writer_properties(&metadata, MAX_ROW_GROUP_ROWS);
-        let props = als_writer_properties(props);
-        let dest = als_dir.join(format!("{key}.parquet"));
-        let mut writer = AtomicParquet::create(&dest, als_schema(), props)?;
+        let metadata = t.metadata(&header, None);
+        let props = als_writer_properties(dataset::writer_properties(&metadata, MAX_ROW_GROUP_ROWS));
+        let mut writer = AtomicParquet::create(&t.als_file(), als_schema(), props)?;
         let mut spill_reader = SpillReader::open(&spill)?;
         let mut start = 0;
         while start < runs.len() {
@@ -291,20 +491,15 @@ fn ingest_tile(
             while end < runs.len() && runs[end].cell == cell {
                 end += 1;
             }
-            let points = spill_reader.read_runs(&runs[start..end])?;
-            let batch = als_batch(points, &tile, cell)?;
-            for part in (0..batch.num_rows()).step_by(MAX_ROW_GROUP_ROWS) {
-                writer.write_row_group(&batch.slice(part, MAX_ROW_GROUP_ROWS.min(batch.num_rows() - part)))?;
-            }
+            write_cell(&mut writer, spill_reader.read_runs(&runs[start..end])?, &tile, cell)?;
             start = end;
         }
         writer.finish()?;
         drop(spill_reader);
         let _ = std::fs::remove_file(&spill);
 
-        let batch = tiles_batch(&header, &tile, hash, epsg, &stats)?;
-        dataset::write_parquet(&tiles_file, tiles_schema(), &[batch], &metadata)?;
-        Ok(TileOutcome::Ingested { tile: tile.clone(), points: stats.kept, dropped: stats.dropped })
+        t.write_row(&header, &stats, None, &metadata)?;
+        Ok(TileOutcome::Ingested { tile: tile.clone(), points: stats.kept, dropped: stats.dropped, window: None })
     })();
     if result.is_err() {
         let _ = std::fs::remove_file(&spill_path);
@@ -330,7 +525,14 @@ fn als_writer_properties(
     builder.build()
 }
 
-fn tiles_batch(h: &TileHeader, tile: &str, hash: &str, epsg: u32, s: &TileStats) -> Result<RecordBatch> {
+fn tiles_batch(
+    h: &TileHeader,
+    tile: &str,
+    hash: &str,
+    epsg: u32,
+    s: &TileStats,
+    window: Option<&ReadWindow>,
+) -> Result<RecordBatch> {
     let has = s.kept > 0;
     let b = |i: usize| has.then_some(s.bounds[i]);
     let gps = |i: usize| (s.gps[0] <= s.gps[1]).then_some(s.gps[i]);
@@ -364,6 +566,9 @@ fn tiles_batch(h: &TileHeader, tile: &str, hash: &str, epsg: u32, s: &TileStats)
         Arc::new(Float64Array::from(vec![gps(1)])),
         Arc::new(TimestampMicrosecondArray::from(vec![acq(0)]).with_timezone("UTC")),
         Arc::new(TimestampMicrosecondArray::from(vec![acq(1)]).with_timezone("UTC")),
+        Arc::new(BooleanArray::from(vec![h.copc])),
+        Arc::new(UInt64Array::from(vec![window.map(|w| w.cells.len() as u64)])),
+        Arc::new(StringArray::from(vec![window.map(|w| w.cells.to_text())])),
     ];
     RecordBatch::try_new(tiles_schema(), cols).map_err(|e| Error::table(&h.path, e))
 }

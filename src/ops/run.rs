@@ -67,6 +67,9 @@ pub struct RunOptions {
     pub geoid_offset: Option<f64>,
     /// Collocation of the new granules.
     pub collocate: CollocateOptions,
+    /// Half-width (m) of the window read around each shot from COPC tiles; `None`:
+    /// [`als::run_window_half`] of the collocation's largest shift.
+    pub als_window: Option<f64>,
     /// The study's bounds.
     pub rules: StudyRules,
 }
@@ -83,6 +86,7 @@ impl RunOptions {
             epsg: None,
             geoid_offset: None,
             collocate: CollocateOptions::default(),
+            als_window: None,
             rules: StudyRules::default(),
         }
     }
@@ -199,8 +203,15 @@ fn ingest_and_collocate_granules(
 ) -> Result<(Dataset, RunReport, Vec<GranuleFile>)> {
     let ds = Dataset::create(&opts.out)?;
     let mut report = RunReport { dataset: opts.out.clone(), rules: opts.rules, ..Default::default() };
+    require_inputs(&ds, opts)?;
+    // The shots first, so that COPC tiles are read only around them; their CRS is then the
+    // dataset's, else the tiles'.
+    let epsg = match (opts.epsg, dataset::dataset_epsg(&ds)?) {
+        (Some(e), _) | (None, Some(e)) => Some(e),
+        (None, None) => als::inputs_epsg(&opts.als)?,
+    };
+    ingest_gedi(&ds, opts, epsg, progress, &mut report)?;
     ingest_als(&ds, opts, progress, &mut report)?;
-    ingest_gedi(&ds, opts, progress, &mut report)?;
     if let Some(landcover) = &opts.landcover {
         report.strata = Some(crate::ops::ingest_strata::ingest_strata(&ds, landcover, progress)?);
     }
@@ -209,31 +220,48 @@ fn ingest_and_collocate_granules(
     Ok((ds, report, granules))
 }
 
-fn ingest_als(ds: &Dataset, opts: &RunOptions, progress: &dyn Progress, report: &mut RunReport) -> Result<()> {
-    if opts.als.is_empty() {
-        if !ds.has_table(tables::ALS) {
-            return Err(Error::Usage(format!(
-                "--als: {} has no ALS table yet; give the LAS/LAZ tiles",
-                opts.out.display()
-            )));
-        }
-        return Ok(());
+/// Tiles and granules given, or already in the dataset; the tiles given readable (their headers).
+fn require_inputs(ds: &Dataset, opts: &RunOptions) -> Result<()> {
+    for f in als::expand_inputs(&opts.als)? {
+        crate::io::las::TileReader::open(&f)?;
     }
-    report.tiles = als::ingest(ds, &opts.als, &AlsOptions { keep_all_classes: false, epsg: opts.epsg }, progress)?;
+    if opts.als.is_empty() && !ds.has_table(tables::ALS) {
+        return Err(Error::Usage(format!(
+            "--als: {} has no ALS table yet; give the LAS/LAZ tiles",
+            opts.out.display()
+        )));
+    }
+    if opts.l1b.is_empty() && opts.l2a.is_empty() && !ds.has_table(tables::SHOTS) {
+        return Err(Error::Usage(format!(
+            "--l1b/--l2a: {} has no shots table yet; give the GEDI granules",
+            opts.out.display()
+        )));
+    }
     Ok(())
 }
 
-fn ingest_gedi(ds: &Dataset, opts: &RunOptions, progress: &dyn Progress, report: &mut RunReport) -> Result<()> {
-    if opts.l1b.is_empty() && opts.l2a.is_empty() {
-        if !ds.has_table(tables::SHOTS) {
-            return Err(Error::Usage(format!(
-                "--l1b/--l2a: {} has no shots table yet; give the GEDI granules",
-                opts.out.display()
-            )));
-        }
+fn ingest_als(ds: &Dataset, opts: &RunOptions, progress: &dyn Progress, report: &mut RunReport) -> Result<()> {
+    if opts.als.is_empty() {
         return Ok(());
     }
-    let (outcomes, ingest) = gedi::ingest(ds, &opts.l1b, &opts.l2a, opts.epsg, opts.geoid_offset, false, progress)?;
+    let half = opts.als_window.unwrap_or_else(|| als::run_window_half(opts.collocate.max_shift));
+    let windows = als::shot_windows(ds, half)?;
+    report.tiles =
+        als::ingest(ds, &opts.als, &AlsOptions { keep_all_classes: false, epsg: opts.epsg, windows }, progress)?;
+    Ok(())
+}
+
+fn ingest_gedi(
+    ds: &Dataset,
+    opts: &RunOptions,
+    epsg: Option<u32>,
+    progress: &dyn Progress,
+    report: &mut RunReport,
+) -> Result<()> {
+    if opts.l1b.is_empty() && opts.l2a.is_empty() {
+        return Ok(());
+    }
+    let (outcomes, ingest) = gedi::ingest(ds, &opts.l1b, &opts.l2a, epsg, opts.geoid_offset, false, progress)?;
     report.warnings.extend(ingest.warnings());
     report.ingested = outcomes;
     Ok(())
@@ -465,7 +493,9 @@ fn plan_granule(ds: &Dataset, file: GranuleFile, inputs: &StudyInputs, rules: &S
             let offset = inputs.offsets.get(&sn).cloned();
             let (dx, dy) = offset.as_ref().map_or((0.0, 0.0), |o| (o.dx, o.dy));
             let (x, y) = (x + dx, y + dy);
-            if inputs.als.covers(x, y, inputs.cover_radius) {
+            // Where a COPC tile was read only in windows, its points must all have been read.
+            let als = &inputs.als;
+            if als.covers(x, y, inputs.cover_radius) && als.unread_window(x, y, inputs.read_radius).is_none() {
                 covered.push(CoveredShot { row, footprint: Footprint::at(sn.to_string(), x, y), offset });
             }
         }
