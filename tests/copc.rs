@@ -395,3 +395,208 @@ mod dataset_path {
         );
     }
 }
+
+/// COPC tiles served by a loopback HTTP server that answers range requests and counts the bytes
+/// it sends: read through `object_store`, only the ranges a read needs are fetched.
+mod remote {
+    use super::*;
+    use std::path::{Path, PathBuf};
+    use std::sync::atomic::{AtomicU64, Ordering};
+    use std::sync::Arc;
+
+    struct Server {
+        url: String,
+        /// Body bytes sent in answer to GET requests.
+        sent: Arc<AtomicU64>,
+    }
+
+    /// Serve the files of `dir` on 127.0.0.1 over HTTP/1.1 with keep-alive, as object stores do:
+    /// HEAD, GET, and GET with `Range: bytes=a-b`; a thread per connection.
+    fn serve(dir: PathBuf) -> Server {
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let port = listener.local_addr().unwrap().port();
+        let sent = Arc::new(AtomicU64::new(0));
+        let counter = sent.clone();
+        std::thread::spawn(move || {
+            for stream in listener.incoming().flatten() {
+                let (dir, counter) = (dir.clone(), counter.clone());
+                std::thread::spawn(move || {
+                    let _ = connection(stream, &dir, &counter);
+                });
+            }
+        });
+        Server { url: format!("http://127.0.0.1:{port}"), sent }
+    }
+
+    /// Answer the requests of one connection until the client closes it.
+    fn connection(stream: std::net::TcpStream, dir: &Path, counter: &AtomicU64) -> std::io::Result<()> {
+        use std::io::{BufRead, Write};
+        let mut reader = std::io::BufReader::new(stream.try_clone()?);
+        let mut out = stream;
+        loop {
+            let mut line = String::new();
+            if reader.read_line(&mut line)? == 0 {
+                return Ok(());
+            }
+            let mut parts = line.split_whitespace();
+            let (method, target) = (parts.next().unwrap_or("").to_string(), parts.next().unwrap_or("").to_string());
+            let mut range = None;
+            loop {
+                let mut h = String::new();
+                reader.read_line(&mut h)?;
+                if h.trim().is_empty() {
+                    break;
+                }
+                if let Some((k, v)) = h.split_once(':') {
+                    if k.trim().eq_ignore_ascii_case("range") {
+                        range = v.trim().strip_prefix("bytes=").and_then(|r| {
+                            let (a, b) = r.split_once('-')?;
+                            Some((a.parse::<usize>().ok()?, b.parse::<usize>().ok()))
+                        });
+                    }
+                }
+            }
+            let Ok(data) = std::fs::read(dir.join(target.trim_start_matches('/'))) else {
+                out.write_all(b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\n\r\n")?;
+                continue;
+            };
+            let len = data.len();
+            let (status, body, extra) = match range {
+                Some((a, b)) if a < len => {
+                    let b = b.unwrap_or(len - 1).min(len - 1);
+                    ("206 Partial Content", &data[a..=b], format!("Content-Range: bytes {a}-{b}/{len}\r\n"))
+                }
+                _ => ("200 OK", &data[..], String::new()),
+            };
+            let head = format!(
+                "HTTP/1.1 {status}\r\nContent-Length: {}\r\n{extra}ETag: \"v1\"\r\n\
+                 Last-Modified: Wed, 25 Nov 2026 10:00:00 GMT\r\n\r\n",
+                body.len()
+            );
+            out.write_all(head.as_bytes())?;
+            if method == "GET" {
+                out.write_all(body)?;
+                counter.fetch_add(body.len() as u64, Ordering::Relaxed);
+            }
+        }
+    }
+
+    fn read_table(path: &Path) -> arrow::record_batch::RecordBatch {
+        let file = std::fs::File::open(path).unwrap();
+        let r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap();
+        let batches: Vec<_> = r.build().unwrap().map(|b| b.unwrap()).collect();
+        arrow::compute::concat_batches(&batches[0].schema(), &batches).unwrap()
+    }
+
+    /// The number after `fetched ` in a line of the CLI's stderr.
+    fn reported_fetched(err: &str) -> u64 {
+        let line = err.lines().find(|l| l.contains("fetched ")).unwrap_or_else(|| panic!("{err}"));
+        line.split("fetched ").nth(1).unwrap().split(' ').next().unwrap().parse().unwrap()
+    }
+
+    #[test]
+    fn simulate_from_a_url_fetches_only_the_ranges_it_decodes_and_equals_the_local_read() {
+        let server = serve(data("als-copc"));
+        let dir = tempfile::tempdir().unwrap();
+        let csv = dir.path().join("plots.csv");
+        std::fs::write(&csv, "id,x,y\na,817600,6460800\nb,817640,6460830\n").unwrap();
+        let name = "lidarforfuel_1_42.copc.laz";
+        let size = std::fs::metadata(data("als-copc").join(name)).unwrap().len();
+        let mut tables = Vec::new();
+        for als in [data("als-copc").join(name).to_string_lossy().into_owned(), format!("{}/{name}", server.url)] {
+            let out = dir.path().join(format!("{}.parquet", tables.len()));
+            let args =
+                ["simulate", "--als", &als, "--footprints", csv.to_str().unwrap(), "--out", out.to_str().unwrap()];
+            let (ok, _, err) = common::gedisim(&args);
+            assert!(ok, "{err}");
+            if als.starts_with("http") {
+                let sent = server.sent.load(Ordering::Relaxed);
+                assert_eq!(reported_fetched(&err), sent, "{err}");
+                assert!(sent > 0 && sent < size * 3 / 4, "{sent} of {size} bytes fetched");
+                let decoded: u64 =
+                    err.split(" compressed bytes").next().unwrap().rsplit(' ').next().unwrap().parse().unwrap();
+                assert!(sent >= decoded, "{err}");
+                eprintln!("{err}");
+            }
+            tables.push(read_table(&out));
+        }
+        assert_eq!(tables[0], tables[1]);
+    }
+
+    #[test]
+    fn a_url_that_does_not_answer_or_holds_nothing_is_one_line() {
+        let server = serve(data("als-copc"));
+        let dir = tempfile::tempdir().unwrap();
+        let csv = dir.path().join("plots.csv");
+        std::fs::write(&csv, "id,x,y\na,817600,6460800\n").unwrap();
+        let out = dir.path().join("o.parquet");
+        for url in [format!("{}/missing.copc.laz", server.url), "http://127.0.0.1:9/x.copc.laz".to_string()] {
+            let args =
+                ["simulate", "--als", &url, "--footprints", csv.to_str().unwrap(), "--out", out.to_str().unwrap()];
+            let (ok, _, err) = common::gedisim(&args);
+            assert!(!ok && err.trim().lines().count() == 1 && err.contains(&url), "{err}");
+        }
+    }
+
+    #[test]
+    fn ingest_from_urls_equals_ingest_from_files() {
+        let server = serve(data(""));
+        let tmp = tempfile::tempdir().unwrap();
+        let world = tmp.path().join("world");
+        let laz = data("als/lidarforfuel_1_42.laz");
+        let args = ["scenario", "--effect", "none", "--als", laz.to_str().unwrap(), "--passes", "1", "--seed", "5"];
+        let (ok, _, err) = common::gedisim(&[&args[..], &["--out", world.to_str().unwrap()]].concat());
+        assert!(ok, "{err}");
+        let gedi = world.join("gedi");
+        // A COPC tile (read around the shots) and a plain LAZ tile elsewhere (read whole).
+        let tiles = ["als-copc/lidarforfuel_1_42.copc.laz", "als/pdal-ign-plugin_mnx_input_crop_2.laz"];
+        let mut datasets = Vec::new();
+        for remote in [false, true] {
+            let ds = tmp.path().join(if remote { "url" } else { "file" });
+            let d = ds.to_str().unwrap();
+            let (ok, _, err) = common::gedisim(&[
+                "ingest",
+                "gedi",
+                "--l1b",
+                gedi.to_str().unwrap(),
+                "--l2a",
+                gedi.to_str().unwrap(),
+                "--out",
+                d,
+            ]);
+            assert!(ok, "{err}");
+            let inputs: Vec<String> = tiles
+                .iter()
+                .map(|t| if remote { format!("{}/{t}", server.url) } else { data(t).to_string_lossy().into_owned() })
+                .collect();
+            let before = server.sent.load(Ordering::Relaxed);
+            let (ok, _, err) = common::gedisim(
+                &[&["ingest", "als"][..], &inputs.iter().map(String::as_str).collect::<Vec<_>>(), &["--out", d]]
+                    .concat(),
+            );
+            assert!(ok, "{err}");
+            assert!(err.contains("new cells of 10 m"), "{err}");
+            if remote {
+                // No input read twice: the COPC tile's windows cover most of this 100 m tile, so
+                // the bound is the file's size, plus its header and hierarchy read by two readers.
+                let lines: Vec<&str> = err.lines().filter(|l| l.contains(" range requests")).collect();
+                assert_eq!(lines.len(), 2, "{err}");
+                let mut total = 0;
+                for line in lines {
+                    let n: Vec<u64> =
+                        line.split("fetched ").nth(1).unwrap().split(' ').filter_map(|w| w.parse().ok()).collect();
+                    assert!(n[0] as f64 <= 1.1 * n[1] as f64, "{line}");
+                    total += n[0];
+                }
+                assert_eq!(total, server.sent.load(Ordering::Relaxed) - before);
+            }
+            let mut points = AlsPoints::default();
+            for f in common::files_with_suffix(&ds.join("als"), ".parquet") {
+                points.extend_from(&gedisim::dataset::als::read_file_points(&f).unwrap());
+            }
+            datasets.push(canonical(&points));
+        }
+        assert!(datasets[0].len() > 200_000, "{}", datasets[0].len());
+        assert_eq!(datasets[0], datasets[1]);
+    }
+}

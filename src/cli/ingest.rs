@@ -82,6 +82,7 @@ pub fn ingest_als(a: IngestAlsArgs) -> Result<()> {
     }
     let opts = AlsOptions { keep_all_classes: a.keep_all_classes, epsg: a.epsg, windows };
     let outcomes = als::ingest(&ds, &a.inputs, &opts, &Bars::new())?;
+    super::reporters::print_fetched(&a.inputs);
     let (mut read, mut written) = (0, 0);
     for o in &outcomes {
         match o {

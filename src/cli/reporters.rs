@@ -110,3 +110,17 @@ pub fn writer(root: &std::path::Path) -> gedisim::Result<gedisim::dataset::Datas
     }
     Ok(ds)
 }
+
+/// What was fetched from each remote input (`https://…`, `s3://…`) that was read (stderr).
+pub fn print_fetched(inputs: &[std::path::PathBuf]) {
+    for (input, f) in gedisim::ops::ingest_als::remote_reads(inputs) {
+        eprintln!(
+            "{}: fetched {} of {} bytes ({:.1} %) in {} range requests",
+            input.display(),
+            f.bytes,
+            f.size,
+            100.0 * f.bytes as f64 / f.size.max(1) as f64,
+            f.requests
+        );
+    }
+}

@@ -164,6 +164,7 @@ pub fn print_ingest_and_collocation(r: &gedisim::ops::run::RunReport) {
         }
         None => eprintln!("collocation: every granule already collocated"),
     }
+    super::reporters::print_fetched(&r.als_inputs);
 }
 
 /// What a run did (stderr), then the filters and the results (stdout).

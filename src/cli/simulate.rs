@@ -99,6 +99,7 @@ pub fn simulate(a: SimulateArgs) -> Result<()> {
     use gedisim::ops::simulate::{SimulateOptions, Source};
     // Dataset mode writes sim/ into the dataset: it holds the writer lock while it runs.
     let _writer = a.dataset.as_deref().map(super::reporters::writer).transpose()?;
+    let als_input = a.als.clone();
     let source = match (a.dataset, a.als) {
         (Some(dataset), _) => Source::Dataset { dataset, footprints: a.footprints, out: a.out },
         (None, Some(als)) => {
@@ -141,6 +142,9 @@ pub fn simulate(a: SimulateArgs) -> Result<()> {
     );
     if let Some(c) = &r.copc {
         eprintln!("COPC: {c}, {} points within the footprints' read radius", c.points_kept);
+    }
+    if let Some(als) = &als_input {
+        super::reporters::print_fetched(std::slice::from_ref(als));
     }
     if a.stats {
         let s = start.elapsed().as_secs_f64();

@@ -19,11 +19,16 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::io::las::{check_layout, columns, tile_header, TileHeader};
+use crate::io::source;
 use crate::kernels::geo::cells::Cells;
 use crate::kernels::sim::AlsPoints;
 
 /// Deepest octree level accepted (a 1 km tile at level 24 has 0.06 mm nodes).
 const MAX_LEVEL: i32 = 24;
+
+/// Most compressed bytes of the nodes fetched at once from a remote object: the memory a remote
+/// read holds beyond its points.
+const REMOTE_BATCH_BYTES: u64 = 64 << 20;
 
 /// Size of one hierarchy entry (COPC 1.0: key 16, offset 8, byte size 4, point count 4).
 const ENTRY_BYTES: usize = 32;
@@ -115,8 +120,8 @@ impl CopcTile {
     /// Open a LAS/LAZ file as COPC if its header carries the COPC info VLR; `None` otherwise.
     pub fn open_if_copc(path: &Path) -> Result<Option<Self>> {
         let bad = |field: &str, msg: String| Error::field(path, field, msg);
-        let mut file = std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
-        let layout = check_layout(path, &mut file)?;
+        let (mut file, len) = source::open(path)?;
+        let layout = check_layout(path, &mut file, len)?;
         let mut file = std::io::BufReader::new(file);
         let h = las::Header::new(&mut file).map_err(|e| {
             bad("header", format!("cannot read the header or its VLRs: {}", crate::error::one_line(&e.to_string())))
@@ -247,7 +252,9 @@ impl CopcTile {
     }
 
     /// Decode `nodes` (in file order, as `self.nodes` keeps them), keeping the points in `cells`;
-    /// also says whether a point lay outside its node.
+    /// also says whether a point lay outside its node. A local file is read node by node by each
+    /// thread; a remote object in batches of [`REMOTE_BATCH_BYTES`], each batch's ranges fetched at
+    /// once (neighbours less than [`source::COALESCE_BYTES`] apart in one request).
     fn decode(
         &self,
         nodes: &[Node],
@@ -255,14 +262,52 @@ impl CopcTile {
         attributes: Attributes,
     ) -> Result<(AlsPoints, CopcRead, bool)> {
         let path = &self.header.path;
-        let open = || std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")));
-        let parts: Vec<Result<(AlsPoints, bool)>> = nodes
-            .par_iter()
-            .map_init(open, |file, node| {
-                let file = file.as_mut().map_err(|e| Error::file(path, e.to_string()))?;
-                self.decode_node(file, node, cells, attributes)
-            })
-            .collect();
+        let read_error = |node: &Node, e: std::io::Error| {
+            Error::field(
+                path,
+                "points",
+                format!("cannot read COPC node {node}: {}", crate::error::one_line(&e.to_string())),
+            )
+        };
+        let parts: Vec<Result<(AlsPoints, bool)>> = match source::remote(path)? {
+            None => nodes
+                .par_iter()
+                .map_init(
+                    || source::open(path).map(|(file, _)| file),
+                    |file, node| {
+                        let file = file.as_mut().map_err(|e| Error::file(path, e.to_string()))?;
+                        let mut chunk = vec![0u8; node.bytes as usize];
+                        file.seek(SeekFrom::Start(node.offset))
+                            .and_then(|_| file.read_exact(&mut chunk))
+                            .map_err(|e| read_error(node, e))?;
+                        self.decode_chunk(&chunk, node, cells, attributes)
+                    },
+                )
+                .collect(),
+            Some(remote) => {
+                let mut parts = Vec::with_capacity(nodes.len());
+                let mut start = 0;
+                while start < nodes.len() {
+                    let mut end = start;
+                    let mut bytes = 0;
+                    while end < nodes.len() && (end == start || bytes + nodes[end].bytes <= REMOTE_BATCH_BYTES) {
+                        bytes += nodes[end].bytes;
+                        end += 1;
+                    }
+                    let batch = &nodes[start..end];
+                    let ranges: Vec<_> = batch.iter().map(|n| n.offset..n.offset + n.bytes).collect();
+                    let chunks = remote.fetch_ranges(&ranges).map_err(|e| read_error(&batch[0], e))?;
+                    parts.par_extend(
+                        batch
+                            .par_iter()
+                            .zip(chunks)
+                            .map(|(node, chunk)| self.decode_chunk(&chunk, node, cells, attributes)),
+                    );
+                    start = end;
+                }
+                parts
+            }
+        };
         let mut points = AlsPoints::default();
         let mut outside = false;
         for part in parts {
@@ -279,26 +324,23 @@ impl CopcTile {
         Ok((points, stats, outside))
     }
 
-    /// One node's points in `cells`, and whether one of its points lay outside its bounds.
-    fn decode_node(
+    /// One node's points in `cells`, from its chunk, and whether one of its points lay outside its
+    /// bounds.
+    fn decode_chunk(
         &self,
-        file: &mut std::fs::File,
+        chunk: &[u8],
         node: &Node,
         cells: Option<&Cells>,
         attributes: Attributes,
     ) -> Result<(AlsPoints, bool)> {
         let cannot =
             |why: String| Error::field(&self.header.path, "points", format!("cannot decode COPC node {node}: {why}"));
-        let mut chunk = vec![0u8; node.bytes as usize];
-        file.seek(SeekFrom::Start(node.offset))
-            .and_then(|_| file.read_exact(&mut chunk))
-            .map_err(|e| cannot(e.to_string()))?;
-        self.check_chunk(&chunk, node).map_err(cannot)?;
+        self.check_chunk(chunk, node).map_err(cannot)?;
         let mut buf = vec![0u8; node.points as usize * self.record];
         // A COPC chunk is a LAZ layered chunk of its own, decoded from memory. The `laz` decoder
         // panics on some corrupt streams: caught and reported, as in `io::las`.
         let decoded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> std::io::Result<()> {
-            let mut d = LayeredPointRecordDecompressor::new(std::io::Cursor::new(chunk.as_slice()));
+            let mut d = LayeredPointRecordDecompressor::new(std::io::Cursor::new(chunk));
             d.set_fields_from(self.laz.items()).map_err(std::io::Error::other)?;
             d.set_selection(attributes.selection());
             d.decompress_many(&mut buf)

@@ -51,6 +51,20 @@ pub(crate) struct Layout {
 /// Largest WKT CRS record read from an EVLR (bytes).
 const MAX_WKT_BYTES: u64 = 1 << 20;
 
+/// The header facts of a LAS/LAZ file, local or remote, reading only its header and (E)VLRs.
+pub fn read_header(path: &Path) -> Result<TileHeader> {
+    let (mut file, len) = crate::io::source::open(path)?;
+    let layout = check_layout(path, &mut file, len)?;
+    let h = las::Header::new(&mut std::io::BufReader::new(file)).map_err(|e| {
+        Error::field(
+            path,
+            "header",
+            format!("cannot read the header or its VLRs: {}", crate::error::one_line(&e.to_string())),
+        )
+    })?;
+    tile_header(path, &h, &layout)
+}
+
 /// A tile opened for streaming.
 pub struct TileReader {
     header: TileHeader,
@@ -67,8 +81,8 @@ impl TileReader {
 
     /// Open a file; `parallel` decodes LAZ chunks on the rayon pool.
     pub fn open_with(path: &Path, parallel: bool) -> Result<Self> {
-        let mut file = std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
-        let layout = check_layout(path, &mut file)?;
+        let (mut file, len) = crate::io::source::open(path)?;
+        let layout = check_layout(path, &mut file, len)?;
         let laz_parallelism = if parallel { las::LazParallelism::Yes } else { las::LazParallelism::No };
         let options = las::ReaderOptions::default().with_laz_parallelism(laz_parallelism);
         let reader = Reader::with_options(std::io::BufReader::with_capacity(1 << 20, file), options).map_err(|e| {
@@ -152,11 +166,14 @@ impl TileReader {
 /// the point count equal to what the point bytes hold (LAS) or within the chunk table's capacity
 /// (LAZ; an understatement smaller than one chunk of a fixed-chunk file is not detectable here).
 /// Leaves `file` at its start.
-pub(crate) fn check_layout(path: &Path, file: &mut std::fs::File) -> Result<Layout> {
-    use std::io::{Read, Seek, SeekFrom};
+pub(crate) fn check_layout<R: std::io::Read + std::io::Seek>(
+    path: &Path,
+    file: &mut R,
+    file_len: u64,
+) -> Result<Layout> {
+    use std::io::SeekFrom;
     let bad = |field: &str, msg: String| Error::field(path, field, msg);
     let io = |e: std::io::Error| Error::field(path, "header", format!("cannot read: {e}"));
-    let file_len = file.metadata().map_err(|e| Error::file(path, format!("cannot stat: {e}")))?.len();
     let h = las::raw::Header::read_from(std::io::BufReader::new(&mut *file)).map_err(|e| {
         bad("header", format!("not a LAS/LAZ header (truncated?): {}", crate::error::one_line(&e.to_string())))
     })?;

@@ -1,5 +1,6 @@
 //! I/O adapters: foreign formats (LAS/LAZ, GEDI HDF5, footprint CSV) read into kernel types and
-//! written from them. No sequencing of steps (that is `ops`), no Parquet tables (that is `dataset`).
+//! written from them, from local files or remote objects (`source`). No sequencing of steps (that
+//! is `ops`), no Parquet tables (that is `dataset`).
 
 pub mod copc;
 pub mod footprints;
@@ -8,6 +9,7 @@ pub mod granule;
 pub mod landcover;
 pub mod las;
 pub mod pulse;
+pub mod source;
 
 use std::path::{Path, PathBuf};
 
@@ -25,7 +27,7 @@ pub fn expand_inputs(inputs: &[PathBuf], wanted: impl Fn(&Path) -> bool) -> Resu
                 .collect();
             found.sort();
             out.extend(found);
-        } else if p.is_file() {
+        } else if p.is_file() || source::is_remote(p) {
             out.push(p.clone());
         } else {
             return Err(Error::file(p, "no such file or folder"));

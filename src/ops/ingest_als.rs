@@ -33,7 +33,8 @@ use crate::dataset::als::{
 use crate::dataset::{self, read, tables, AtomicParquet, Dataset};
 use crate::error::{Error, Result};
 use crate::io::copc::{Attributes, CopcRead, CopcTile};
-use crate::io::las::{TileHeader, TileReader, CHUNK_POINTS};
+use crate::io::las::{read_header, TileHeader, TileReader, CHUNK_POINTS};
+use crate::io::source::{self, Fetched};
 use crate::kernels::geo::cells::{Cells, Windows};
 use crate::kernels::sim::{self, AlsPoints, Profile, SimConfig};
 use crate::ops::progress::{Progress, Step};
@@ -77,10 +78,24 @@ pub fn shot_windows(ds: &Dataset, half: f64) -> Result<Option<Windows>> {
     Ok(Some(Windows::new(centres, half)))
 }
 
+/// The key of a tile's content: SHA-256 of a local file's bytes, or, for a remote object, of its
+/// URL, size and version ([`source::Remote::content_key`]: its bytes are not read for this).
+fn content_key(input: &Path) -> Result<String> {
+    match source::remote(input)? {
+        Some(remote) => Ok(remote.content_key()),
+        None => dataset::content_hash(input),
+    }
+}
+
+/// What was fetched from each remote input (`https://…`, `s3://…`) read so far in this process.
+pub fn remote_reads(inputs: &[PathBuf]) -> Vec<(&Path, Fetched)> {
+    inputs.iter().filter_map(|i| source::fetched(i).map(|f| (i.as_path(), f))).collect()
+}
+
 /// The CRS (EPSG) recorded by the first of the LAS/LAZ files of `inputs` that records one.
 pub fn inputs_epsg(inputs: &[PathBuf]) -> Result<Option<u32>> {
     for f in expand_inputs(inputs)? {
-        if let Some(epsg) = TileReader::open(&f)?.header().epsg {
+        if let Some(epsg) = read_header(&f)?.epsg {
             return Ok(Some(epsg));
         }
     }
@@ -142,8 +157,8 @@ pub fn ingest_tiles(
     let existing = dataset::dataset_epsg(dataset)?;
     let mut headers: Vec<(u32, u64, bool)> = Vec::with_capacity(files.len()); // (EPSG, points, COPC) per file
     for f in files {
-        let reader = TileReader::open(f)?;
-        let epsg = resolve_epsg(reader.header(), opts, existing)?;
+        let header = read_header(f)?;
+        let epsg = resolve_epsg(&header, opts, existing)?;
         if let Some(&(first, ..)) = headers.first().filter(|&&(first, ..)| first != epsg) {
             return Err(Error::field(
                 f,
@@ -151,14 +166,14 @@ pub fn ingest_tiles(
                 format!("EPSG:{epsg} differs from EPSG:{first} of {} in the same call", files[0].display()),
             ));
         }
-        headers.push((epsg, reader.header().number_of_points, reader.header().copc));
+        headers.push((epsg, header.number_of_points, header.copc));
     }
     progress.set_total(headers.iter().map(|h| h.1).sum());
     let als_dir = dataset.table_dir(tables::ALS)?;
     let tiles_dir = dataset.table_dir(tables::TILES)?;
     // Content hashes first: a file whose content appears earlier in the call is skipped like one
     // ingested before (two copies must not write the same table files at once).
-    let hashes = files.par_iter().map(|f| dataset::content_hash(f)).collect::<Result<Vec<_>>>()?;
+    let hashes = files.par_iter().map(|f| content_key(f)).collect::<Result<Vec<_>>>()?;
     let mut seen = std::collections::HashSet::new();
     let first_copy: Vec<bool> = hashes.iter().map(|h| seen.insert(h.clone())).collect();
     // A single file gets both cores for LAZ decoding; several files run one per core.

@@ -118,6 +118,8 @@ pub struct RunReport {
     pub dataset: PathBuf,
     /// ALS files given, ingested or skipped.
     pub tiles: Vec<TileOutcome>,
+    /// The ALS inputs given (files, folders or URLs).
+    pub als_inputs: Vec<PathBuf>,
     /// GEDI granules given, ingested or skipped.
     pub ingested: Vec<GranuleOutcome>,
     /// Warnings (GEDI joins, foreign files in `sim/`).
@@ -223,7 +225,7 @@ fn ingest_and_collocate_granules(
 /// Tiles and granules given, or already in the dataset; the tiles given readable (their headers).
 fn require_inputs(ds: &Dataset, opts: &RunOptions) -> Result<()> {
     for f in als::expand_inputs(&opts.als)? {
-        crate::io::las::TileReader::open(&f)?;
+        crate::io::las::read_header(&f)?;
     }
     if opts.als.is_empty() && !ds.has_table(tables::ALS) {
         return Err(Error::Usage(format!(
@@ -246,6 +248,7 @@ fn ingest_als(ds: &Dataset, opts: &RunOptions, progress: &dyn Progress, report: 
     }
     let half = opts.als_window.unwrap_or_else(|| als::run_window_half(opts.collocate.max_shift));
     let windows = als::shot_windows(ds, half)?;
+    report.als_inputs = opts.als.clone();
     report.tiles =
         als::ingest(ds, &opts.als, &AlsOptions { keep_all_classes: false, epsg: opts.epsg, windows }, progress)?;
     Ok(())
