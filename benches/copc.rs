@@ -16,20 +16,10 @@
 mod common;
 
 use std::path::Path;
-use std::process::Command;
 
-use common::{extent, scene_25m};
+use common::{beams, extent, medians, s, scene_25m, timed, TO_LAS};
 
 const REPS: usize = 5;
-
-/// COPC → LAS with laspy: the COPC records dropped (laspy writes no COPC), the CRS EVLR kept.
-const TO_LAS: &str = "import laspy, sys
-from laspy.vlrs.vlrlist import VLRList
-f = laspy.read(sys.argv[1])
-f.header.vlrs = VLRList([v for v in f.header.vlrs if v.user_id != 'copc'])
-f.vlrs = VLRList([v for v in f.vlrs if v.user_id != 'copc'])
-f.evlrs = VLRList([v for v in (f.evlrs or []) if v.user_id != 'copc'])
-f.write(sys.argv[2])";
 
 fn main() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -55,7 +45,7 @@ fn main() {
     }
     let las = dir.join("scene25M.las");
     let (convert_s, convert_mb, _) = timed("python3", &["-c", TO_LAS, s(&copc), s(&las)]);
-    let shots = beams(&extent(&scene));
+    let shots = beams(&extent(&scene), 2);
     let csv = dir.join("beams.csv");
     let coords = dir.join("beams.coords");
     let mut c = String::from("id,x,y\n");
@@ -119,49 +109,4 @@ fn main() {
         "vs gediRat's whole workflow from the published COPC (conversion + gediRat): {:.1}×",
         (convert_s + rw) / gw
     );
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-/// Run `program` under `/usr/bin/time`: (wall s, peak RSS MB, stderr). Panics if it fails.
-fn timed(program: &str, args: &[&str]) -> (f64, f64, String) {
-    let stats = tempfile::NamedTempFile::new().unwrap();
-    let o = Command::new("/usr/bin/time")
-        .args(["-f", "%e %M", "-o", stats.path().to_str().unwrap(), program])
-        .args(args)
-        .output()
-        .expect("run /usr/bin/time");
-    let err = String::from_utf8_lossy(&o.stderr).into_owned();
-    assert!(o.status.success(), "{program} {args:?}: {err}");
-    let line = std::fs::read_to_string(stats.path()).unwrap();
-    let mut f = line.split_whitespace().map(|v| v.parse::<f64>().unwrap());
-    (f.next().unwrap(), f.next().unwrap() / 1024.0, err)
-}
-
-fn medians(v: &[(f64, f64)]) -> (f64, f64) {
-    let med = |mut x: Vec<f64>| {
-        x.sort_by(f64::total_cmp);
-        x[x.len() / 2]
-    };
-    (med(v.iter().map(|p| p.0).collect()), med(v.iter().map(|p| p.1).collect()))
-}
-
-/// Two GEDI-like beams across the tile: parallel tracks heading 20° east of north, 600 m apart,
-/// through the tile's centre ± 300 m, one shot every 60 m, those 20 m or more inside the tile.
-fn beams(e: &[f64; 4]) -> Vec<(f64, f64)> {
-    let (cx, cy) = ((e[0] + e[2]) / 2.0, (e[1] + e[3]) / 2.0);
-    let (dx, dy) = (20f64.to_radians().sin(), 20f64.to_radians().cos());
-    let mut out = Vec::new();
-    for side in [-300.0, 300.0] {
-        let (ox, oy) = (cx + side * dy, cy - side * dx);
-        for k in -30..=30 {
-            let (x, y) = (ox + 60.0 * k as f64 * dx, oy + 60.0 * k as f64 * dy);
-            if x >= e[0] + 20.0 && x <= e[2] - 20.0 && y >= e[1] + 20.0 && y <= e[3] - 20.0 {
-                out.push((x, y));
-            }
-        }
-    }
-    out
 }

@@ -4,6 +4,8 @@
 
 mod common;
 
+use std::path::PathBuf;
+
 use common::{data, TILES};
 use gedisim::io::copc::{Attributes, CopcTile};
 use gedisim::io::las::read_points;
@@ -195,6 +197,50 @@ fn simulate_from_copc_equals_simulate_from_the_laz_original() {
             assert_eq!(a.to_data(), b.to_data(), "column {}", field.name());
         }
     }
+}
+
+#[test]
+fn simulate_reads_several_tiles_and_skips_those_no_footprint_reaches() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("plots.csv");
+    // Two plots on lidarforfuel_1_42, one on pdal-ign-plugin_mnx_input_crop_2 (600 km away).
+    std::fs::write(&csv, "id,x,y\na,817600,6460800\nb,817640,6460830\nc,689425,6735475\n").unwrap();
+    let table = |als: &[PathBuf], name: &str| {
+        let out = dir.path().join(name);
+        let mut args = vec!["simulate".to_string(), "--footprints".into(), csv.to_string_lossy().into_owned()];
+        args.extend(["--out".to_string(), out.to_string_lossy().into_owned(), "--als".into()]);
+        args.extend(als.iter().map(|p| p.to_string_lossy().into_owned()));
+        let (ok, _, err) = common::gedisim(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        assert!(ok, "{err}");
+        let file = std::fs::File::open(&out).unwrap();
+        let r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap();
+        let batches: Vec<_> = r.build().unwrap().map(|b| b.unwrap()).collect();
+        (arrow::compute::concat_batches(&batches[0].schema(), &batches).unwrap(), err)
+    };
+    let copc = data("als-copc/lidarforfuel_1_42.copc.laz");
+    let far = data("als-copc/pdal-ign-plugin_mnx_input_crop_2.depth6-paged.copc.laz");
+    let other = data("als-copc/lidarforfuel_2_bas_lig.copc.laz");
+    // The tile no plot reaches adds its nodes to the count, none decoded.
+    let nodes: usize = [&copc, &far, &other].iter().map(|f| CopcTile::open(f).unwrap().node_count()).sum();
+    let (both, err) = table(&[copc.clone(), far.clone(), other], "both.parquet");
+    assert!(err.contains(&format!(" of {nodes} octree nodes")), "{err}");
+    // Each plot simulated as from its own tile alone.
+    let (one, _) = table(&[copc], "one.parquet");
+    let (two, _) = table(&[far], "two.parquet");
+    let status = |b: &arrow::record_batch::RecordBatch| {
+        use arrow::array::AsArray;
+        let c = b.column_by_name("status").unwrap().as_string::<i32>();
+        (0..b.num_rows()).map(|i| c.value(i).to_string()).collect::<Vec<_>>()
+    };
+    let (sb, s1, s2) = (status(&both), status(&one), status(&two));
+    assert_eq!(sb.len(), 9);
+    for r in 0..9 {
+        let expected = if r < 6 { &s1[r] } else { &s2[r] };
+        assert_eq!(&sb[r], expected, "row {r}");
+    }
+    assert!(sb.iter().all(|s| s == "ok"), "{sb:?}");
+    let rh = |b: &arrow::record_batch::RecordBatch, r: usize| b.column_by_name("rh").unwrap().slice(r, 1).to_data();
+    assert!((0..6).all(|r| rh(&both, r) == rh(&one, r)) && (6..9).all(|r| rh(&both, r) == rh(&two, r)));
 }
 
 /// Two granules of a world over the COPC tile, and their runs: the first alone, then both.

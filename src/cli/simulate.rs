@@ -12,9 +12,10 @@ use super::reporters::{peak_rss_mb, Bars};
 
 #[derive(Args)]
 pub struct SimulateArgs {
-    /// LAS/LAZ file (direct mode); a COPC file is decoded only around the footprints.
-    #[arg(long, requires_all = ["footprints", "out"], conflicts_with = "dataset")]
-    als: Option<PathBuf>,
+    /// LAS/LAZ files, folders holding them, or https:// and s3:// URLs (direct mode); a COPC file
+    /// is decoded only around the footprints, a file no footprint reaches is not read.
+    #[arg(long, num_args = 1.., requires_all = ["footprints", "out"], conflicts_with = "dataset")]
+    als: Vec<PathBuf>,
     /// CSV with a header naming id, x, y (direct mode; in dataset mode, footprints to simulate
     /// instead of the ingested shots, e.g. inventory plots).
     #[arg(long)]
@@ -102,15 +103,13 @@ pub fn simulate(a: SimulateArgs) -> Result<()> {
     let als_input = a.als.clone();
     let source = match (a.dataset, a.als) {
         (Some(dataset), _) => Source::Dataset { dataset, footprints: a.footprints, out: a.out },
-        (None, Some(als)) => {
+        (None, als) if !als.is_empty() => {
             let (Some(footprints), Some(out)) = (a.footprints, a.out) else {
                 return Err(Error::Usage("give --als, --footprints and --out (direct mode) or --dataset".into()));
             };
             Source::Direct { als, footprints, out, keep_all_classes: a.keep_all_classes }
         }
-        (None, None) => {
-            return Err(Error::Usage("give --als, --footprints and --out (direct mode) or --dataset".into()))
-        }
+        (None, _) => return Err(Error::Usage("give --als, --footprints and --out (direct mode) or --dataset".into())),
     };
     if matches!(a.profile, ProfileArg::Gedirat) && a.density == DensityArg::Pulses {
         return Err(Error::Usage(
@@ -143,9 +142,7 @@ pub fn simulate(a: SimulateArgs) -> Result<()> {
     if let Some(c) = &r.copc {
         eprintln!("COPC: {c}, {} points within the footprints' read radius", c.points_kept);
     }
-    if let Some(als) = &als_input {
-        super::reporters::print_fetched(std::slice::from_ref(als));
-    }
+    super::reporters::print_fetched(&als_input);
     if a.stats {
         let s = start.elapsed().as_secs_f64();
         let n = r.simulated + r.skipped;

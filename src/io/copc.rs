@@ -95,6 +95,19 @@ pub struct CopcRead {
     pub read_whole: bool,
 }
 
+impl CopcRead {
+    /// Add what another read touched (of another tile).
+    pub fn add(&mut self, o: &CopcRead) {
+        self.nodes += o.nodes;
+        self.nodes_in_tile += o.nodes_in_tile;
+        self.points_decoded += o.points_decoded;
+        self.points_in_tile += o.points_in_tile;
+        self.bytes_decoded += o.bytes_decoded;
+        self.points_kept += o.points_kept;
+        self.read_whole |= o.read_whole;
+    }
+}
+
 impl std::fmt::Display for CopcRead {
     /// `N of M octree nodes decoded (a of b points, c compressed bytes)`, and a word when the
     /// node bounds did not hold.
@@ -202,6 +215,11 @@ impl CopcTile {
     /// The header facts.
     pub fn header(&self) -> &TileHeader {
         &self.header
+    }
+
+    /// Number of data nodes in the octree.
+    pub fn node_count(&self) -> usize {
+        self.nodes.len()
     }
 
     /// Whether the octree's cube had to be taken from the header bounds (the COPC info VLR records

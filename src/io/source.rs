@@ -1,9 +1,9 @@
 //! Where a tile's bytes come from: a local file, or a remote object read by range requests
 //! through the `object_store` crate: `https://…` and `http://…` (HTTP range requests) and
-//! `s3://bucket/key` (credentials and region from the `AWS_*` environment). A remote object is
-//! fetched as the reader seeks, in blocks of at least [`BLOCK_BYTES`]: a COPC read fetches the
-//! header, the hierarchy pages and the chunks of the nodes it decodes, and nothing else; a plain
-//! LAS/LAZ file is streamed whole. Memory is bounded by one block per reader (docs/copc.md).
+//! `s3://bucket/key` (credentials and region from the `AWS_*` environment). A [`RangeReader`]
+//! fetches as it reads, in ranges of at least [`BLOCK_BYTES`], and holds one range; a COPC read
+//! fetches the chunks of the nodes it decodes with [`Remote::fetch_ranges`] (in batches: see
+//! `io::copc`). A plain LAS/LAZ file is streamed whole (docs/copc.md, "Remote tiles").
 
 use std::collections::HashMap;
 use std::io::{Read, Seek, SeekFrom};
@@ -163,13 +163,7 @@ impl Remote {
         let got = self.runtime.block_on(self.store.get_range(&self.location, start..end)).map_err(|e| {
             std::io::Error::other(format!("bytes {start}–{end}: {}", crate::error::one_line(&e.to_string())))
         })?;
-        if got.len() as u64 != end - start {
-            return Err(std::io::Error::other(format!(
-                "bytes {start}–{end}: the server sent {} bytes instead of {}",
-                got.len(),
-                end - start
-            )));
-        }
+        whole(&(start..end), &got)?;
         self.fetched.fetch_add(got.len() as u64, Ordering::Relaxed);
         self.requests.fetch_add(1, Ordering::Relaxed);
         let mut kept = self.small.lock().expect("range cache");
@@ -192,17 +186,7 @@ impl Remote {
             .runtime
             .block_on(object_store::coalesce_ranges(ranges, fetch, COALESCE_BYTES))
             .map_err(|e| std::io::Error::other(crate::error::one_line(&e.to_string())))?;
-        for (r, b) in ranges.iter().zip(&got) {
-            if b.len() as u64 != r.end - r.start {
-                return Err(std::io::Error::other(format!(
-                    "bytes {}–{}: the server sent {} bytes instead of {}",
-                    r.start,
-                    r.end,
-                    b.len(),
-                    r.end - r.start
-                )));
-            }
-        }
+        ranges.iter().zip(&got).try_for_each(|(r, b)| whole(r, b))?;
         Ok(got)
     }
 
@@ -210,6 +194,20 @@ impl Remote {
     pub fn reader(self: &Arc<Self>) -> RangeReader {
         RangeReader { remote: self.clone(), pos: 0, block_start: 0, block: bytes::Bytes::new() }
     }
+}
+
+/// An error unless `got` holds the whole of `range`.
+fn whole(range: &std::ops::Range<u64>, got: &bytes::Bytes) -> std::io::Result<()> {
+    let want = range.end - range.start;
+    if got.len() as u64 == want {
+        return Ok(());
+    }
+    Err(std::io::Error::other(format!(
+        "bytes {}–{}: the server sent {} bytes instead of {want}",
+        range.start,
+        range.end,
+        got.len()
+    )))
 }
 
 /// Read + Seek over a remote object: each read outside the block held fetches the range from the

@@ -1,4 +1,4 @@
-//! `gedisim simulate`: the simulation kernels driven from files — direct mode (one LAS/LAZ file and
+//! `gedisim simulate`: the simulation kernels driven from files — direct mode (LAS/LAZ files and
 //! a footprint CSV) and dataset mode (every ingested shot, or a footprint CSV such as inventory
 //! plots, against the `als/` table).
 
@@ -21,10 +21,10 @@ use crate::ops::progress::{Progress, Step};
 /// What `gedisim simulate` reads and where it writes.
 #[derive(Debug, Clone)]
 pub enum Source {
-    /// Direct mode: one LAS/LAZ file and a footprint CSV, into `out`. With the `default` profile the
-    /// classes the ingest drops are dropped too, unless `keep_all_classes`. A COPC file is read
-    /// only around the footprints ([`read_around`]).
-    Direct { als: PathBuf, footprints: PathBuf, out: PathBuf, keep_all_classes: bool },
+    /// Direct mode: LAS/LAZ files (folders expanded) and a footprint CSV, into `out`. With the
+    /// `default` profile the classes the ingest drops are dropped too, unless `keep_all_classes`.
+    /// A COPC file is read only around the footprints ([`read_around`]).
+    Direct { als: Vec<PathBuf>, footprints: PathBuf, out: PathBuf, keep_all_classes: bool },
     /// Dataset mode: every ingested shot (moved by its collocation offset) into
     /// `<dataset>/sim/shots.parquet`, or the `footprints` CSV into `out` (default
     /// `<dataset>/sim/<CSV name>.parquet`).
@@ -52,21 +52,55 @@ pub struct SimulateReport {
     pub simulated: usize,
     pub skipped: usize,
     pub out: PathBuf,
-    /// Direct mode from a COPC tile: what its read decoded.
+    /// Direct mode from COPC tiles: what their reads decoded, summed.
     pub copc: Option<CopcRead>,
 }
 
-/// The points of a LAS/LAZ file that `footprints` need under `cfg`: a COPC tile is read only in the
-/// cells within the read radius of a footprint, without the pulse identity unless the density is
-/// counted by pulse (and says what it decoded); any other file is read whole.
-pub fn read_around(als: &Path, footprints: &[Footprint], cfg: &SimConfig) -> Result<(AlsPoints, Option<CopcRead>)> {
-    let Some(tile) = CopcTile::open_if_copc(als)? else {
-        return Ok((crate::io::las::read_points(als)?, None));
-    };
+/// The points of LAS/LAZ files (folders expanded) that `footprints` need under `cfg`: a COPC tile
+/// is read only in the cells within the read radius of a footprint, without the pulse identity
+/// unless the density is counted by pulse (and says what it decoded, summed over the COPC tiles);
+/// any other file is read whole, if a footprint's cells meet its extent. Files that record a CRS
+/// must record the same.
+pub fn read_around(
+    als: &[PathBuf],
+    footprints: &[Footprint],
+    cfg: &SimConfig,
+) -> Result<(AlsPoints, Option<CopcRead>)> {
+    let files = crate::ops::ingest_als::expand_inputs(als)?;
+    if files.is_empty() {
+        return Err(Error::Usage("--als: no LAS/LAZ file found in the inputs".into()));
+    }
     let cells = Cells::around(footprints.iter().map(|f| (f.x, f.y)), sim::footprint::read_radius(cfg.fsigma));
     let attributes = if cfg.counts_pulses() { Attributes::All } else { Attributes::WithoutPulseIdentity };
-    let (points, read) = tile.read(Some(&cells), attributes)?;
-    Ok((points, Some(read)))
+    let mut crs: Option<(u32, &Path)> = None;
+    let (mut points, mut copc) = (AlsPoints::default(), None::<CopcRead>);
+    for f in &files {
+        let tile = CopcTile::open_if_copc(f)?;
+        let header = match &tile {
+            Some(t) => t.header().clone(),
+            None => crate::io::las::read_header(f)?,
+        };
+        match (header.epsg, crs) {
+            (Some(e), Some((first, at))) if e != first => {
+                return Err(Error::field(f, "CRS", format!("EPSG:{e} differs from EPSG:{first} of {}", at.display())))
+            }
+            (Some(e), None) => crs = Some((e, f)),
+            _ => {}
+        }
+        let b = header.bounds;
+        let mine = cells.within([b[0], b[1], b[3], b[4]]);
+        match tile {
+            Some(t) => {
+                let (p, read) = if mine.is_empty() { Default::default() } else { t.read(Some(&mine), attributes)? };
+                points.extend_from(&p);
+                let read = CopcRead { nodes_in_tile: t.node_count(), points_in_tile: header.number_of_points, ..read };
+                copc.get_or_insert_default().add(&read);
+            }
+            None if !mine.is_empty() => points.extend_from(&crate::io::las::read_points(f)?),
+            None => {}
+        }
+    }
+    Ok((points, copc))
 }
 
 /// The simulator settings of `opts` (profile, footprint, density normalisation, pulse).
