@@ -4,7 +4,7 @@
 
 mod common;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use common::{data, TILES};
 use gedisim::io::copc::{Attributes, CopcTile};
@@ -48,6 +48,14 @@ fn some_cells(p: &AlsPoints) -> Cells {
     let (x0, y0) =
         (p.x.iter().copied().fold(f64::INFINITY, f64::min), p.y.iter().copied().fold(f64::INFINITY, f64::min));
     Cells::around([(x0 + 12.0, y0 + 15.0), (x0 + 31.0, y0 + 40.0), (x0 + 70.0, y0 + 80.0)], 18.4)
+}
+
+/// Every row of a Parquet file, as one batch.
+fn read_table(path: &Path) -> arrow::record_batch::RecordBatch {
+    let file = std::fs::File::open(path).unwrap();
+    let r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap();
+    let batches: Vec<_> = r.build().unwrap().map(|b| b.unwrap()).collect();
+    arrow::compute::concat_batches(&batches[0].schema(), &batches).unwrap()
 }
 
 #[test]
@@ -178,11 +186,7 @@ fn simulate_from_copc_equals_simulate_from_the_laz_original() {
         ]);
         assert!(ok, "{err}");
         assert_eq!(err.contains("COPC: "), name == "copc", "{err}");
-        let file = std::fs::File::open(&out).unwrap();
-        let reader =
-            parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap().build().unwrap();
-        let batches: Vec<_> = reader.map(|b| b.unwrap()).collect();
-        tables.push(arrow::compute::concat_batches(&batches[0].schema(), &batches).unwrap());
+        tables.push(read_table(&out));
     }
     let (laz, copc) = (&tables[0], &tables[1]);
     assert_eq!(laz.num_rows(), 9);
@@ -212,10 +216,7 @@ fn simulate_reads_several_tiles_and_skips_those_no_footprint_reaches() {
         args.extend(als.iter().map(|p| p.to_string_lossy().into_owned()));
         let (ok, _, err) = common::gedisim(&args.iter().map(String::as_str).collect::<Vec<_>>());
         assert!(ok, "{err}");
-        let file = std::fs::File::open(&out).unwrap();
-        let r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap();
-        let batches: Vec<_> = r.build().unwrap().map(|b| b.unwrap()).collect();
-        (arrow::compute::concat_batches(&batches[0].schema(), &batches).unwrap(), err)
+        (read_table(&out), err)
     };
     let copc = data("als-copc/lidarforfuel_1_42.copc.laz");
     let far = data("als-copc/pdal-ign-plugin_mnx_input_crop_2.depth6-paged.copc.laz");
@@ -270,15 +271,7 @@ mod dataset_path {
     }
 
     fn table(ds: &Path, name: &str) -> Vec<(PathBuf, arrow::record_batch::RecordBatch)> {
-        common::files_with_suffix(&ds.join(name), ".parquet")
-            .into_iter()
-            .map(|f| {
-                let file = std::fs::File::open(&f).unwrap();
-                let r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap();
-                let batches: Vec<_> = r.build().unwrap().map(|b| b.unwrap()).collect();
-                (f, arrow::compute::concat_batches(&batches[0].schema(), &batches).unwrap())
-            })
-            .collect()
+        common::files_with_suffix(&ds.join(name), ".parquet").into_iter().map(|f| (f.clone(), read_table(&f))).collect()
     }
 
     /// The cells the tile was read in, from its `tiles/` row.
@@ -333,10 +326,7 @@ mod dataset_path {
         let args = ["simulate", "--dataset", ds.to_str().unwrap(), "--footprints", csv.to_str().unwrap()];
         let (ok, _, err) = common::gedisim(&[&args[..], &["--out", out.to_str().unwrap()]].concat());
         assert!(ok, "{err}");
-        let file = std::fs::File::open(&out).unwrap();
-        let r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap();
-        let batches: Vec<_> = r.build().unwrap().map(|b| b.unwrap()).collect();
-        arrow::compute::concat_batches(&batches[0].schema(), &batches).unwrap()
+        read_table(&out)
     }
 
     #[test]
@@ -525,13 +515,6 @@ mod remote {
                 counter.fetch_add(body.len() as u64, Ordering::Relaxed);
             }
         }
-    }
-
-    fn read_table(path: &Path) -> arrow::record_batch::RecordBatch {
-        let file = std::fs::File::open(path).unwrap();
-        let r = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap();
-        let batches: Vec<_> = r.build().unwrap().map(|b| b.unwrap()).collect();
-        arrow::compute::concat_batches(&batches[0].schema(), &batches).unwrap()
     }
 
     /// The number after `fetched ` in a line of the CLI's stderr.
