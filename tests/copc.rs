@@ -207,8 +207,9 @@ fn simulate_from_copc_equals_simulate_from_the_laz_original() {
 fn simulate_reads_several_tiles_and_skips_those_no_footprint_reaches() {
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("plots.csv");
-    // Two plots on lidarforfuel_1_42, one on pdal-ign-plugin_mnx_input_crop_2 (600 km away).
-    std::fs::write(&csv, "id,x,y\na,817600,6460800\nb,817640,6460830\nc,689425,6735475\n").unwrap();
+    // Two plots on lidarforfuel_1_42, one on pdal-ign-plugin_mnx_input_crop_2 (600 km away), listed
+    // between them: the tiles are taken one at a time, the rows stay in the CSV's order.
+    std::fs::write(&csv, "id,x,y\na,817600,6460800\nc,689425,6735475\nb,817640,6460830\n").unwrap();
     let table = |als: &[PathBuf], name: &str| {
         let out = dir.path().join(name);
         let mut args = vec!["simulate".to_string(), "--footprints".into(), csv.to_string_lossy().into_owned()];
@@ -233,15 +234,23 @@ fn simulate_reads_several_tiles_and_skips_those_no_footprint_reaches() {
         let c = b.column_by_name("status").unwrap().as_string::<i32>();
         (0..b.num_rows()).map(|i| c.value(i).to_string()).collect::<Vec<_>>()
     };
+    let ids = |b: &arrow::record_batch::RecordBatch| {
+        use arrow::array::AsArray;
+        let c = b.column_by_name("footprint_id").unwrap().as_string::<i32>();
+        (0..b.num_rows()).step_by(3).map(|i| c.value(i).to_string()).collect::<Vec<_>>()
+    };
+    assert_eq!(ids(&both), ["a", "c", "b"]);
     let (sb, s1, s2) = (status(&both), status(&one), status(&two));
     assert_eq!(sb.len(), 9);
+    // Rows 0–2 (a) and 6–8 (b) from the first tile, 3–5 (c) from the far one.
+    let from_far = |r: usize| (3..6).contains(&r);
     for r in 0..9 {
-        let expected = if r < 6 { &s1[r] } else { &s2[r] };
+        let expected = if from_far(r) { &s2[r] } else { &s1[r] };
         assert_eq!(&sb[r], expected, "row {r}");
     }
     assert!(sb.iter().all(|s| s == "ok"), "{sb:?}");
     let rh = |b: &arrow::record_batch::RecordBatch, r: usize| b.column_by_name("rh").unwrap().slice(r, 1).to_data();
-    assert!((0..6).all(|r| rh(&both, r) == rh(&one, r)) && (6..9).all(|r| rh(&both, r) == rh(&two, r)));
+    assert!((0..9).all(|r| rh(&both, r) == if from_far(r) { rh(&two, r) } else { rh(&one, r) }));
 }
 
 /// Two granules of a world over the COPC tile, and their runs: the first alone, then both.

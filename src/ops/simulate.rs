@@ -56,51 +56,100 @@ pub struct SimulateReport {
     pub copc: Option<CopcRead>,
 }
 
-/// The points of LAS/LAZ files (folders expanded) that `footprints` need under `cfg`: a COPC tile
-/// is read only in the cells within the read radius of a footprint, without the pulse identity
-/// unless the density is counted by pulse (and says what it decoded, summed over the COPC tiles);
-/// any other file is read whole, if a footprint's cells meet its extent. Files that record a CRS
-/// must record the same.
-pub fn read_around(
-    als: &[PathBuf],
-    footprints: &[Footprint],
-    cfg: &SimConfig,
-) -> Result<(AlsPoints, Option<CopcRead>)> {
-    let files = crate::ops::ingest_als::expand_inputs(als)?;
-    if files.is_empty() {
-        return Err(Error::Usage("--als: no LAS/LAZ file found in the inputs".into()));
-    }
-    let cells = Cells::around(footprints.iter().map(|f| (f.x, f.y)), sim::footprint::read_radius(cfg.fsigma));
-    let attributes = if cfg.counts_pulses() { Attributes::All } else { Attributes::WithoutPulseIdentity };
-    let mut crs: Option<(u32, &Path)> = None;
-    let (mut points, mut copc) = (AlsPoints::default(), None::<CopcRead>);
-    for f in &files {
-        let tile = CopcTile::open_if_copc(f)?;
-        let header = match &tile {
-            Some(t) => t.header().clone(),
-            None => crate::io::las::read_header(f)?,
-        };
-        match (header.epsg, crs) {
-            (Some(e), Some((first, at))) if e != first => {
-                return Err(Error::field(f, "CRS", format!("EPSG:{e} differs from EPSG:{first} of {}", at.display())))
-            }
-            (Some(e), None) => crs = Some((e, f)),
-            _ => {}
+/// The LAS/LAZ files of direct mode (folders expanded), each opened once: its header facts and, for
+/// a COPC tile, its octree. Files that record a CRS must record the same.
+pub struct AlsInputs {
+    files: Vec<(PathBuf, Option<CopcTile>, crate::io::las::TileHeader)>,
+}
+
+impl AlsInputs {
+    pub fn open(als: &[PathBuf]) -> Result<Self> {
+        let paths = crate::ops::ingest_als::expand_inputs(als)?;
+        if paths.is_empty() {
+            return Err(Error::Usage("--als: no LAS/LAZ file found in the inputs".into()));
         }
-        let b = header.bounds;
-        let mine = cells.within([b[0], b[1], b[3], b[4]]);
-        match tile {
-            Some(t) => {
-                let (p, read) = if mine.is_empty() { Default::default() } else { t.read(Some(&mine), attributes)? };
-                points.extend_from(&p);
-                let read = CopcRead { nodes_in_tile: t.node_count(), points_in_tile: header.number_of_points, ..read };
-                copc.get_or_insert_default().add(&read);
+        let mut crs: Option<(u32, &Path)> = None;
+        let mut files = Vec::with_capacity(paths.len());
+        for f in &paths {
+            let tile = CopcTile::open_if_copc(f)?;
+            let header = match &tile {
+                Some(t) => t.header().clone(),
+                None => crate::io::las::read_header(f)?,
+            };
+            match (header.epsg, crs) {
+                (Some(e), Some((first, at))) if e != first => {
+                    let why = format!("EPSG:{e} differs from EPSG:{first} of {}", at.display());
+                    return Err(Error::field(f, "CRS", why));
+                }
+                (Some(e), None) => crs = Some((e, f)),
+                _ => {}
             }
-            None if !mine.is_empty() => points.extend_from(&crate::io::las::read_points(f)?),
-            None => {}
+            files.push((f.clone(), tile, header));
         }
+        Ok(AlsInputs { files })
     }
-    Ok((points, copc))
+
+    /// Whether every file is a COPC tile (read in windows, so that footprints can be taken a tile
+    /// at a time without reading a file whole more than once).
+    pub fn all_copc(&self) -> bool {
+        self.files.iter().all(|(_, t, _)| t.is_some())
+    }
+
+    /// Footprint indices grouped by the first file whose extent holds their centre (then those
+    /// no file holds), in footprint order within a group.
+    pub fn group_by_tile(&self, footprints: &[Footprint]) -> Vec<Vec<usize>> {
+        let mut groups = vec![Vec::new(); self.files.len() + 1];
+        for (i, f) in footprints.iter().enumerate() {
+            let holds = |b: &[f64; 6]| (b[0]..=b[3]).contains(&f.x) && (b[1]..=b[4]).contains(&f.y);
+            let g = self.files.iter().position(|(_, _, h)| holds(&h.bounds)).unwrap_or(self.files.len());
+            groups[g].push(i);
+        }
+        groups.retain(|g| !g.is_empty());
+        groups
+    }
+
+    /// The points that `footprints` need under `cfg`: a COPC tile is read only in the cells within
+    /// the read radius of a footprint, without the pulse identity unless the density is counted by
+    /// pulse (`read` adds what it decoded); any other file is read whole, if a footprint's cells
+    /// meet its extent.
+    pub fn read_around(&self, footprints: &[Footprint], cfg: &SimConfig, read: &mut CopcRead) -> Result<AlsPoints> {
+        let cells = Cells::around(footprints.iter().map(|f| (f.x, f.y)), sim::footprint::read_radius(cfg.fsigma));
+        let attributes = if cfg.counts_pulses() { Attributes::All } else { Attributes::WithoutPulseIdentity };
+        let mut points = AlsPoints::default();
+        for (f, tile, header) in &self.files {
+            let b = header.bounds;
+            let mine = cells.within([b[0], b[1], b[3], b[4]]);
+            if mine.is_empty() {
+                continue;
+            }
+            match tile {
+                Some(t) => {
+                    let (p, r) = t.read(Some(&mine), attributes)?;
+                    points.extend_from(&p);
+                    // The tile's totals are counted once, by `copc_totals`.
+                    read.add(&CopcRead { nodes_in_tile: 0, points_in_tile: 0, ..r });
+                }
+                None => points.extend_from(&crate::io::las::read_points(f)?),
+            }
+        }
+        Ok(points)
+    }
+
+    /// What the COPC tiles hold (nodes and points), with nothing decoded yet; `None` without one.
+    fn copc_totals(&self) -> Option<CopcRead> {
+        let mut total = None::<CopcRead>;
+        for (_, tile, header) in &self.files {
+            if let Some(t) = tile {
+                let r = CopcRead {
+                    nodes_in_tile: t.node_count(),
+                    points_in_tile: header.number_of_points,
+                    ..Default::default()
+                };
+                total.get_or_insert_default().add(&r);
+            }
+        }
+        total
+    }
 }
 
 /// The simulator settings of `opts` (profile, footprint, density normalisation, pulse).
@@ -177,12 +226,11 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
         )),
         Source::Direct { als, footprints, out, keep_all_classes } => {
             let footprints = crate::io::footprints::read_footprints_csv(footprints)?;
-            let (mut points, read) = read_around(als, &footprints, &cfg)?;
+            let inputs = AlsInputs::open(als)?;
+            let drop_classes = profile == Profile::Default && !keep_all_classes;
+            let (counts, read) = simulate_direct(&inputs, &footprints, &cfg, profile, drop_classes, out, progress)?;
             copc = read;
-            if profile == Profile::Default && !keep_all_classes {
-                points = drop_ingest_classes(&points);
-            }
-            (simulate_direct(&points, &footprints, &cfg, profile, out)?, out.clone())
+            (counts, out.clone())
         }
     };
     Ok(SimulateReport { simulated, skipped, out, copc })
@@ -210,20 +258,49 @@ pub fn drop_ingest_classes(p: &AlsPoints) -> AlsPoints {
     p.permuted(&keep)
 }
 
-/// Direct mode: simulate `footprints` on `points` and write the `sim` rows to `out` (atomically).
-/// Returns the number of footprints simulated and skipped.
+/// Direct mode: simulate `footprints` on the points of `inputs` (without the classes the ingest
+/// drops if `drop_classes`) and write the `sim` rows to `out` (atomically), in footprint order.
+/// COPC tiles are taken a tile at a time (the footprints whose centre a tile holds, with the
+/// points of every tile around them), so that memory holds one tile's windows, not all of them;
+/// other files are read once, whole. Returns the numbers of footprints simulated and skipped, and
+/// what the COPC reads decoded.
 pub fn simulate_direct(
-    points: &AlsPoints,
+    inputs: &AlsInputs,
     footprints: &[Footprint],
     cfg: &SimConfig,
     profile: Profile,
+    drop_classes: bool,
     out: &Path,
-) -> Result<(usize, usize)> {
-    let results = sim::simulate(points, footprints, cfg)?;
+    progress: &dyn Progress,
+) -> Result<((usize, usize), Option<CopcRead>)> {
+    let groups =
+        if inputs.all_copc() { inputs.group_by_tile(footprints) } else { vec![(0..footprints.len()).collect()] };
+    let mut read = CopcRead::default();
+    let mut results: Vec<Option<std::result::Result<sim::SimulatedFootprint, sim::SkipReason>>> =
+        vec![None; footprints.len()];
+    progress.start(Step::Simulate, footprints.len() as u64);
+    for group in groups {
+        let fps: Vec<Footprint> = group.iter().map(|&i| footprints[i].clone()).collect();
+        let mut points = inputs.read_around(&fps, cfg, &mut read)?;
+        if drop_classes {
+            points = drop_ingest_classes(&points);
+        }
+        for (i, r) in group.iter().zip(sim::simulate(&points, &fps, cfg)?) {
+            results[*i] = Some(r);
+        }
+        progress.advance(fps.len() as u64);
+    }
+    progress.finish();
+    let results: Vec<std::result::Result<sim::SimulatedFootprint, sim::SkipReason>> =
+        results.into_iter().map(|r| r.expect("every footprint is in a group")).collect();
     let ok = results.iter().filter(|r| r.is_ok()).count();
     let batch = sim_batch(footprints, &results, &Weighting::ALL, &[])?;
     dataset::write_parquet(out, sim_schema(), &[batch], &sim_metadata(profile))?;
-    Ok((ok, results.len() - ok))
+    let copc = inputs.copc_totals().map(|mut t| {
+        t.add(&read);
+        t
+    });
+    Ok(((ok, results.len() - ok), copc))
 }
 
 /// Simulate `footprints` (each with the collocation offset already applied to it, if any) on the
