@@ -326,10 +326,10 @@ impl CopcTile {
                 parts
             }
         };
-        let mut points = AlsPoints::default();
+        let parts = parts.into_iter().collect::<Result<Vec<_>>>()?;
+        let mut points = AlsPoints::with_capacity(parts.iter().map(|(p, _)| p.len()).sum());
         let mut outside = false;
-        for part in parts {
-            let (p, o) = part?;
+        for (p, o) in parts {
             outside |= o;
             points.extend_from(&p);
         }

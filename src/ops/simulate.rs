@@ -111,8 +111,14 @@ impl AlsInputs {
     /// The points that `footprints` need under `cfg`: a COPC tile is read only in the cells within
     /// the read radius of a footprint, without the pulse identity unless the density is counted by
     /// pulse (`read` adds what it decoded); any other file is read whole, if a footprint's cells
-    /// meet its extent.
-    pub fn read_around(&self, footprints: &[Footprint], cfg: &SimConfig, read: &mut CopcRead) -> Result<AlsPoints> {
+    /// meet its extent. With `drop_classes`, the classes the ingest drops are dropped file by file.
+    pub fn read_around(
+        &self,
+        footprints: &[Footprint],
+        cfg: &SimConfig,
+        drop_classes: bool,
+        read: &mut CopcRead,
+    ) -> Result<AlsPoints> {
         let cells = Cells::around(footprints.iter().map(|f| (f.x, f.y)), sim::footprint::read_radius(cfg.fsigma));
         let attributes = if cfg.counts_pulses() { Attributes::All } else { Attributes::WithoutPulseIdentity };
         let mut points = AlsPoints::default();
@@ -122,14 +128,22 @@ impl AlsInputs {
             if mine.is_empty() {
                 continue;
             }
-            match tile {
+            let mut p = match tile {
                 Some(t) => {
                     let (p, r) = t.read(Some(&mine), attributes)?;
-                    points.extend_from(&p);
                     // The tile's totals are counted once, by `copc_totals`.
                     read.add(&CopcRead { nodes_in_tile: 0, points_in_tile: 0, ..r });
+                    p
                 }
-                None => points.extend_from(&crate::io::las::read_points(f)?),
+                None => crate::io::las::read_points(f)?,
+            };
+            if drop_classes {
+                p.permute(&kept_by_ingest(&p));
+            }
+            if points.is_empty() {
+                points = p;
+            } else {
+                points.extend_from(&p);
             }
         }
         Ok(points)
@@ -253,9 +267,12 @@ pub fn attach_recorded_pulses(
 /// Keep only the points whose class the ingest keeps (so that direct mode with the `default`
 /// profile sees the same points as the dataset path).
 pub fn drop_ingest_classes(p: &AlsPoints) -> AlsPoints {
-    let keep: Vec<u32> =
-        (0..p.len() as u32).filter(|&i| !DROPPED_CLASSES.contains(&p.classification[i as usize])).collect();
-    p.permuted(&keep)
+    p.permuted(&kept_by_ingest(p))
+}
+
+/// Indices of the points whose class the ingest keeps.
+fn kept_by_ingest(p: &AlsPoints) -> Vec<u32> {
+    (0..p.len() as u32).filter(|&i| !DROPPED_CLASSES.contains(&p.classification[i as usize])).collect()
 }
 
 /// Direct mode: simulate `footprints` on the points of `inputs` (without the classes the ingest
@@ -281,11 +298,8 @@ pub fn simulate_direct(
     progress.start(Step::Simulate, footprints.len() as u64);
     for group in groups {
         let fps: Vec<Footprint> = group.iter().map(|&i| footprints[i].clone()).collect();
-        let mut points = inputs.read_around(&fps, cfg, &mut read)?;
-        if drop_classes {
-            points = drop_ingest_classes(&points);
-        }
-        for (i, r) in group.iter().zip(sim::simulate(&points, &fps, cfg)?) {
+        let points = inputs.read_around(&fps, cfg, drop_classes, &mut read)?;
+        for (i, r) in group.iter().zip(sim::simulate_owned(points, &fps, cfg)?) {
             results[*i] = Some(r);
         }
         progress.advance(fps.len() as u64);

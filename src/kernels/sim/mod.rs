@@ -275,6 +275,23 @@ pub fn simulate(
     footprints: &[Footprint],
     cfg: &SimConfig,
 ) -> Result<Vec<std::result::Result<SimulatedFootprint, SkipReason>>> {
+    simulate_points(std::borrow::Cow::Borrowed(points), footprints, cfg)
+}
+
+/// [`simulate`] on points it may reorder in place: memory holds them once, not twice.
+pub fn simulate_owned(
+    points: AlsPoints,
+    footprints: &[Footprint],
+    cfg: &SimConfig,
+) -> Result<Vec<std::result::Result<SimulatedFootprint, SkipReason>>> {
+    simulate_points(std::borrow::Cow::Owned(points), footprints, cfg)
+}
+
+fn simulate_points(
+    points: std::borrow::Cow<AlsPoints>,
+    footprints: &[Footprint],
+    cfg: &SimConfig,
+) -> Result<Vec<std::result::Result<SimulatedFootprint, SkipReason>>> {
     let n = points.len();
     let lens = [
         points.y.len(),
@@ -304,8 +321,8 @@ pub fn simulate(
     Ok(if cfg.quirks.batch_grid {
         let centres: Vec<(f64, f64)> =
             footprints.iter().map(|f| (f.x, f.y)).filter(|c| c.0.is_finite() && c.1.is_finite()).collect();
-        let octree = Octree::build(points, &centres, max_sep);
-        let pulses = pulses_of(points);
+        let octree = Octree::build(&points, &centres, max_sep);
+        let pulses = pulses_of(&points);
         footprints
             .par_iter()
             .map(|fp| {
@@ -313,12 +330,18 @@ pub fn simulate(
                 if let Some(o) = &octree {
                     o.candidates(fp.x, fp.y, half, &mut cand);
                 }
-                run(fp, points, pulses.as_ref(), cand)
+                run(fp, &points, pulses.as_ref(), cand)
             })
             .collect()
     } else {
-        let grid = CellGrid::build(points, INDEX_CELL);
-        let sorted = points.permuted(grid.order());
+        let grid = CellGrid::build(&points, INDEX_CELL);
+        let sorted = match points {
+            std::borrow::Cow::Borrowed(p) => p.permuted(grid.order()),
+            std::borrow::Cow::Owned(mut p) => {
+                p.permute(grid.order());
+                p
+            }
+        };
         let pulses = pulses_of(&sorted);
         footprints
             .par_iter()
