@@ -11,7 +11,7 @@
 //!   conversion gediRat needs (laspy with lazrs).
 //!
 //! Needs python3 with numpy, laspy, lazrs and copclib (`pip install copclib laspy lazrs`).
-//! Run with `cargo bench --bench copc` (the README's build: the dev profile's optimisations).
+//! Run with `cargo bench --profile dev --bench copc` (the README's build).
 
 mod common;
 

@@ -2,7 +2,8 @@
 //! `las` crate alone needs to decode the same LAZ, on the largest real tile and on a 25 M-point
 //! scene (`lidarforfuel_2_bas_lig.laz` replicated 10 × 10 with X/Y offsets of (100·i, 100·j) m).
 //!
-//! Run with `cargo bench --bench ingest`. The scene is generated once into `target/bench-data/`.
+//! Run with `cargo bench --profile dev --bench ingest` (the README's build). The scene is generated once into
+//! `target/bench-data/`.
 
 mod common;
 

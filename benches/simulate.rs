@@ -9,7 +9,7 @@
 //! - the dataset path: `ingest als` once, then `simulate --dataset --footprints` (memory bounded
 //!   by a batch of footprints).
 //!
-//! Run with `cargo bench --bench simulate`.
+//! Run with `cargo bench --profile dev --bench simulate` (the README's build).
 
 mod common;
 
