@@ -91,13 +91,13 @@ impl AlsInputs {
 
     /// Whether every file is a COPC tile (read in windows, so that footprints can be taken a tile
     /// at a time without reading a file whole more than once).
-    pub fn all_copc(&self) -> bool {
+    fn all_copc(&self) -> bool {
         self.files.iter().all(|(_, t, _)| t.is_some())
     }
 
     /// Footprint indices grouped by the first file whose extent holds their centre (then those
     /// no file holds), in footprint order within a group.
-    pub fn group_by_tile(&self, footprints: &[Footprint]) -> Vec<Vec<usize>> {
+    fn group_by_tile(&self, footprints: &[Footprint]) -> Vec<Vec<usize>> {
         let mut groups = vec![Vec::new(); self.files.len() + 1];
         for (i, f) in footprints.iter().enumerate() {
             let holds = |b: &[f64; 6]| (b[0]..=b[3]).contains(&f.x) && (b[1]..=b[4]).contains(&f.y);
@@ -112,7 +112,7 @@ impl AlsInputs {
     /// the read radius of a footprint, without the pulse identity unless the density is counted by
     /// pulse (`read` adds what it decoded); any other file is read whole, if a footprint's cells
     /// meet its extent. With `drop_classes`, the classes the ingest drops are dropped file by file.
-    pub fn read_around(
+    fn read_around(
         &self,
         footprints: &[Footprint],
         cfg: &SimConfig,
