@@ -2,6 +2,8 @@
 //! into options for one operation (`gedisim::ops`) and printing what it did.
 
 mod bench;
+#[cfg(feature = "cluster")]
+mod cluster;
 mod collocate;
 mod demo;
 mod diagnose;
@@ -77,6 +79,10 @@ pub enum Command {
     /// once modelled (held-out tracks) → <out>/diagnosis.json, tables, figures (docs/diagnosis.md).
     Diagnose(DiagnoseArgs),
     /// Measurements used by the benchmarks.
+    /// An Apache Ballista cluster that runs gedisim's SQL (built with `--features cluster`).
+    #[cfg(feature = "cluster")]
+    #[command(subcommand)]
+    Cluster(cluster::ClusterCommand),
     #[command(subcommand, hide = true)]
     Bench(BenchCommand),
     /// The child process that reads one GEDI granule for the other commands (gedisim::ops::ingest_gedi::child).
@@ -123,6 +129,8 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Demo(a) => demo::demo(a),
         Command::Scenario(a) => scenario::scenario(a),
         Command::Diagnose(a) => diagnose::diagnose(a),
+        #[cfg(feature = "cluster")]
+        Command::Cluster(c) => cluster::cluster(c),
         Command::Bench(BenchCommand::Decode { file }) => bench::bench_decode(file),
         Command::ReadGranule { request } => read_granule::read_granule(request),
     }

@@ -2,6 +2,8 @@
 //! (read with `io`/`dataset`, compute with `kernels`, write with `dataset`).
 
 pub mod bench;
+#[cfg(feature = "cluster")]
+pub mod cluster;
 pub mod collocate;
 pub mod demo;
 pub mod diagnose;

@@ -1,0 +1,43 @@
+//! `gedisim cluster scheduler|executor` (feature `cluster`).
+
+use std::net::SocketAddr;
+
+use clap::Subcommand;
+
+use gedisim::Result;
+
+#[derive(Subcommand)]
+pub enum ClusterCommand {
+    /// Start a Ballista scheduler; runs until stopped.
+    Scheduler {
+        /// Address to listen on.
+        #[arg(long, default_value = "127.0.0.1:50050")]
+        bind: SocketAddr,
+    },
+    /// Start a Ballista executor that knows gedisim's functions; runs until stopped.
+    Executor {
+        /// The scheduler's address, host:port.
+        #[arg(long)]
+        scheduler: String,
+        /// Address of the executor's Flight service (its gRPC service takes the next port).
+        #[arg(long, default_value = "127.0.0.1:50051")]
+        bind: SocketAddr,
+        /// Tasks run at once (default: the machine's cores).
+        #[arg(long)]
+        concurrency: Option<usize>,
+    },
+}
+
+pub fn cluster(c: ClusterCommand) -> Result<()> {
+    match c {
+        ClusterCommand::Scheduler { bind } => {
+            eprintln!("gedisim cluster scheduler on {bind}");
+            gedisim::ops::cluster::run_scheduler(bind)
+        }
+        ClusterCommand::Executor { scheduler, bind, concurrency } => {
+            let n = concurrency.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+            eprintln!("gedisim cluster executor on {bind}, scheduler {scheduler}, {n} tasks at once");
+            gedisim::ops::cluster::run_executor(&scheduler, bind, n)
+        }
+    }
+}
