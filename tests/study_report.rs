@@ -86,7 +86,7 @@ fn report_tables_contracts_and_msd_identity() {
     let dir = tempfile::tempdir().unwrap();
     let ds = full_dataset(&dir.path().join("ds"));
     let progress = common::Recorder::default();
-    let summary = run_report(&ds, None, &progress).unwrap();
+    let summary = run_report(&ds, None, &Default::default(), &progress).unwrap();
     let steps = progress.events.lock().unwrap();
     let out = ds.root().join("report");
     assert_eq!(summary.dir, out);
@@ -389,7 +389,7 @@ fn results_alone_skips_what_needs_other_tables() {
     }
     study::write_results(&ds, &rows);
     let out = dir.path().join("elsewhere");
-    let summary = run_report(&ds, Some(&out), &gedisim::ops::progress::NoProgress).unwrap();
+    let summary = run_report(&ds, Some(&out), &Default::default(), &gedisim::ops::progress::NoProgress).unwrap();
     let skipped: HashMap<String, Vec<String>> = summary.skipped.iter().cloned().collect();
     assert_eq!(skipped["collocation"], ["offsets"]);
     assert_eq!(skipped["waveform_examples"], ["shots", "sim"]);

@@ -29,6 +29,10 @@ pub enum ClusterCommand {
 }
 
 pub fn cluster(c: ClusterCommand) -> Result<()> {
+    // Ballista's own messages (warnings and up unless RUST_LOG says otherwise), on stderr.
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
     match c {
         ClusterCommand::Scheduler { bind } => {
             eprintln!("gedisim cluster scheduler on {bind}");

@@ -15,11 +15,16 @@ pub struct ReportArgs {
     /// Output directory (default <dataset>/report).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Run the report's queries on the Ballista cluster whose scheduler is at this address
+    /// (`gedisim cluster`); every node must see the dataset at the same path.
+    #[arg(long, value_name = "df://HOST:PORT")]
+    cluster: Option<String>,
 }
 
 pub fn report(a: ReportArgs) -> Result<()> {
     let ds = super::reporters::writer(&a.dataset)?;
-    let s = gedisim::ops::report::run_report(&ds, a.out.as_deref(), &Bars::new())?;
+    let engine = a.cluster.map(gedisim::ops::report::Engine::Cluster).unwrap_or_default();
+    let s = gedisim::ops::report::run_report(&ds, a.out.as_deref(), &engine, &Bars::new())?;
     for (name, rows) in &s.tables {
         eprintln!("{name}: {rows} rows");
     }

@@ -71,6 +71,11 @@ pub struct RunArgs {
     // The collocation's transmit pulse: the study's simulation keeps its 15 ns Gaussian.
     #[command(flatten)]
     pulse: super::simulate::PulseArgs,
+    /// Simulate on the Ballista cluster whose scheduler is at this address (`gedisim cluster`):
+    /// one plan, a partition per group of a granule's blocks; every node must see the dataset at
+    /// the same path.
+    #[arg(long, value_name = "df://HOST:PORT")]
+    cluster: Option<String>,
 }
 
 pub fn run_command(a: RunArgs) -> Result<()> {
@@ -85,6 +90,7 @@ pub fn run_command(a: RunArgs) -> Result<()> {
             ..CollocateOptions::default()
         },
         rules: gedisim::kernels::study::select::StudyRules { max_days_apart: a.max_days_apart, ..Default::default() },
+        engine: a.cluster.map(gedisim::ops::run::Engine::Cluster).unwrap_or_default(),
         ..base
     };
     let _writer = super::reporters::writer(&opts.out)?;

@@ -27,6 +27,10 @@ pub struct SqlArgs {
     /// (e.g. 512M, 8G; default: half of the machine's memory).
     #[arg(long, value_parser = parse_size)]
     memory_limit: Option<usize>,
+    /// Run on the Ballista cluster whose scheduler is at this address (`gedisim cluster`); every
+    /// node must see the dataset at the same path.
+    #[arg(long, value_name = "df://HOST:PORT")]
+    cluster: Option<String>,
 }
 
 /// `<number>[K|M|G|T]` (binary units) as bytes.
@@ -57,7 +61,8 @@ pub fn sql(a: SqlArgs) -> Result<()> {
     if let Some(bytes) = a.memory_limit {
         limits.memory_limit = bytes;
     }
-    if let Some(table) = gedisim::ops::sql::sql(&a.dataset, &query, a.out.as_deref(), &limits)? {
+    let engine = a.cluster.map(gedisim::ops::sql::Engine::Cluster).unwrap_or_default();
+    if let Some(table) = gedisim::ops::sql::sql(&a.dataset, &query, a.out.as_deref(), &limits, &engine)? {
         println!("{table}");
     }
     Ok(())

@@ -46,12 +46,12 @@ pub fn sim_schema() -> SchemaRef {
 
 /// Parquet key-value metadata of a `sim` file: profile and bin-label convention.
 pub fn sim_metadata(profile: Profile) -> HashMap<String, String> {
-    let (name, label) = match profile {
-        Profile::Gedirat => ("gedirat", "top_edge"),
-        Profile::Default => ("default", "centre"),
+    let label = match profile {
+        Profile::Gedirat => "top_edge",
+        Profile::Default => "centre",
     };
     HashMap::from([
-        ("gedisim:profile".to_string(), name.to_string()),
+        ("gedisim:profile".to_string(), profile.name().to_string()),
         ("gedisim:bin_label".to_string(), label.to_string()),
     ])
 }

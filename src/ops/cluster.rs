@@ -1,6 +1,6 @@
 //! `gedisim cluster`: an Apache DataFusion Ballista scheduler and executors, embedded, that know
-//! gedisim's SQL functions (feature `cluster`; issue 19). Work in progress: the table function
-//! `gedi_simulate` needs a physical extension codec before executors can run it.
+//! gedisim's SQL functions and ship `gedi_simulate`'s plans ([`crate::sql::codec`]) (feature
+//! `cluster`; docs/scale.md).
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -10,18 +10,27 @@ use ballista_executor::executor_process::{start_executor_process, ExecutorProces
 use ballista_scheduler::cluster::BallistaCluster;
 use ballista_scheduler::config::SchedulerConfig;
 use ballista_scheduler::scheduler_process::start_server;
-use datafusion::execution::{FunctionRegistry, SessionState};
+use datafusion::execution::{FunctionRegistry, SessionState, SessionStateBuilder};
 use datafusion::prelude::SessionConfig;
 
 use crate::error::{Error, Result};
+use crate::sql::codec::{LogicalCodec, PhysicalCodec};
 
-/// Ballista's function registry with gedisim's scalar functions added ([`crate::sql::scalar_functions`]).
+/// Every function a local session knows (DataFusion's defaults, including the nested-type functions
+/// Ballista's default registry lacks, and gedisim's scalar functions, [`crate::sql::scalar_functions`]),
+/// as an executor's registry.
 pub fn function_registry() -> BallistaFunctionRegistry {
-    let mut registry = BallistaFunctionRegistry::default();
+    let mut state = SessionStateBuilder::new().with_default_features().build();
     for f in crate::sql::scalar_functions() {
-        registry.scalar_functions.insert(f.name().to_string(), Arc::new(f));
+        // Registering a new name replaces nothing.
+        let _ = state.register_udf(Arc::new(f));
     }
-    registry
+    BallistaFunctionRegistry {
+        scalar_functions: state.scalar_functions().clone(),
+        aggregate_functions: state.aggregate_functions().clone(),
+        window_functions: state.window_functions().clone(),
+        ..BallistaFunctionRegistry::default()
+    }
 }
 
 /// The scheduler's sessions: Ballista's defaults with gedisim's scalar functions registered, so
@@ -47,6 +56,8 @@ pub fn run_scheduler(bind: SocketAddr) -> Result<()> {
         bind_host: bind.ip().to_string(),
         bind_port: bind.port(),
         override_session_builder: Some(Arc::new(session_state)),
+        override_logical_codec: Some(Arc::new(LogicalCodec::default())),
+        override_physical_codec: Some(Arc::new(PhysicalCodec::default())),
         ..SchedulerConfig::default()
     };
     runtime()?.block_on(async {
@@ -66,6 +77,8 @@ pub fn run_executor(scheduler: &str, bind: SocketAddr, concurrency: usize) -> Re
         .rsplit_once(':')
         .and_then(|(h, p)| Some((h.to_string(), p.parse::<u16>().ok()?)))
         .ok_or_else(|| Error::Usage(format!("--scheduler {scheduler}: expected host:port")))?;
+    // Ballista's executor waits for ever on a scheduler that does not answer.
+    crate::sql::reachable(scheduler).map_err(|e| Error::Usage(format!("--scheduler {scheduler}: {e}")))?;
     let config = ExecutorProcessConfig {
         bind_host: bind.ip().to_string(),
         port: bind.port(),
@@ -75,6 +88,8 @@ pub fn run_executor(scheduler: &str, bind: SocketAddr, concurrency: usize) -> Re
         scheduler_connect_timeout_seconds: 10,
         vcores: concurrency.max(1),
         override_function_registry: Some(Arc::new(function_registry())),
+        override_logical_codec: Some(Arc::new(LogicalCodec::default())),
+        override_physical_codec: Some(Arc::new(PhysicalCodec::default())),
         ..ExecutorProcessConfig::default()
     };
     runtime()?.block_on(async {

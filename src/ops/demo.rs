@@ -132,7 +132,7 @@ pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoRepor
     };
     let run = run_study(&run_opts, progress)?;
     let ds = Dataset::open(&ds_dir)?;
-    let report = crate::ops::report::run_report(&ds, None, progress)?;
+    let report = crate::ops::report::run_report(&ds, None, &Default::default(), progress)?;
     let headline = Headline::read(&report.dir)?;
     // The diagnosis of the world, told nothing about the withheld effect.
     let diagnosis = crate::ops::diagnose::diagnose_dataset(

@@ -10,17 +10,23 @@ use datafusion::logical_expr::{DdlStatement, LogicalPlan};
 
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
-pub use crate::sql::SessionLimits;
+pub use crate::sql::{Engine, SessionLimits};
 
-/// Run `query` on `dataset`; the result as a text table, or written to `out` (then `None`).
-pub fn sql(dataset: &Path, query: &str, out: Option<&Path>, limits: &SessionLimits) -> Result<Option<String>> {
+/// Run `query` on `dataset` with `engine`; the result as a text table, or written to `out` (then `None`).
+pub fn sql(
+    dataset: &Path,
+    query: &str,
+    out: Option<&Path>,
+    limits: &SessionLimits,
+    engine: &Engine,
+) -> Result<Option<String>> {
     let ds = Dataset::open(dataset)?;
     let rt = tokio::runtime::Runtime::new().map_err(|e| Error::Usage(e.to_string()))?;
     let sql_err = |e: datafusion::error::DataFusionError| {
         Error::Usage(format!("SQL: {}", crate::error::one_line(&e.to_string())))
     };
     rt.block_on(async move {
-        let ctx = crate::sql::session_with(&ds, limits).await?;
+        let ctx = crate::sql::session_on(&ds, limits, engine).await?;
         let plan = ctx.state().create_logical_plan(query).await.map_err(sql_err)?;
         crate::sql::statement_options(limits).verify_plan(&plan).map_err(|e| {
             Error::Usage(format!(

@@ -2,6 +2,8 @@
 //! (thin wrappers over the kernels).
 
 pub mod args;
+#[cfg(feature = "cluster")]
+pub mod codec;
 pub mod l2a;
 pub mod link_margin_twin;
 pub mod noise_twin;
@@ -21,6 +23,7 @@ use datafusion::datasource::file_format::parquet::ParquetFormat;
 use datafusion::datasource::listing::{ListingOptions, ListingTable, ListingTableConfig, ListingTableUrl};
 use datafusion::datasource::TableType;
 use datafusion::execution::runtime_env::RuntimeEnvBuilder;
+use datafusion::execution::{SessionState, SessionStateBuilder};
 use datafusion::logical_expr::dml::InsertOp;
 use datafusion::logical_expr::{DocSection, Expr, ScalarUDF, TableProviderFilterPushDown};
 use datafusion::physical_plan::ExecutionPlan;
@@ -54,6 +57,16 @@ pub fn default_memory_limit() -> usize {
     }
 }
 
+/// Where a session's plans run.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub enum Engine {
+    /// In this process.
+    #[default]
+    Local,
+    /// On the Ballista cluster whose scheduler is at this `df://host:port` address (feature `cluster`).
+    Cluster(String),
+}
+
 /// A session with every table folder of `dataset` registered under its folder name (read-only)
 /// and gedisim's functions, under the default [`SessionLimits`].
 pub async fn session(ds: &Dataset) -> Result<SessionContext> {
@@ -62,13 +75,29 @@ pub async fn session(ds: &Dataset) -> Result<SessionContext> {
 
 /// [`session`] with `limits`' memory pool.
 pub async fn session_with(ds: &Dataset, limits: &SessionLimits) -> Result<SessionContext> {
+    session_on(ds, limits, &Engine::Local).await
+}
+
+/// [`session_with`] whose plans run on `engine`. On a cluster the dataset's tables are plain
+/// Parquet listings (what Ballista ships) and no statement may write.
+pub async fn session_on(ds: &Dataset, limits: &SessionLimits, engine: &Engine) -> Result<SessionContext> {
     let config = SessionConfig::new().with_information_schema(true);
     let runtime = RuntimeEnvBuilder::new()
         .with_memory_limit(limits.memory_limit, 1.0)
         .build_arc()
         .map_err(|e| Error::Usage(format!("SQL: {e}")))?;
-    let ctx = SessionContext::new_with_config_rt(config, runtime);
+    let state = SessionStateBuilder::new().with_config(config).with_runtime_env(runtime).with_default_features().build();
+    let ctx = match engine {
+        Engine::Local => SessionContext::new_with_state(state),
+        Engine::Cluster(url) => {
+            if limits.allow_writes {
+                return Err(Error::Usage("--allow-writes: not with --cluster (a cluster only reads)".into()));
+            }
+            SessionContext::new_with_state(cluster_state(state, url)?)
+        }
+    };
     register_functions(&ctx, ds);
+    let read_only = *engine == Engine::Local;
     for entry in std::fs::read_dir(ds.root()).map_err(|e| Error::file(ds.root(), e))? {
         let dir = entry.map_err(|e| Error::file(ds.root(), e))?.path();
         let Some(name) = dir.file_name().and_then(|n| n.to_str()).map(str::to_string) else { continue };
@@ -78,10 +107,59 @@ pub async fn session_with(ds: &Dataset, limits: &SessionLimits) -> Result<Sessio
         }
         let files = ds.visible_files(&name).map_err(|e| Error::file(&dir, e))?;
         if !files.is_empty() {
-            register_table(&ctx, &name, &files).await?;
+            register_table(&ctx, &name, &files, read_only).await?;
         }
     }
     Ok(ctx)
+}
+
+/// `state` made a client of the Ballista scheduler at `url` (`df://host:port`), with gedisim's
+/// codecs ([`codec`]). The scheduler must answer within a few seconds: one line if it does not.
+#[cfg(feature = "cluster")]
+fn cluster_state(state: SessionState, url: &str) -> Result<SessionState> {
+    use ballista_core::extension::{SessionConfigExt, SessionStateExt};
+    let address = scheduler_address(url)?;
+    let config = state
+        .config()
+        .clone()
+        .with_ballista_logical_extension_codec(Arc::new(codec::LogicalCodec::default()))
+        .with_ballista_physical_extension_codec(Arc::new(codec::PhysicalCodec::default()))
+        .with_ballista_adaptive_query_planner(false);
+    SessionStateBuilder::new_from_existing(state)
+        .with_config(config)
+        .build()
+        .upgrade_for_ballista(format!("http://{address}"))
+        .map_err(|e| Error::Usage(format!("--cluster {url}: {}", crate::error::one_line(&e.to_string()))))
+}
+
+#[cfg(not(feature = "cluster"))]
+fn cluster_state(_state: SessionState, url: &str) -> Result<SessionState> {
+    Err(Error::Usage(format!(
+        "--cluster {url}: this gedisim was built without the `cluster` feature (cargo install --features cluster)"
+    )))
+}
+
+/// The `host:port` of a `df://host:port` scheduler address, checked to accept a connection.
+pub fn scheduler_address(url: &str) -> Result<String> {
+    let bad = |why: &str| Error::Usage(format!("--cluster {url}: {why}"));
+    let rest = url.strip_prefix("df://").ok_or_else(|| bad("expected df://host:port"))?;
+    let address = rest.trim_end_matches('/');
+    reachable(address).map_err(|e| bad(&e))?;
+    Ok(address.to_string())
+}
+
+/// Whether something accepts TCP connections at `address` (`host:port`) within 5 s, as one line.
+pub fn reachable(address: &str) -> std::result::Result<(), String> {
+    use std::net::ToSocketAddrs;
+    let addrs: Vec<_> = address.to_socket_addrs().map_err(|e| format!("{address}: {e}"))?.collect();
+    let mut last = format!("{address}: no address");
+    for a in addrs {
+        match std::net::TcpStream::connect_timeout(&a, std::time::Duration::from_secs(5)) {
+            Ok(_) => return Ok(()),
+            Err(e) => last = format!("nothing answers at {a} ({e})"),
+        }
+    }
+    Err(last)
 }
 
 /// What `limits` lets a statement do: reads always; DDL, DML and `COPY` only with `allow_writes`.
@@ -113,8 +191,9 @@ pub fn register_functions(ctx: &SessionContext, ds: &Dataset) {
     ctx.register_udtf("gedi_simulate", Arc::new(simulate::GediSimulate::new(ds.clone())));
 }
 
-/// Register the Parquet `files` (of one table folder) as the read-only table `name`.
-pub async fn register_table(ctx: &SessionContext, name: &str, files: &[PathBuf]) -> Result<()> {
+/// Register the Parquet `files` (of one table folder) as the table `name`, refusing `INSERT` when
+/// `read_only`.
+pub async fn register_table(ctx: &SessionContext, name: &str, files: &[PathBuf], read_only: bool) -> Result<()> {
     let dir = files.first().and_then(|f| f.parent()).unwrap_or(Path::new("."));
     let table_err = |e: datafusion::error::DataFusionError| Error::table(dir, e);
     let urls = files
@@ -131,7 +210,8 @@ pub async fn register_table(ctx: &SessionContext, name: &str, files: &[PathBuf])
         .await
         .map_err(table_err)?;
     let table = ListingTable::try_new(config).map_err(table_err)?;
-    ctx.register_table(name, Arc::new(ReadOnly(Arc::new(table)))).map_err(table_err)?;
+    let table: Arc<dyn TableProvider> = if read_only { Arc::new(ReadOnly(Arc::new(table))) } else { Arc::new(table) };
+    ctx.register_table(name, table).map_err(table_err)?;
     Ok(())
 }
 

@@ -45,6 +45,19 @@ pub enum Profile {
 }
 
 impl Profile {
+    /// The profile's name in SQL and on the command line: `gedirat` or `default`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Profile::Gedirat => "gedirat",
+            Profile::Default => "default",
+        }
+    }
+
+    /// The profile named `name` ([`Profile::name`]).
+    pub fn from_name(name: &str) -> Option<Profile> {
+        [Profile::Gedirat, Profile::Default].into_iter().find(|p| p.name() == name)
+    }
+
     /// The reference behaviours this profile reproduces.
     pub fn quirks(self) -> Quirks {
         let on = self == Profile::Gedirat;

@@ -20,6 +20,7 @@ use arrow::datatypes::{DataType, Float64Type, SchemaRef};
 use crate::dataset::{self, tables, Dataset};
 use crate::error::{Error, Result};
 use crate::ops::progress::{Progress, Step};
+pub use crate::sql::Engine;
 
 /// One of the study's tables: its name (file stem), a title and its SQL.
 #[derive(Debug, Clone, Copy)]
@@ -88,12 +89,12 @@ pub enum QueryOutcome {
     },
 }
 
-/// Run every query of [`QUERIES`] whose tables exist. `on_query(name)` is called before each.
-pub async fn run_queries(ds: &Dataset, on_query: &dyn Fn(&str)) -> Result<Vec<QueryOutcome>> {
+/// Run every query of [`QUERIES`] whose tables exist, on `engine`. `on_query(name)` is called before each.
+pub async fn run_queries(ds: &Dataset, engine: &Engine, on_query: &dyn Fn(&str)) -> Result<Vec<QueryOutcome>> {
     if !ds.has_table(tables::RESULTS) {
         return Err(Error::file(ds.root().join(tables::RESULTS), "no results table: run `gedisim run` first"));
     }
-    let ctx = crate::sql::session(ds).await?;
+    let ctx = crate::sql::session_on(ds, &Default::default(), engine).await?;
     let mut out = Vec::new();
     for q in QUERIES {
         let missing: Vec<String> = required_tables(q.sql).into_iter().filter(|t| !ds.has_table(t)).collect();
@@ -215,15 +216,15 @@ pub struct ReportSummary {
 }
 
 /// `gedisim report`: the whole report into `out` (default `<dataset>/report/`), as one
-/// [`Step::Report`] whose notes name what it is doing.
-pub fn run_report(ds: &Dataset, out: Option<&Path>, progress: &dyn Progress) -> Result<ReportSummary> {
+/// [`Step::Report`] whose notes name what it is doing; its queries run on `engine`.
+pub fn run_report(ds: &Dataset, out: Option<&Path>, engine: &Engine, progress: &dyn Progress) -> Result<ReportSummary> {
     progress.start(Step::Report, 0);
-    let summary = report(ds, out, &|what| progress.note(what));
+    let summary = report(ds, out, engine, &|what| progress.note(what));
     progress.finish();
     summary
 }
 
-fn report(ds: &Dataset, out: Option<&Path>, on_step: &dyn Fn(&str)) -> Result<ReportSummary> {
+fn report(ds: &Dataset, out: Option<&Path>, engine: &Engine, on_step: &dyn Fn(&str)) -> Result<ReportSummary> {
     let dir = match out {
         Some(d) => d.to_path_buf(),
         None => ds.root().join(tables::REPORT),
@@ -231,7 +232,7 @@ fn report(ds: &Dataset, out: Option<&Path>, on_step: &dyn Fn(&str)) -> Result<Re
     std::fs::create_dir_all(&dir).map_err(|e| Error::file(&dir, format!("cannot create report directory: {e}")))?;
     let rt =
         tokio::runtime::Runtime::new().map_err(|e| Error::Usage(format!("cannot start the query runtime: {e}")))?;
-    let outcomes = rt.block_on(run_queries(ds, &|name| on_step(&format!("query {name}"))))?;
+    let outcomes = rt.block_on(run_queries(ds, engine, &|name| on_step(&format!("query {name}"))))?;
     let mut summary = ReportSummary { dir: dir.clone(), ..Default::default() };
     let mut ran = Vec::new();
     for o in outcomes {
