@@ -10,7 +10,7 @@ WITH p AS (
         r.weighting, r.algorithm, r.sensitivity_group, k.value AS percentile,
         CAST(r.rh_aligned[k.value + 1] AS DOUBLE) AS y,
         CAST(r.rh_sim[k.value + 1] AS DOUBLE) AS yhat
-    FROM results r CROSS JOIN generate_series(1, 99) AS k
+    FROM results r CROSS JOIN (SELECT unnest(range(1, 100)) AS value) AS k  -- RH1..RH99 (unnest: a plan a cluster can ship)
 ),
 m AS (
     SELECT

@@ -13,6 +13,10 @@ pub enum ClusterCommand {
         /// Address to listen on.
         #[arg(long, default_value = "127.0.0.1:50050")]
         bind: SocketAddr,
+        /// Seconds without a heartbeat after which an executor is lost and its tasks run on the
+        /// others (executors beat every 2 s).
+        #[arg(long, default_value_t = 20)]
+        executor_timeout: u64,
     },
     /// Start a Ballista executor that knows gedisim's functions; runs until stopped.
     Executor {
@@ -34,9 +38,9 @@ pub fn cluster(c: ClusterCommand) -> Result<()> {
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
     let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
     match c {
-        ClusterCommand::Scheduler { bind } => {
+        ClusterCommand::Scheduler { bind, executor_timeout } => {
             eprintln!("gedisim cluster scheduler on {bind}");
-            gedisim::ops::cluster::run_scheduler(bind)
+            gedisim::ops::cluster::run_scheduler(bind, executor_timeout)
         }
         ClusterCommand::Executor { scheduler, bind, concurrency } => {
             let n = concurrency.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));

@@ -50,11 +50,23 @@ fn runtime() -> Result<tokio::runtime::Runtime> {
         .map_err(|e| Error::Usage(format!("cannot start the async runtime: {e}")))
 }
 
-/// Run a scheduler listening on `bind` until the process is stopped.
-pub fn run_scheduler(bind: SocketAddr) -> Result<()> {
+/// Seconds between an executor's heartbeats to the scheduler (Ballista's default is 60).
+pub const HEARTBEAT_SECONDS: u64 = 2;
+
+/// Run a scheduler listening on `bind` until the process is stopped. An executor silent for
+/// `executor_timeout` seconds is taken as lost: its tasks run again on the others.
+pub fn run_scheduler(bind: SocketAddr, executor_timeout: u64) -> Result<()> {
+    if executor_timeout < 2 * HEARTBEAT_SECONDS {
+        return Err(Error::Usage(format!(
+            "--executor-timeout {executor_timeout}: at least {} s (two heartbeats)",
+            2 * HEARTBEAT_SECONDS
+        )));
+    }
     let config = SchedulerConfig {
         bind_host: bind.ip().to_string(),
         bind_port: bind.port(),
+        executor_timeout_seconds: executor_timeout,
+        expire_dead_executor_interval_seconds: HEARTBEAT_SECONDS,
         override_session_builder: Some(Arc::new(session_state)),
         override_logical_codec: Some(Arc::new(LogicalCodec::default())),
         override_physical_codec: Some(Arc::new(PhysicalCodec::default())),
@@ -87,6 +99,7 @@ pub fn run_executor(scheduler: &str, bind: SocketAddr, concurrency: usize) -> Re
         scheduler_port: port,
         scheduler_connect_timeout_seconds: 10,
         vcores: concurrency.max(1),
+        executor_heartbeat_interval_seconds: HEARTBEAT_SECONDS,
         override_function_registry: Some(Arc::new(function_registry())),
         override_logical_codec: Some(Arc::new(LogicalCodec::default())),
         override_physical_codec: Some(Arc::new(PhysicalCodec::default())),

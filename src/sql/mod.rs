@@ -123,8 +123,7 @@ fn cluster_state(state: SessionState, url: &str) -> Result<SessionState> {
         .config()
         .clone()
         .with_ballista_logical_extension_codec(Arc::new(codec::LogicalCodec::default()))
-        .with_ballista_physical_extension_codec(Arc::new(codec::PhysicalCodec::default()))
-        .with_ballista_adaptive_query_planner(false);
+        .with_ballista_physical_extension_codec(Arc::new(codec::PhysicalCodec::default()));
     SessionStateBuilder::new_from_existing(state)
         .with_config(config)
         .build()

@@ -1,0 +1,405 @@
+//! The same SQL, simulation and study on an Apache Ballista cluster (docs/scale.md): a scheduler and
+//! two executors started as separate `gedisim cluster` processes on loopback. Every `queries/*.sql`
+//! and a `gedi_simulate()` query give the local engine's rows; `run --cluster` writes the local
+//! run's `results/` and `sim/`; a query survives an executor killed while it runs (or ends with one
+//! line and no output); a bad cluster address is one line, not a hang.
+
+#![cfg(feature = "cluster")]
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+use arrow::array::RecordBatch;
+use arrow::datatypes::DataType;
+use arrow::util::display::array_value_to_string;
+use common::{data, gedisim};
+use gedisim::dataset::Dataset;
+use gedisim::ops::report::{run_queries, QueryOutcome};
+use gedisim::sql::Engine;
+
+const BIN: &str = env!("CARGO_BIN_EXE_gedisim");
+
+/// A process killed when dropped.
+struct Process(Child);
+
+impl Drop for Process {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// A port `p` such that `p` and `p + 1` are free now.
+fn free_port_pair() -> u16 {
+    loop {
+        let a = TcpListener::bind("127.0.0.1:0").unwrap();
+        let p = a.local_addr().unwrap().port();
+        if p < u16::MAX && TcpListener::bind(("127.0.0.1", p + 1)).is_ok() {
+            return p;
+        }
+    }
+}
+
+/// Wait until `log` holds `needle` `times` times; false after `limit`.
+fn wait_for_log(log: &Path, needle: &str, times: usize, limit: Duration) -> bool {
+    let start = Instant::now();
+    while start.elapsed() < limit {
+        let text = std::fs::read_to_string(log).unwrap_or_default();
+        if text.matches(needle).count() >= times {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    false
+}
+
+/// A scheduler and `executors` executors (one task at a time each), their logs in `dir`.
+struct Cluster {
+    url: String,
+    executors: Vec<Process>,
+    logs: Vec<PathBuf>,
+    _scheduler: Process,
+}
+
+impl Cluster {
+    fn start(dir: &Path, executors: usize, executor_timeout: u64) -> Cluster {
+        std::fs::create_dir_all(dir).unwrap();
+        let spawn = |args: &[&str], log: &Path| {
+            let file = std::fs::File::create(log).unwrap();
+            let child = Command::new(BIN)
+                .args(args)
+                .env("RUST_LOG", "info")
+                .stdout(Stdio::null())
+                .stderr(file)
+                .spawn()
+                .unwrap();
+            Process(child)
+        };
+        let port = free_port_pair();
+        let address = format!("127.0.0.1:{port}");
+        let log = dir.join("scheduler.log");
+        let timeout = executor_timeout.to_string();
+        let scheduler = spawn(&["cluster", "scheduler", "--bind", &address, "--executor-timeout", &timeout], &log);
+        assert!(wait_for_log(&log, "listening on", 1, Duration::from_secs(60)), "scheduler did not start: {log:?}");
+        let mut procs = Vec::new();
+        let mut logs = Vec::new();
+        for k in 0..executors {
+            let bind = format!("127.0.0.1:{}", free_port_pair());
+            let log = dir.join(format!("executor{k}.log"));
+            procs.push(spawn(
+                &["cluster", "executor", "--scheduler", &address, "--bind", &bind, "--concurrency", "1"],
+                &log,
+            ));
+            assert!(
+                wait_for_log(&log, "registration succeed", 1, Duration::from_secs(60)),
+                "executor {k} did not register: {}",
+                std::fs::read_to_string(&log).unwrap_or_default()
+            );
+            logs.push(log);
+        }
+        Cluster { url: format!("df://{address}"), executors: procs, logs, _scheduler: scheduler }
+    }
+}
+
+/// A scenario world over the three bundled tiles, and the dataset a local `gedisim run` made of it.
+struct World {
+    _dir: tempfile::TempDir,
+    root: PathBuf,
+    local: PathBuf,
+}
+
+fn world() -> &'static World {
+    static WORLD: OnceLock<World> = OnceLock::new();
+    WORLD.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path().join("world");
+        let tiles = data("als");
+        let (ok, _, err) = gedisim(&[
+            "scenario",
+            "--effect",
+            "ground_detection",
+            "--als",
+            tiles.to_str().unwrap(),
+            "--passes",
+            "8",
+            "--seed",
+            "5",
+            "--out",
+            root.to_str().unwrap(),
+        ]);
+        assert!(ok, "{err}");
+        let local = dir.path().join("local");
+        let (ok, _, err) = gedisim(&run_args(&root, &local, None).iter().map(String::as_str).collect::<Vec<_>>());
+        assert!(ok, "{err}");
+        World { _dir: dir, root, local }
+    })
+}
+
+fn run_args(world: &Path, out: &Path, cluster: Option<&str>) -> Vec<String> {
+    let gedi = world.join("gedi").display().to_string();
+    let mut args: Vec<String> = ["run", "--als", &world.join("als").display().to_string(), "--l1b", &gedi, "--l2a", &gedi]
+        .map(String::from)
+        .to_vec();
+    args.extend(["--out".to_string(), out.display().to_string()]);
+    if let Some(url) = cluster {
+        args.extend(["--cluster".to_string(), url.to_string()]);
+    }
+    args
+}
+
+/// Every row of `batches` as text (floats in their shortest exact form, so that any bit differs), sorted.
+fn rows(batches: &[RecordBatch]) -> Vec<String> {
+    let mut out = Vec::new();
+    for b in batches {
+        for i in 0..b.num_rows() {
+            let cells: Vec<String> = b.columns().iter().map(|c| array_value_to_string(c, i).unwrap()).collect();
+            out.push(cells.join(" | "));
+        }
+    }
+    out.sort();
+    out
+}
+
+/// Aggregates add their rows in the order partitions arrive, and a cluster splits a table into
+/// tasks differently from the local engine: floating-point addition is not associative, so a sum,
+/// mean or moment may differ in its last bits. Floats are compared to within this (absolute below
+/// 1, relative above: a nanometre, far below any figure the study reports); everything else, and
+/// the row set, exactly.
+const AGGREGATE_TOLERANCE: f64 = 1e-9;
+
+/// `local` and `cluster` hold the same rows (in any order), floats within [`AGGREGATE_TOLERANCE`].
+fn same_rows(what: &str, local: &[RecordBatch], cluster: &[RecordBatch]) {
+    let (l, c) = (rows(local), rows(cluster));
+    if l == c {
+        return;
+    }
+    let floats: Vec<bool> = local[0]
+        .schema()
+        .fields()
+        .iter()
+        .map(|f| matches!(f.data_type(), DataType::Float64 | DataType::Float32))
+        .collect();
+    // Rows keyed by their exact cells, so that both sides sort the same way.
+    let keyed = |rows: &[String]| {
+        let mut v: Vec<(Vec<String>, Vec<String>)> = rows
+            .iter()
+            .map(|r| {
+                let cells: Vec<String> = r.split(" | ").map(String::from).collect();
+                let key = cells.iter().zip(&floats).filter(|(_, f)| !**f).map(|(c, _)| c.clone()).collect();
+                (key, cells)
+            })
+            .collect();
+        v.sort();
+        v
+    };
+    let (l, c) = (keyed(&l), keyed(&c));
+    assert_eq!(l.len(), c.len(), "{what}: row count");
+    let mut worst = 0.0f64;
+    for ((lk, lc), (ck, cc)) in l.iter().zip(&c) {
+        assert_eq!(lk, ck, "{what}: a row differs in a column that is not a float");
+        for ((a, b), float) in lc.iter().zip(cc).zip(&floats) {
+            if *float && a != b {
+                let (x, y): (f64, f64) = (a.parse().unwrap(), b.parse().unwrap());
+                let diff = (x - y).abs() / x.abs().max(y.abs()).max(1.0);
+                assert!(diff <= AGGREGATE_TOLERANCE, "{what}: {a} vs {b}");
+                worst = worst.max(diff);
+            }
+        }
+    }
+    eprintln!("{what}: floats within {worst:.1e} of the local engine's");
+}
+
+fn query(ds: &Path, engine: &Engine, sql: &str) -> Vec<RecordBatch> {
+    let ds = Dataset::open(ds).unwrap();
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    rt.block_on(async {
+        let ctx = gedisim::sql::session_on(&ds, &Default::default(), engine).await.unwrap();
+        ctx.sql(sql).await.unwrap_or_else(|e| panic!("{sql}: {e}")).collect().await.unwrap()
+    })
+}
+
+/// Every column of every file of `table`, with its key-value metadata, by file name.
+fn table_files(ds: &Path, table: &str) -> Vec<(String, Vec<RecordBatch>, Option<String>)> {
+    let mut out = Vec::new();
+    for path in common::files_with_suffix(&ds.join(table), ".parquet") {
+        let file = std::fs::File::open(&path).unwrap();
+        let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap();
+        let meta = builder.metadata().file_metadata().key_value_metadata().map(|kv| {
+            let mut kv: Vec<String> = kv.iter().map(|e| format!("{}={:?}", e.key, e.value)).collect();
+            kv.sort();
+            kv.join("\n")
+        });
+        let batches: Vec<RecordBatch> = builder.build().unwrap().map(|b| b.unwrap()).collect();
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        out.push((name, vec![arrow::compute::concat_batches(&batches[0].schema(), &batches).unwrap()], meta));
+    }
+    out.sort_by(|a, b| a.0.cmp(&b.0));
+    out
+}
+
+#[test]
+fn every_query_and_gedi_simulate_give_the_local_rows() {
+    let w = world();
+    let tmp = tempfile::tempdir().unwrap();
+    let cluster = Cluster::start(tmp.path(), 2, 20);
+    let engine = Engine::Cluster(cluster.url.clone());
+    let ds = Dataset::open(&w.local).unwrap();
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let local = rt.block_on(run_queries(&ds, &Engine::Local, &|_| {})).unwrap();
+    let remote = rt.block_on(run_queries(&ds, &engine, &|_| {})).unwrap();
+    assert_eq!(local.len(), remote.len());
+    let mut ran = 0;
+    for (l, r) in local.iter().zip(&remote) {
+        match (l, r) {
+            (QueryOutcome::Ran(l), QueryOutcome::Ran(r)) => {
+                assert_eq!(l.query.name, r.query.name);
+                assert_eq!(l.schema, r.schema, "queries/{}.sql", l.query.name);
+                assert_eq!(l.rows(), r.rows(), "queries/{}.sql", l.query.name);
+                if l.rows() > 0 {
+                    same_rows(&format!("queries/{}.sql", l.query.name), &l.batches, &r.batches);
+                    ran += 1;
+                }
+            }
+            (QueryOutcome::Skipped { query, .. }, QueryOutcome::Skipped { .. }) => {
+                eprintln!("queries/{}.sql skipped on both (its tables are not in a run's dataset)", query.name)
+            }
+            _ => panic!("a query ran on one engine only"),
+        }
+    }
+    assert!(ran >= 8, "only {ran} queries gave rows");
+
+    // The simulation itself, every column, bit for bit.
+    let sql = "select * from gedi_simulate() order by footprint_id, weighting";
+    let (l, r) = (query(&w.local, &Engine::Local, sql), query(&w.local, &engine, sql));
+    let concat = |b: &[RecordBatch]| arrow::compute::concat_batches(&b[0].schema(), b).unwrap();
+    let (l, r) = (concat(&l), concat(&r));
+    assert!(l.num_rows() > 100, "{} rows", l.num_rows());
+    assert_eq!(l, r);
+    // Both executors took part.
+    for log in &cluster.logs {
+        assert!(std::fs::read_to_string(log).unwrap().contains("Execute task"), "{log:?} ran no task");
+    }
+}
+
+#[test]
+fn run_on_the_cluster_writes_the_local_results() {
+    let w = world();
+    let tmp = tempfile::tempdir().unwrap();
+    let cluster = Cluster::start(&tmp.path().join("cluster"), 2, 20);
+    let out = tmp.path().join("distributed");
+    let args = run_args(&w.root, &out, Some(&cluster.url));
+    let (ok, _, err) = gedisim(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(ok, "{err}");
+    for table in ["sim", "results"] {
+        let (l, r) = (table_files(&w.local, table), table_files(&out, table));
+        assert!(l.len() > 5, "{table}: {} files", l.len());
+        assert_eq!(l.len(), r.len(), "{table}");
+        for (l, r) in l.iter().zip(&r) {
+            assert_eq!(l.0, r.0);
+            assert_eq!(l.1, r.1, "{table}/{}", l.0);
+            assert_eq!(l.2, r.2, "{table}/{}: metadata", l.0);
+        }
+    }
+    // The simulation ran as tasks on the executors.
+    assert!(cluster.logs.iter().all(|log| std::fs::read_to_string(log).unwrap().contains("Execute task")));
+}
+
+#[test]
+fn a_query_survives_an_executor_killed_while_it_runs() {
+    let w = world();
+    let tmp = tempfile::tempdir().unwrap();
+    // A short timeout: the scheduler gives a silent executor's tasks to the other after 6 s.
+    let mut cluster = Cluster::start(&tmp.path().join("cluster"), 2, 6);
+    let out = tmp.path().join("out.parquet");
+    let sql = "select * from gedi_simulate() order by footprint_id, weighting";
+    let mut client = Process(
+        Command::new(BIN)
+            .args(["sql", "--dataset", w.local.to_str().unwrap(), "--cluster", &cluster.url, "--out"])
+            .arg(&out)
+            .arg(sql)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    // Kill the first executor as soon as it starts a task of this query.
+    assert!(wait_for_log(&cluster.logs[0], "Execute task", 1, Duration::from_secs(120)), "no task reached executor 0");
+    let mut victim = cluster.executors.remove(0);
+    victim.0.kill().unwrap();
+    victim.0.wait().unwrap();
+    let start = Instant::now();
+    let status = loop {
+        if let Some(s) = client.0.try_wait().unwrap() {
+            break s;
+        }
+        assert!(start.elapsed() < Duration::from_secs(300), "the query hung after an executor died");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let stderr: Vec<String> =
+        BufReader::new(client.0.stderr.take().unwrap()).lines().map(|l| l.unwrap()).collect();
+    if status.success() {
+        let file = std::fs::File::open(&out).unwrap();
+        let got: Vec<RecordBatch> = parquet::arrow::arrow_reader::ParquetRecordBatchReader::try_new(file, 8192)
+            .unwrap()
+            .map(|b| b.unwrap())
+            .collect();
+        assert_eq!(rows(&got), rows(&query(&w.local, &Engine::Local, sql)), "rows after the executor died");
+        eprintln!("the query completed on the other executor");
+    } else {
+        assert_eq!(stderr.len(), 1, "{stderr:?}");
+        assert!(!out.exists(), "partial output");
+    }
+    let left: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert!(left.iter().all(|n| n == "cluster" || n == "out.parquet"), "left behind: {left:?}");
+}
+
+#[test]
+fn a_bad_cluster_address_is_one_line_not_a_hang() {
+    let w = world();
+    let tmp = tempfile::tempdir().unwrap();
+    let report = tmp.path().join("report").display().to_string();
+    // Nothing listens on a port just freed.
+    let port = free_port_pair();
+    let dead = format!("127.0.0.1:{port}");
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (
+            ["sql", "--dataset", w.local.to_str().unwrap(), "--cluster", &format!("df://{dead}"), "select 1"]
+                .map(String::from)
+                .to_vec(),
+            "--cluster",
+        ),
+        (
+            ["sql", "--dataset", w.local.to_str().unwrap(), "--cluster", &dead, "select 1"].map(String::from).to_vec(),
+            "df://host:port",
+        ),
+        (
+            ["report", "--dataset", w.local.to_str().unwrap(), "--out", &report, "--cluster", &format!("df://{dead}")]
+                .map(String::from)
+                .to_vec(),
+            "--cluster",
+        ),
+        (["cluster", "executor", "--scheduler", &dead].map(String::from).to_vec(), "--scheduler"),
+    ];
+    for (args, names) in cases {
+        let mut child = Process(Command::new(BIN).args(&args).stderr(Stdio::piped()).spawn().unwrap());
+        let start = Instant::now();
+        let status = loop {
+            if let Some(s) = child.0.try_wait().unwrap() {
+                break s;
+            }
+            assert!(start.elapsed() < Duration::from_secs(120), "{args:?} hung");
+            std::thread::sleep(Duration::from_millis(50));
+        };
+        let stderr: Vec<String> = BufReader::new(child.0.stderr.take().unwrap()).lines().map(|l| l.unwrap()).collect();
+        assert!(!status.success(), "{args:?}");
+        let errors: Vec<&String> = stderr.iter().filter(|l| l.starts_with("error")).collect();
+        assert_eq!(errors.len(), 1, "{args:?}: {stderr:?}");
+        assert!(errors[0].contains(names), "{args:?}: {stderr:?}");
+    }
+}
