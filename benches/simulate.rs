@@ -15,7 +15,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{extent, field, run, scene_25m};
+use common::{field, run, scene_25m, write_lattice};
 
 /// The reference (gediRat) on this job: wall seconds and peak GB, 2000 and 2 footprints.
 const REF_2000_S: f64 = 50.1;
@@ -74,27 +74,4 @@ fn report(title: &str, two: &str, all: &str, ingest: Option<&str>) {
             REF_2000_S / (ti + t2000)
         );
     }
-}
-
-/// The lattice: x = xmin+20+(i+0.5)·W/50, y = ymin+20+(j+0.5)·H/40, W = H = extent − 40 m
-/// (the first `n` of its 2000 points), as an `id,x,y` CSV.
-fn write_lattice(dir: &Path, scene: &Path, n: usize, name: &str) -> PathBuf {
-    let [xmin, ymin, xmax, ymax] = extent(scene);
-    let (w, h) = (xmax - xmin - 40.0, ymax - ymin - 40.0);
-    let mut csv = String::from("id,x,y\n");
-    let mut k = 0;
-    'outer: for j in 0..40 {
-        for i in 0..50 {
-            if k == n {
-                break 'outer;
-            }
-            let x = xmin + 20.0 + (i as f64 + 0.5) * w / 50.0;
-            let y = ymin + 20.0 + (j as f64 + 0.5) * h / 40.0;
-            csv.push_str(&format!("fp{k},{x:.3},{y:.3}\n"));
-            k += 1;
-        }
-    }
-    let path = dir.join(name);
-    std::fs::write(&path, csv).unwrap();
-    path
 }

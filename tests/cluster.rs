@@ -143,9 +143,10 @@ fn world() -> &'static World {
 
 fn run_args(world: &Path, out: &Path, cluster: Option<&str>) -> Vec<String> {
     let gedi = world.join("gedi").display().to_string();
-    let mut args: Vec<String> = ["run", "--als", &world.join("als").display().to_string(), "--l1b", &gedi, "--l2a", &gedi]
-        .map(String::from)
-        .to_vec();
+    let mut args: Vec<String> =
+        ["run", "--als", &world.join("als").display().to_string(), "--l1b", &gedi, "--l2a", &gedi]
+            .map(String::from)
+            .to_vec();
     args.extend(["--out".to_string(), out.display().to_string()]);
     if let Some(url) = cluster {
         args.extend(["--cluster".to_string(), url.to_string()]);
@@ -341,8 +342,7 @@ fn a_query_survives_an_executor_killed_while_it_runs() {
         assert!(start.elapsed() < Duration::from_secs(300), "the query hung after an executor died");
         std::thread::sleep(Duration::from_millis(100));
     };
-    let stderr: Vec<String> =
-        BufReader::new(client.0.stderr.take().unwrap()).lines().map(|l| l.unwrap()).collect();
+    let stderr: Vec<String> = BufReader::new(client.0.stderr.take().unwrap()).lines().map(|l| l.unwrap()).collect();
     if status.success() {
         let file = std::fs::File::open(&out).unwrap();
         let got: Vec<RecordBatch> = parquet::arrow::arrow_reader::ParquetRecordBatchReader::try_new(file, 8192)

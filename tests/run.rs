@@ -196,7 +196,8 @@ fn run_keeps_exactly_what_passes_the_filters_and_the_report_contracts_hold() {
 
     // The report on the run's output: the two table contracts and the MSD identity.
     let ds = Dataset::open(&ds_dir).unwrap();
-    let summary = gedisim::ops::report::run_report(&ds, None, &Default::default(), &gedisim::ops::progress::NoProgress).unwrap();
+    let summary =
+        gedisim::ops::report::run_report(&ds, None, &Default::default(), &gedisim::ops::progress::NoProgress).unwrap();
     let gd = read_parquet(&summary.dir.join("ground_detection.parquet"));
     assert_eq!(
         columns(&gd),

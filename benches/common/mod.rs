@@ -97,3 +97,26 @@ pub fn beams(e: &[f64; 4], n: usize) -> Vec<(f64, f64)> {
     }
     out
 }
+
+/// The lattice: x = xmin+20+(i+0.5)·W/50, y = ymin+20+(j+0.5)·H/40, W = H = extent − 40 m
+/// (the first `n` of its 2000 points), as an `id,x,y` CSV.
+pub fn write_lattice(dir: &Path, scene: &Path, n: usize, name: &str) -> PathBuf {
+    let [xmin, ymin, xmax, ymax] = extent(scene);
+    let (w, h) = (xmax - xmin - 40.0, ymax - ymin - 40.0);
+    let mut csv = String::from("id,x,y\n");
+    let mut k = 0;
+    'outer: for j in 0..40 {
+        for i in 0..50 {
+            if k == n {
+                break 'outer;
+            }
+            let x = xmin + 20.0 + (i as f64 + 0.5) * w / 50.0;
+            let y = ymin + 20.0 + (j as f64 + 0.5) * h / 40.0;
+            csv.push_str(&format!("fp{k},{x:.3},{y:.3}\n"));
+            k += 1;
+        }
+    }
+    let path = dir.join(name);
+    std::fs::write(&path, csv).unwrap();
+    path
+}

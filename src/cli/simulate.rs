@@ -57,6 +57,10 @@ pub struct SimulateArgs {
     /// Print wall time, waveforms/s and peak memory at the end.
     #[arg(long)]
     stats: bool,
+    /// Dataset mode: simulate on the Ballista cluster whose scheduler is at this address
+    /// (`gedisim cluster`), the profile's settings only; every node must see the dataset.
+    #[arg(long, value_name = "df://HOST:PORT", requires = "dataset")]
+    cluster: Option<String>,
 }
 
 /// The transmit pulse of a command (docs/pulse.md); each command has its own default.
@@ -130,6 +134,7 @@ pub fn simulate(a: SimulateArgs) -> Result<()> {
         },
         pulse_before: a.pulse_before,
         pulse: a.pulse.model("gaussian", a.psigma),
+        engine: a.cluster.map(gedisim::ops::simulate::Engine::Cluster).unwrap_or_default(),
     };
     let start = Instant::now();
     let r = gedisim::ops::simulate::simulate(&opts, &Bars::new())?;

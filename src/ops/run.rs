@@ -26,6 +26,7 @@ use sha2::{Digest, Sha256};
 use crate::dataset::als::AlsTable;
 use crate::dataset::offsets::{offsets_batch, offsets_schema, read_offsets, read_r_after, AppliedOffset};
 use crate::dataset::results::{results_batch, results_metadata, results_schema};
+use crate::dataset::sim::{sim_metadata, sim_schema};
 use crate::dataset::{self, read, tables, Dataset};
 use crate::error::{Error, Result};
 use crate::kernels::sim::{Footprint, Profile, SimConfig};
@@ -38,10 +39,8 @@ use crate::ops::ingest_als::{self as als, AlsOptions, TileOutcome};
 use crate::ops::ingest_gedi::{self as gedi, GranuleOutcome};
 use crate::ops::ingest_strata::StrataReport;
 use crate::ops::progress::{Progress, Step};
-use crate::dataset::blocks::blocks;
-use crate::dataset::sim::{sim_metadata, sim_schema};
+use crate::ops::simulate::{simulate_groups, status_counts};
 pub use crate::sql::Engine;
-use crate::sql::simulate::{FootprintPartition, SimulatedShots};
 
 /// Version of what `run` writes: a change of the selection or the simulation logic bumps it, so
 /// that every granule is redone.
@@ -611,21 +610,20 @@ fn simulate(ds: &Dataset, plans: &mut [GranulePlan], inputs: &StudyInputs, progr
     Ok(())
 }
 
-/// Footprints per partition of a cluster run (whole blocks, so at least one block).
-const CLUSTER_PARTITION_FOOTPRINTS: usize = 256;
 /// Footprints per job a cluster run submits: the client holds one job's rows at a time.
 const CLUSTER_JOB_FOOTPRINTS: usize = 20_000;
 
 /// [`simulate`] as plans on `engine`: each job covers whole granules, each of its partitions a run of
-/// one granule's blocks ([`blocks`]); the rows come back in any order and are written per granule
-/// in the order a local run writes them (block by block), with the same metadata.
+/// one granule's blocks ([`crate::ops::simulate::simulate_groups`]); every `sim/` file gets the rows
+/// and metadata a local run writes.
 fn simulate_on(engine: &Engine, ds: &Dataset, plans: &mut [GranulePlan], progress: &dyn Progress) -> Result<()> {
     let total: usize = plans.iter().filter(|p| p.needs_sim).map(|p| p.covered.len()).sum();
     if total == 0 {
         return Ok(());
     }
     progress.start(Step::Simulate, total as u64);
-    let rt = tokio::runtime::Runtime::new().map_err(|e| Error::Usage(format!("cannot start the query runtime: {e}")))?;
+    let rt =
+        tokio::runtime::Runtime::new().map_err(|e| Error::Usage(format!("cannot start the query runtime: {e}")))?;
     let r = rt.block_on(async {
         let ctx = crate::sql::session_on(ds, &Default::default(), engine).await?;
         let mut todo: Vec<&mut GranulePlan> = plans.iter_mut().filter(|p| p.needs_sim).collect();
@@ -637,98 +635,22 @@ fn simulate_on(engine: &Engine, ds: &Dataset, plans: &mut [GranulePlan], progres
             });
             let n = n.count().max(1);
             let job: Vec<&mut GranulePlan> = todo.drain(..n).collect();
-            simulate_job(&ctx, ds, job, progress).await?;
+            let groups =
+                job.iter().map(|p| p.covered.iter().map(|c| (c.footprint.clone(), c.offset.clone())).collect());
+            let batches = simulate_groups(&ctx, ds, groups.collect(), Profile::Default).await?;
+            for (p, batch) in job.into_iter().zip(batches) {
+                let mut metadata = sim_metadata(Profile::Default);
+                metadata.insert(META_INPUT.to_string(), p.sim_input.clone());
+                dataset::write_parquet(&p.sim_path, sim_schema(), std::slice::from_ref(&batch), &metadata)?;
+                let (ok, skipped) = status_counts(&p.sim_path, &batch)?;
+                p.run.simulated = Some((ok, skipped));
+                progress.advance((ok + skipped) as u64);
+            }
         }
         Ok(())
     });
     progress.finish();
     r
-}
-
-/// One job of [`simulate_on`].
-async fn simulate_job(
-    ctx: &datafusion::prelude::SessionContext,
-    ds: &Dataset,
-    job: Vec<&mut GranulePlan>,
-    progress: &dyn Progress,
-) -> Result<()> {
-    // Footprint id → (granule in the job, place in the local order).
-    let mut place: HashMap<String, (usize, usize)> = HashMap::new();
-    let mut partitions = Vec::new();
-    for (g, p) in job.iter().enumerate() {
-        let footprints: Vec<_> = p.covered.iter().map(|c| (c.footprint.clone(), c.offset.clone())).collect();
-        let mut part: FootprintPartition = Vec::new();
-        for block in blocks(footprints) {
-            for (f, _) in &block {
-                let k = place.len();
-                if place.insert(f.id.clone(), (g, k)).is_some() {
-                    return Err(Error::table(&p.file.path, format!("shot {} appears twice", f.id)));
-                }
-            }
-            part.extend(block);
-            if part.len() >= CLUSTER_PARTITION_FOOTPRINTS {
-                partitions.push(std::mem::take(&mut part));
-            }
-        }
-        if !part.is_empty() {
-            partitions.push(part);
-        }
-    }
-    let where_ = |e: datafusion::error::DataFusionError| {
-        Error::Usage(format!("simulation on the cluster: {}", crate::error::one_line(&e.to_string())))
-    };
-    let shots = SimulatedShots::partitioned(ds.clone(), Profile::Default, partitions);
-    let batches = ctx.read_table(std::sync::Arc::new(shots)).map_err(where_)?.collect().await.map_err(where_)?;
-    // Every row, by granule, in the local order (a footprint's weightings stay in theirs).
-    let mut rows: Vec<Vec<(usize, usize, usize)>> = vec![Vec::new(); job.len()];
-    for (b, batch) in batches.iter().enumerate() {
-        let ids = read::Columns::new(ds.root(), batch).strings("footprint_id")?;
-        for i in 0..batch.num_rows() {
-            let id = read::text(ids, i).unwrap_or_default();
-            let Some(&(g, k)) = place.get(&id) else {
-                return Err(Error::field(ds.root(), "footprint_id", format!("the cluster returned shot {id}")));
-            };
-            rows[g].push((k, b, i));
-        }
-    }
-    for (p, mut rows) in job.into_iter().zip(rows) {
-        rows.sort_by_key(|&(k, _, _)| k);
-        let indices: Vec<(usize, usize)> = rows.iter().map(|&(_, b, i)| (b, i)).collect();
-        let batch = take_rows(&batches, &indices).map_err(|e| Error::table(&p.sim_path, e))?;
-        let columns = read::Columns::new(&p.sim_path, &batch);
-        let (ids, status) = (columns.strings("footprint_id")?, columns.strings("status")?);
-        let (mut shots, mut ok) = (HashSet::new(), HashSet::new());
-        for j in 0..batch.num_rows() {
-            shots.insert(ids.value(j));
-            if status.value(j) == "ok" {
-                ok.insert(ids.value(j));
-            }
-        }
-        if shots.len() != p.covered.len() {
-            return Err(Error::table(
-                &p.sim_path,
-                format!("the cluster simulated {} of the granule's {} shots", shots.len(), p.covered.len()),
-            ));
-        }
-        let mut metadata = sim_metadata(Profile::Default);
-        metadata.insert(META_INPUT.to_string(), p.sim_input.clone());
-        dataset::write_parquet(&p.sim_path, sim_schema(), std::slice::from_ref(&batch), &metadata)?;
-        p.run.simulated = Some((ok.len(), shots.len() - ok.len()));
-        progress.advance(shots.len() as u64);
-    }
-    Ok(())
-}
-
-/// The rows `(batch, row)` of `batches`, in that order, as one batch.
-fn take_rows(batches: &[RecordBatch], rows: &[(usize, usize)]) -> std::result::Result<RecordBatch, arrow::error::ArrowError> {
-    let schema = sim_schema();
-    let columns = (0..schema.fields().len())
-        .map(|c| {
-            let arrays: Vec<&dyn arrow::array::Array> = batches.iter().map(|b| b.column(c).as_ref()).collect();
-            arrow::compute::interleave(&arrays, rows)
-        })
-        .collect::<std::result::Result<Vec<_>, _>>()?;
-    RecordBatch::try_new(schema, columns)
 }
 
 /// Apply the filters and write `results/<key>.parquet` for every granule whose results are not current.

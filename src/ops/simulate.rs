@@ -2,11 +2,15 @@
 //! a footprint CSV) and dataset mode (every ingested shot, or a footprint CSV such as inventory
 //! plots, against the `als/` table).
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use arrow::record_batch::RecordBatch;
+use datafusion::prelude::SessionContext;
 
 use crate::dataset::als::DROPPED_CLASSES;
-use crate::dataset::blocks::BlockSimulation;
+use crate::dataset::blocks::{blocks, BlockSimulation};
 use crate::dataset::offsets::AppliedOffset;
 use crate::dataset::sim::{sim_batch, sim_metadata, sim_schema};
 use crate::dataset::{self, tables, AtomicParquet, Dataset};
@@ -17,6 +21,8 @@ use crate::kernels::sim::{
     self, AlsPoints, DensityCount, Footprint, Profile, PulseModel, PulseTiming, SimConfig, Weighting,
 };
 use crate::ops::progress::{Progress, Step};
+use crate::sql::simulate::{FootprintPartition, SimulatedShots};
+pub use crate::sql::Engine;
 
 /// What `gedisim simulate` reads and where it writes.
 #[derive(Debug, Clone)]
@@ -44,6 +50,8 @@ pub struct SimulateOptions {
     /// Convolve each return with the pulse while binning instead of after.
     pub pulse_before: bool,
     pub pulse: PulseModel,
+    /// Dataset mode: where the simulation runs (here, or as one plan on a cluster).
+    pub engine: Engine,
 }
 
 /// What `gedisim simulate` did.
@@ -229,7 +237,10 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
                 }
             }
             progress.start(Step::Simulate, footprints.len() as u64);
-            let r = simulate_on_dataset(&ds, footprints, &cfg, profile, &dest, progress);
+            let r = match &opts.engine {
+                Engine::Local => simulate_on_dataset(&ds, footprints, &cfg, profile, &dest, progress),
+                engine => simulate_dataset_on(engine, &ds, footprints, &cfg, profile, &dest),
+            };
             progress.finish();
             (r?, dest)
         }
@@ -238,6 +249,9 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
                  mean recorded pulse that `simulate --dataset … --footprints … --pulse recorded` writes"
                 .into(),
         )),
+        Source::Direct { .. } if opts.engine != Engine::Local => {
+            return Err(Error::Usage("--cluster: a cluster simulates from a dataset (--dataset)".into()))
+        }
         Source::Direct { als, footprints, out, keep_all_classes } => {
             let footprints = crate::io::footprints::read_footprints_csv(footprints)?;
             let inputs = AlsInputs::open(als)?;
@@ -356,4 +370,117 @@ pub fn simulate_on_dataset_with(
     }
     writer.finish()?;
     Ok((ok, skipped))
+}
+
+/// [`simulate_on_dataset`] as one plan on `engine` ([`simulate_groups`]): the same file.
+fn simulate_dataset_on(
+    engine: &Engine,
+    ds: &Dataset,
+    footprints: FootprintPartition,
+    cfg: &SimConfig,
+    profile: Profile,
+    dest: &Path,
+) -> Result<(usize, usize)> {
+    if *cfg != SimConfig::new(profile) || footprints.iter().any(|(f, _)| f.pulse.is_some()) {
+        return Err(Error::Usage(format!(
+            "--cluster: a cluster simulates with the {} profile's settings only (no --pulse, --psigma, --fsigma, \
+             --density, --no-norm or --pulse-before)",
+            profile.name()
+        )));
+    }
+    let rt =
+        tokio::runtime::Runtime::new().map_err(|e| Error::Usage(format!("cannot start the query runtime: {e}")))?;
+    let batch = rt.block_on(async {
+        let ctx = crate::sql::session_on(ds, &Default::default(), engine).await?;
+        simulate_groups(&ctx, ds, vec![footprints], profile).await
+    })?;
+    dataset::write_parquet(dest, sim_schema(), &batch, &sim_metadata(profile))?;
+    status_counts(dest, &batch[0])
+}
+
+/// Footprints per partition of a distributed simulation (whole blocks, so at least one block).
+const PARTITION_FOOTPRINTS: usize = 256;
+
+/// The `sim` rows of each of `groups`, simulated as one plan on `ctx`'s engine (a cluster): a
+/// partition per run of whole blocks ([`blocks`]) of one group, about [`PARTITION_FOOTPRINTS`]
+/// footprints each. The rows come back in any order; each group's are returned in the order a
+/// local simulation writes them (block by block), as one batch. Footprints ids must be unique.
+pub async fn simulate_groups(
+    ctx: &SessionContext,
+    ds: &Dataset,
+    groups: Vec<FootprintPartition>,
+    profile: Profile,
+) -> Result<Vec<RecordBatch>> {
+    // Footprint id → (group, place in the local order).
+    let mut place: HashMap<String, (usize, usize)> = HashMap::new();
+    let mut partitions = Vec::new();
+    let sizes: Vec<usize> = groups.iter().map(Vec::len).collect();
+    for (g, footprints) in groups.into_iter().enumerate() {
+        let mut part: FootprintPartition = Vec::new();
+        for block in blocks(footprints) {
+            for (f, _) in &block {
+                if place.insert(f.id.clone(), (g, place.len())).is_some() {
+                    return Err(Error::Usage(format!("footprint {} appears twice", f.id)));
+                }
+            }
+            part.extend(block);
+            if part.len() >= PARTITION_FOOTPRINTS {
+                partitions.push(std::mem::take(&mut part));
+            }
+        }
+        if !part.is_empty() {
+            partitions.push(part);
+        }
+    }
+    let failed = |e: datafusion::error::DataFusionError| {
+        Error::Usage(format!("simulation on the cluster: {}", crate::error::one_line(&e.to_string())))
+    };
+    let shots = SimulatedShots::partitioned(ds.clone(), profile, partitions);
+    let batches = ctx.read_table(Arc::new(shots)).map_err(failed)?.collect().await.map_err(failed)?;
+    let mut rows: Vec<Vec<(usize, usize, usize)>> = vec![Vec::new(); sizes.len()];
+    for (b, batch) in batches.iter().enumerate() {
+        let ids = crate::dataset::read::Columns::new(ds.root(), batch).strings("footprint_id")?;
+        for i in 0..batch.num_rows() {
+            let id = ids.value(i);
+            let Some(&(g, k)) = place.get(id) else {
+                return Err(Error::field(ds.root(), "footprint_id", format!("the cluster returned footprint {id}")));
+            };
+            rows[g].push((k, b, i));
+        }
+    }
+    for (rows, n) in rows.iter().zip(&sizes) {
+        if rows.len() != n * Weighting::ALL.len() {
+            let got = rows.len() / Weighting::ALL.len();
+            return Err(Error::Usage(format!("simulation on the cluster: {got} of {n} footprints came back")));
+        }
+    }
+    let arrays: Vec<Vec<&dyn arrow::array::Array>> =
+        (0..sim_schema().fields().len()).map(|c| batches.iter().map(|b| b.column(c).as_ref()).collect()).collect();
+    rows.into_iter()
+        .map(|mut rows| {
+            // Stable: a footprint's weightings stay in their order.
+            rows.sort_by_key(|&(k, _, _)| k);
+            let take: Vec<(usize, usize)> = rows.iter().map(|&(_, b, i)| (b, i)).collect();
+            let columns = arrays
+                .iter()
+                .map(|a| arrow::compute::interleave(a, &take))
+                .collect::<std::result::Result<Vec<_>, _>>()
+                .map_err(|e| Error::table(ds.root(), e))?;
+            RecordBatch::try_new(sim_schema(), columns).map_err(|e| Error::table(ds.root(), e))
+        })
+        .collect()
+}
+
+/// Footprints simulated (`status` ok) and skipped among the `sim` rows of `batch` (read from `path`).
+pub fn status_counts(path: &Path, batch: &RecordBatch) -> Result<(usize, usize)> {
+    let columns = crate::dataset::read::Columns::new(path, batch);
+    let (ids, status) = (columns.strings("footprint_id")?, columns.strings("status")?);
+    let (mut all, mut ok) = (HashSet::new(), HashSet::new());
+    for j in 0..batch.num_rows() {
+        all.insert(ids.value(j));
+        if status.value(j) == "ok" {
+            ok.insert(ids.value(j));
+        }
+    }
+    Ok((ok.len(), all.len() - ok.len()))
 }

@@ -69,7 +69,10 @@ fn encode(shots: &SimulatedShots, exec: Option<WireExec>, buf: &mut Vec<u8>) -> 
     let partitions = match &shots.footprints {
         Footprints::EveryShot => None,
         Footprints::Partitions(parts) => Some(
-            parts.iter().map(|p| p.iter().map(wire_footprint).collect::<DfResult<Vec<_>>>()).collect::<DfResult<_>>()?,
+            parts
+                .iter()
+                .map(|p| p.iter().map(wire_footprint).collect::<DfResult<Vec<_>>>())
+                .collect::<DfResult<_>>()?,
         ),
     };
     let wire = Wire { dataset, profile: shots.profile.name().to_string(), partitions, exec };
@@ -232,7 +235,10 @@ mod tests {
         let Footprints::Partitions(got) = back.footprints else { panic!("partitions lost") };
         assert_eq!(got.len(), 2);
         for (g, p) in got.iter().flatten().zip(parts.iter().flatten()) {
-            assert_eq!((g.0.id.as_str(), g.0.x.to_bits(), g.0.y.to_bits()), (p.0.id.as_str(), p.0.x.to_bits(), p.0.y.to_bits()));
+            assert_eq!(
+                (g.0.id.as_str(), g.0.x.to_bits(), g.0.y.to_bits()),
+                (p.0.id.as_str(), p.0.x.to_bits(), p.0.y.to_bits())
+            );
             let bits = |o: &Option<AppliedOffset>| {
                 o.as_ref().map(|o| (o.segment_id.clone(), o.dx.to_bits(), o.dy.to_bits(), o.dz.to_bits()))
             };

@@ -86,7 +86,8 @@ pub async fn session_on(ds: &Dataset, limits: &SessionLimits, engine: &Engine) -
         .with_memory_limit(limits.memory_limit, 1.0)
         .build_arc()
         .map_err(|e| Error::Usage(format!("SQL: {e}")))?;
-    let state = SessionStateBuilder::new().with_config(config).with_runtime_env(runtime).with_default_features().build();
+    let state =
+        SessionStateBuilder::new().with_config(config).with_runtime_env(runtime).with_default_features().build();
     let ctx = match engine {
         Engine::Local => SessionContext::new_with_state(state),
         Engine::Cluster(url) => {

@@ -177,18 +177,18 @@ impl SimulateExec {
     /// The `sim` batches of (global) partition `partition`, simulated as they are pulled.
     fn batches(&self, partition: usize) -> Box<dyn Iterator<Item = DfResult<RecordBatch>> + Send> {
         if partition >= self.partitions {
-            return Box::new(std::iter::once(internal_err!("gedi_simulate: partition {partition} of {}", self.partitions)));
+            return Box::new(std::iter::once(internal_err!(
+                "gedi_simulate: partition {partition} of {}",
+                self.partitions
+            )));
         }
         let (shots, n, projection) = (self.shots.clone(), self.partitions, self.projection.clone());
         let start = move || -> crate::Result<BlockSimulation> {
             let footprints = match shots.footprints {
                 Footprints::Partitions(mut p) => p.swap_remove(partition),
-                Footprints::EveryShot => blocks(shot_footprints(&shots.dataset)?)
-                    .into_iter()
-                    .skip(partition)
-                    .step_by(n)
-                    .flatten()
-                    .collect(),
+                Footprints::EveryShot => {
+                    blocks(shot_footprints(&shots.dataset)?).into_iter().skip(partition).step_by(n).flatten().collect()
+                }
             };
             BlockSimulation::new(&shots.dataset, footprints, SimConfig::new(shots.profile))
         };
@@ -268,7 +268,7 @@ impl ExecutionPlan for SimulateExec {
         let stream = numbers.flat_map(move |batch| {
             let this = this.clone();
             let iter: Box<dyn Iterator<Item = DfResult<RecordBatch>> + Send> =
-                match batch.and_then(|b| Ok(b.column(0).as_primitive_opt::<UInt64Type>().cloned())) {
+                match batch.map(|b| b.column(0).as_primitive_opt::<UInt64Type>().cloned()) {
                     Err(e) => Box::new(std::iter::once(Err(e))),
                     Ok(None) => Box::new(std::iter::once(internal_err!("SimulateExec: partition numbers not UInt64"))),
                     Ok(Some(numbers)) => {
