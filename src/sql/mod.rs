@@ -135,7 +135,8 @@ fn cluster_state(state: SessionState, url: &str) -> Result<SessionState> {
 #[cfg(not(feature = "cluster"))]
 fn cluster_state(_state: SessionState, url: &str) -> Result<SessionState> {
     Err(Error::Usage(format!(
-        "--cluster {url}: this gedisim was built without the `cluster` feature (cargo install --features cluster)"
+        "--cluster {url}: this gedisim was built without the `cluster` feature (on by default; build without \
+         --no-default-features)"
     )))
 }
 

@@ -81,9 +81,9 @@ pub enum Footprints {
 /// The streamed `sim` rows of a dataset's footprints, as a table.
 #[derive(Clone)]
 pub struct SimulatedShots {
-    pub dataset: Dataset,
-    pub profile: Profile,
-    pub footprints: Footprints,
+    pub(crate) dataset: Dataset,
+    pub(crate) profile: Profile,
+    pub(crate) footprints: Footprints,
 }
 
 impl SimulatedShots {
@@ -136,9 +136,9 @@ impl TableProvider for SimulatedShots {
 /// (it would run every partition in every task).
 #[derive(Debug)]
 pub struct SimulateExec {
-    pub shots: SimulatedShots,
-    pub partitions: usize,
-    pub projection: Option<Vec<usize>>,
+    pub(crate) shots: SimulatedShots,
+    pub(crate) partitions: usize,
+    pub(crate) projection: Option<Vec<usize>>,
     input: Arc<dyn ExecutionPlan>,
     properties: Arc<PlanProperties>,
 }
