@@ -59,6 +59,20 @@ fn wait_for_log(log: &Path, needle: &str, times: usize, limit: Duration) -> bool
     false
 }
 
+/// The exit status and stderr lines of `child` (stderr piped), failing if it runs longer than `limit` (a hang).
+fn finish(child: &mut Process, limit: Duration, what: &str) -> (std::process::ExitStatus, Vec<String>) {
+    let start = Instant::now();
+    let status = loop {
+        if let Some(s) = child.0.try_wait().unwrap() {
+            break s;
+        }
+        assert!(start.elapsed() < limit, "{what} hung");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let stderr = BufReader::new(child.0.stderr.take().unwrap()).lines().map(|l| l.unwrap()).collect();
+    (status, stderr)
+}
+
 /// A scheduler and `executors` executors (one task at a time each), their logs in `dir`.
 struct Cluster {
     url: String,
@@ -334,15 +348,7 @@ fn a_query_survives_an_executor_killed_while_it_runs() {
     let mut victim = cluster.executors.remove(0);
     victim.0.kill().unwrap();
     victim.0.wait().unwrap();
-    let start = Instant::now();
-    let status = loop {
-        if let Some(s) = client.0.try_wait().unwrap() {
-            break s;
-        }
-        assert!(start.elapsed() < Duration::from_secs(300), "the query hung after an executor died");
-        std::thread::sleep(Duration::from_millis(100));
-    };
-    let stderr: Vec<String> = BufReader::new(client.0.stderr.take().unwrap()).lines().map(|l| l.unwrap()).collect();
+    let (status, stderr) = finish(&mut client, Duration::from_secs(300), "the query after an executor died");
     if status.success() {
         let file = std::fs::File::open(&out).unwrap();
         let got: Vec<RecordBatch> = parquet::arrow::arrow_reader::ParquetRecordBatchReader::try_new(file, 8192)
@@ -388,15 +394,7 @@ fn a_bad_cluster_address_is_one_line_not_a_hang() {
     ];
     for (args, names) in cases {
         let mut child = Process(Command::new(BIN).args(&args).stderr(Stdio::piped()).spawn().unwrap());
-        let start = Instant::now();
-        let status = loop {
-            if let Some(s) = child.0.try_wait().unwrap() {
-                break s;
-            }
-            assert!(start.elapsed() < Duration::from_secs(120), "{args:?} hung");
-            std::thread::sleep(Duration::from_millis(50));
-        };
-        let stderr: Vec<String> = BufReader::new(child.0.stderr.take().unwrap()).lines().map(|l| l.unwrap()).collect();
+        let (status, stderr) = finish(&mut child, Duration::from_secs(120), &format!("{args:?}"));
         assert!(!status.success(), "{args:?}");
         let errors: Vec<&String> = stderr.iter().filter(|l| l.starts_with("error")).collect();
         assert_eq!(errors.len(), 1, "{args:?}: {stderr:?}");

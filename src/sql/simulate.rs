@@ -173,42 +173,46 @@ impl SimulateExec {
         );
         Ok(SimulateExec { shots, partitions, projection, input, properties: Arc::new(properties) })
     }
+}
 
-    /// The `sim` batches of (global) partition `partition`, simulated as they are pulled.
-    fn batches(&self, partition: usize) -> Box<dyn Iterator<Item = DfResult<RecordBatch>> + Send> {
-        if partition >= self.partitions {
-            return Box::new(std::iter::once(internal_err!(
-                "gedi_simulate: partition {partition} of {}",
-                self.partitions
-            )));
-        }
-        let (shots, n, projection) = (self.shots.clone(), self.partitions, self.projection.clone());
-        let start = move || -> crate::Result<BlockSimulation> {
-            let footprints = match shots.footprints {
-                Footprints::Partitions(mut p) => p.swap_remove(partition),
-                Footprints::EveryShot => {
-                    blocks(shot_footprints(&shots.dataset)?).into_iter().skip(partition).step_by(n).flatten().collect()
-                }
-            };
-            BlockSimulation::new(&shots.dataset, footprints, SimConfig::new(shots.profile))
-        };
-        let blocks = std::iter::once_with(start).flat_map(move |started| -> Box<dyn Iterator<Item = _> + Send> {
-            match started {
-                Err(e) => Box::new(std::iter::once(Err(to_df(e)))),
-                Ok(blocks) => {
-                    let projection = projection.clone();
-                    Box::new(blocks.map(move |block| {
-                        let batch = block.and_then(|b| b.batch()).map_err(to_df)?;
-                        match &projection {
-                            Some(p) => Ok(batch.project(p)?),
-                            None => Ok(batch),
-                        }
-                    }))
-                }
-            }
-        });
-        Box::new(blocks)
+/// The `sim` batches of (global) partition `partition` of `partitions`, simulated as they are pulled.
+fn partition_batches(
+    shots: SimulatedShots,
+    partitions: usize,
+    projection: Option<Vec<usize>>,
+    partition: usize,
+) -> Box<dyn Iterator<Item = DfResult<RecordBatch>> + Send> {
+    if partition >= partitions {
+        return Box::new(std::iter::once(internal_err!("gedi_simulate: partition {partition} of {partitions}")));
     }
+    let start = move || -> crate::Result<BlockSimulation> {
+        let footprints = match shots.footprints {
+            Footprints::Partitions(mut p) => p.swap_remove(partition),
+            Footprints::EveryShot => blocks(shot_footprints(&shots.dataset)?)
+                .into_iter()
+                .skip(partition)
+                .step_by(partitions)
+                .flatten()
+                .collect(),
+        };
+        BlockSimulation::new(&shots.dataset, footprints, SimConfig::new(shots.profile))
+    };
+    let blocks = std::iter::once_with(start).flat_map(move |started| -> Box<dyn Iterator<Item = _> + Send> {
+        match started {
+            Err(e) => Box::new(std::iter::once(Err(to_df(e)))),
+            Ok(blocks) => {
+                let projection = projection.clone();
+                Box::new(blocks.map(move |block| {
+                    let batch = block.and_then(|b| b.batch()).map_err(to_df)?;
+                    match &projection {
+                        Some(p) => Ok(batch.project(p)?),
+                        None => Ok(batch),
+                    }
+                }))
+            }
+        }
+    });
+    Box::new(blocks)
 }
 
 /// `n` partitions of one row each: the partition's number (`partition`, UInt64).
@@ -259,21 +263,20 @@ impl ExecutionPlan for SimulateExec {
 
     fn execute(&self, partition: usize, ctx: Arc<TaskContext>) -> DfResult<SendableRecordBatchStream> {
         let numbers = self.input.execute(partition, ctx)?;
-        let this = Arc::new(SimulateExec::with_input(
-            self.shots.clone(),
-            self.partitions,
-            self.projection.clone(),
-            self.input.clone(),
-        )?);
+        let (shots, n, projection) = (self.shots.clone(), self.partitions, self.projection.clone());
         let stream = numbers.flat_map(move |batch| {
-            let this = this.clone();
+            let (shots, projection) = (shots.clone(), projection.clone());
             let iter: Box<dyn Iterator<Item = DfResult<RecordBatch>> + Send> =
                 match batch.map(|b| b.column(0).as_primitive_opt::<UInt64Type>().cloned()) {
                     Err(e) => Box::new(std::iter::once(Err(e))),
                     Ok(None) => Box::new(std::iter::once(internal_err!("SimulateExec: partition numbers not UInt64"))),
-                    Ok(Some(numbers)) => {
-                        Box::new(numbers.values().to_vec().into_iter().flat_map(move |g| this.batches(g as usize)))
-                    }
+                    Ok(Some(numbers)) => Box::new(
+                        numbers
+                            .values()
+                            .to_vec()
+                            .into_iter()
+                            .flat_map(move |g| partition_batches(shots.clone(), n, projection.clone(), g as usize)),
+                    ),
                 };
             futures::stream::iter(iter)
         });
