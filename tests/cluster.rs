@@ -1,7 +1,7 @@
 //! The same SQL, simulation and study on an Apache Ballista cluster (docs/scale.md): a scheduler and
 //! two executors started as separate `gedisim cluster` processes on loopback. Every `queries/*.sql`
 //! and a `gedi_simulate()` query give the local engine's rows; `run --cluster` writes the local
-//! run's `results/` and `sim/`; a query survives an executor killed while it runs (or ends with one
+//! run's `offsets/`, `sim/` and `results/`; a query survives an executor killed while it runs (or ends with one
 //! line and no output); a bad cluster address is one line, not a hang.
 
 #![cfg(feature = "cluster")]
@@ -161,7 +161,9 @@ fn run_args(world: &Path, out: &Path, cluster: Option<&str>) -> Vec<String> {
         ["run", "--als", &world.join("als").display().to_string(), "--l1b", &gedi, "--l2a", &gedi]
             .map(String::from)
             .to_vec();
-    args.extend(["--out".to_string(), out.display().to_string()]);
+    // Segments of one shot and up: the bundled tiles are 50–100 m wide, so that offsets are solved.
+    args.extend(["--min-segment", "1", "--out"].map(String::from));
+    args.push(out.display().to_string());
     if let Some(url) = cluster {
         args.extend(["--cluster".to_string(), url.to_string()]);
     }
@@ -250,9 +252,10 @@ fn table_files(ds: &Path, table: &str) -> Vec<(String, Vec<RecordBatch>, Option<
             kv.sort();
             kv.join("\n")
         });
+        let schema = builder.schema().clone();
         let batches: Vec<RecordBatch> = builder.build().unwrap().map(|b| b.unwrap()).collect();
         let name = path.file_name().unwrap().to_string_lossy().into_owned();
-        out.push((name, vec![arrow::compute::concat_batches(&batches[0].schema(), &batches).unwrap()], meta));
+        out.push((name, vec![arrow::compute::concat_batches(&schema, &batches).unwrap()], meta));
     }
     out.sort_by(|a, b| a.0.cmp(&b.0));
     out
@@ -311,9 +314,11 @@ fn run_on_the_cluster_writes_the_local_results() {
     let args = run_args(&w.root, &out, Some(&cluster.url));
     let (ok, _, err) = gedisim(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(ok, "{err}");
-    for table in ["sim", "results"] {
+    // The collocation (one offsets file, a partition per granule) and the simulation (a file per granule).
+    for (table, files) in [("offsets", 1), ("sim", 6), ("results", 6)] {
         let (l, r) = (table_files(&w.local, table), table_files(&out, table));
-        assert!(l.len() > 5, "{table}: {} files", l.len());
+        assert!(l.len() >= files, "{table}: {} files", l.len());
+        assert!(l.iter().map(|f| f.1[0].num_rows()).sum::<usize>() > 0, "{table}: no rows");
         assert_eq!(l.len(), r.len(), "{table}");
         for (l, r) in l.iter().zip(&r) {
             assert_eq!(l.0, r.0);
@@ -321,7 +326,7 @@ fn run_on_the_cluster_writes_the_local_results() {
             assert_eq!(l.2, r.2, "{table}/{}: metadata", l.0);
         }
     }
-    // The simulation ran as tasks on the executors.
+    // The collocation and the simulation ran as tasks on the executors.
     assert!(cluster.logs.iter().all(|log| std::fs::read_to_string(log).unwrap().contains("Execute task")));
 }
 

@@ -34,6 +34,11 @@ pub struct CollocateArgs {
     min_segment: usize,
     #[command(flatten)]
     pulse: PulseArgs,
+    /// Collocate on the Ballista cluster whose scheduler is at this address (`gedisim cluster`):
+    /// one plan, a partition per granule; every node must see the dataset (and a pulse file) at the
+    /// same path.
+    #[arg(long, value_name = "df://HOST:PORT")]
+    cluster: Option<String>,
     /// Print wall time and peak memory at the end.
     #[arg(long)]
     stats: bool,
@@ -60,7 +65,8 @@ pub fn collocate(a: CollocateArgs) -> Result<()> {
         min_segment: a.min_segment,
         pulse: a.pulse.model("recorded", None),
     };
-    let report = gedisim::ops::collocate::collocate(&ds, &opts, &Bars::new())?;
+    let engine = a.cluster.map(gedisim::ops::collocate::Engine::Cluster).unwrap_or_default();
+    let report = gedisim::ops::collocate::collocate_on(&engine, &ds, &opts, &Bars::new())?;
     for s in &report.short_runs {
         eprintln!("too short, not collocated: {s}");
     }

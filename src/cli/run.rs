@@ -71,9 +71,9 @@ pub struct RunArgs {
     // The collocation's transmit pulse: the study's simulation keeps its 15 ns Gaussian.
     #[command(flatten)]
     pulse: super::simulate::PulseArgs,
-    /// Simulate on the Ballista cluster whose scheduler is at this address (`gedisim cluster`):
-    /// one plan, a partition per group of a granule's blocks; every node must see the dataset at
-    /// the same path.
+    /// Collocate and simulate on the Ballista cluster whose scheduler is at this address
+    /// (`gedisim cluster`): a plan each, a partition per granule to collocate and per group of a
+    /// granule's blocks to simulate; every node must see the dataset at the same path.
     #[arg(long, value_name = "df://HOST:PORT")]
     cluster: Option<String>,
 }

@@ -24,7 +24,7 @@ use arrow::array::{AsArray, BooleanArray, RecordBatch};
 use sha2::{Digest, Sha256};
 
 use crate::dataset::als::AlsTable;
-use crate::dataset::offsets::{offsets_batch, offsets_schema, read_offsets, read_r_after, AppliedOffset};
+use crate::dataset::offsets::{offsets_schema, read_offsets, read_r_after, AppliedOffset};
 use crate::dataset::results::{results_batch, results_metadata, results_schema};
 use crate::dataset::sim::{sim_metadata, sim_schema};
 use crate::dataset::{self, read, tables, Dataset};
@@ -34,7 +34,7 @@ use crate::kernels::study::select::{
     als_window, select_rows, AlgorithmFacts, Filter, FilterCounts, SegmentFacts, ShotContext, ShotFacts, SimFacts,
     StudyRules, TileWindow, WEIGHTINGS,
 };
-use crate::ops::collocate::{CollocateOptions, CollocateReport, Collocation};
+use crate::ops::collocate::{solve_granules, CollocateOptions, CollocateReport};
 use crate::ops::ingest_als::{self as als, AlsOptions, TileOutcome};
 use crate::ops::ingest_gedi::{self as gedi, GranuleOutcome};
 use crate::ops::ingest_strata::StrataReport;
@@ -75,8 +75,8 @@ pub struct RunOptions {
     pub als_window: Option<f64>,
     /// The study's bounds.
     pub rules: StudyRules,
-    /// Where the simulation runs: here, or as one plan on a Ballista cluster (a partition per
-    /// group of a granule's blocks).
+    /// Where the collocation and the simulation run: here, or each as one plan on a Ballista cluster
+    /// (a partition per granule to collocate, per group of a granule's blocks to simulate).
     pub engine: Engine,
 }
 
@@ -371,11 +371,8 @@ fn collocate(
     if needed.is_empty() {
         return Ok(());
     }
-    let plan = Collocation::plan_files(ds, &opts.collocate, needed.iter().map(|g| g.path.clone()).collect())?;
-    progress.start(Step::Collocate, plan.shots_to_process() as u64);
-    let solved = plan.solve(progress);
-    progress.finish();
-    let (rows, collocation) = solved?;
+    let files = needed.iter().map(|g| g.path.clone()).collect();
+    let (offsets, collocation) = solve_granules(&opts.engine, ds, &opts.collocate, files, progress)?;
     // Keep the other granules' segments; replace those of the granules just collocated, and drop
     // those of granules no longer in `shots/` (a granule renamed when its L1B file arrived).
     let replaced: HashSet<&str> = needed.iter().map(|g| g.name.as_str()).collect();
@@ -392,7 +389,7 @@ fn collocate(
         }
         batches.push(b);
     }
-    batches.push(offsets_batch(&rows)?);
+    batches.extend(offsets);
     let mut map = recorded.unwrap_or_else(|| {
         granules.iter().filter(|g| present.contains(&g.name)).map(|g| (g.key.clone(), g.inputs.clone())).collect()
     });
@@ -622,8 +619,7 @@ fn simulate_on(engine: &Engine, ds: &Dataset, plans: &mut [GranulePlan], progres
         return Ok(());
     }
     progress.start(Step::Simulate, total as u64);
-    let rt =
-        tokio::runtime::Runtime::new().map_err(|e| Error::Usage(format!("cannot start the query runtime: {e}")))?;
+    let rt = crate::sql::runtime()?;
     let r = rt.block_on(async {
         let ctx = crate::sql::session_on(ds, &Default::default(), engine).await?;
         let mut todo: Vec<&mut GranulePlan> = plans.iter_mut().filter(|p| p.needs_sim).collect();

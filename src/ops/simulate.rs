@@ -388,8 +388,7 @@ fn simulate_dataset_on(
             profile.name()
         )));
     }
-    let rt =
-        tokio::runtime::Runtime::new().map_err(|e| Error::Usage(format!("cannot start the query runtime: {e}")))?;
+    let rt = crate::sql::runtime()?;
     let batch = rt.block_on(async {
         let ctx = crate::sql::session_on(ds, &Default::default(), engine).await?;
         simulate_groups(&ctx, ds, vec![footprints], profile).await

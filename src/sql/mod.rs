@@ -4,9 +4,11 @@
 pub mod args;
 #[cfg(feature = "cluster")]
 pub mod codec;
+pub mod collocate;
 pub mod l2a;
 pub mod link_margin_twin;
 pub mod noise_twin;
+pub mod partitions;
 pub mod rh;
 pub mod simulate;
 pub mod twin;
@@ -65,6 +67,11 @@ pub enum Engine {
     Local,
     /// On the Ballista cluster whose scheduler is at this `df://host:port` address (feature `cluster`).
     Cluster(String),
+}
+
+/// The runtime a command's queries run on.
+pub fn runtime() -> Result<tokio::runtime::Runtime> {
+    tokio::runtime::Runtime::new().map_err(|e| Error::Usage(format!("cannot start the query runtime: {e}")))
 }
 
 /// A session with every table folder of `dataset` registered under its folder name (read-only)

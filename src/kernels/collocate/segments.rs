@@ -24,6 +24,11 @@ impl Level {
             Level::Shot => "shot",
         }
     }
+
+    /// The level named `name` ([`name`](Self::name)).
+    pub fn from_name(name: &str) -> Option<Level> {
+        [Level::Beam, Level::Granule, Level::Shot].into_iter().find(|l| l.name() == name)
+    }
 }
 
 /// Fewest shots (beam) or along-track steps (granule) of a segment: a shorter remainder joins the

@@ -230,8 +230,7 @@ fn report(ds: &Dataset, out: Option<&Path>, engine: &Engine, on_step: &dyn Fn(&s
         None => ds.root().join(tables::REPORT),
     };
     std::fs::create_dir_all(&dir).map_err(|e| Error::file(&dir, format!("cannot create report directory: {e}")))?;
-    let rt =
-        tokio::runtime::Runtime::new().map_err(|e| Error::Usage(format!("cannot start the query runtime: {e}")))?;
+    let rt = crate::sql::runtime()?;
     let outcomes = rt.block_on(run_queries(ds, engine, &|name| on_step(&format!("query {name}"))))?;
     let mut summary = ReportSummary { dir: dir.clone(), ..Default::default() };
     let mut ran = Vec::new();
