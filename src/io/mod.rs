@@ -10,6 +10,7 @@ pub mod landcover;
 pub mod las;
 pub mod pulse;
 pub mod source;
+pub mod store;
 
 use std::path::{Path, PathBuf};
 

@@ -81,37 +81,7 @@ impl Remote {
         };
         let parsed = url::Url::parse(url).map_err(|e| fail("not a URL", &e))?;
         let location = object_store::path::Path::from_url_path(parsed.path()).map_err(|e| fail("not a path", &e))?;
-        // A few quick retries: a wrong address ends in seconds, not after object_store's
-        // default of 10 retries over 3 minutes.
-        let retry = object_store::RetryConfig {
-            max_retries: 3,
-            retry_timeout: std::time::Duration::from_secs(30),
-            backoff: Default::default(),
-        };
-        // A plain `http://` URL, written as such, is allowed (object_store refuses it by default).
-        let client = object_store::ClientOptions::new()
-            .with_allow_http(parsed.scheme() == "http")
-            .with_connect_timeout(std::time::Duration::from_secs(10));
-        let store: Arc<dyn ObjectStore> = match parsed.scheme() {
-            "http" | "https" => Arc::new(
-                object_store::http::HttpBuilder::new()
-                    .with_url(&parsed[..url::Position::BeforePath])
-                    .with_client_options(client)
-                    .with_retry(retry)
-                    .build()
-                    .map_err(|e| fail("cannot open", &e))?,
-            ),
-            // Credentials, region and endpoint from the AWS_* environment.
-            "s3" => Arc::new(
-                object_store::aws::AmazonS3Builder::from_env()
-                    .with_url(url)
-                    .with_client_options(client)
-                    .with_retry(retry)
-                    .build()
-                    .map_err(|e| fail("cannot open", &e))?,
-            ),
-            other => return Err(fail("cannot open", &format!("{other}:// is not http://, https:// or s3://"))),
-        };
+        let store = super::store::open(&parsed).map_err(|e| fail("cannot open", &e))?;
         let runtime = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(2)
             .thread_name("gedisim-fetch")

@@ -10,10 +10,12 @@ use ballista_executor::executor_process::{start_executor_process, ExecutorProces
 use ballista_scheduler::cluster::BallistaCluster;
 use ballista_scheduler::config::SchedulerConfig;
 use ballista_scheduler::scheduler_process::start_server;
+use datafusion::execution::runtime_env::{RuntimeEnv, RuntimeEnvBuilder};
 use datafusion::execution::{FunctionRegistry, SessionState, SessionStateBuilder};
 use datafusion::prelude::SessionConfig;
 
 use crate::error::{Error, Result};
+use crate::io::store::Stores;
 use crate::sql::codec::{LogicalCodec, PhysicalCodec};
 
 /// Every function a local session knows (DataFusion's defaults, including the nested-type functions
@@ -36,11 +38,22 @@ pub fn function_registry() -> BallistaFunctionRegistry {
 /// The scheduler's sessions: Ballista's defaults with gedisim's scalar functions registered, so
 /// that plans using them can be decoded and planned.
 fn session_state(config: SessionConfig) -> datafusion::common::Result<SessionState> {
-    let mut state = ballista_core::utils::default_session_builder(config)?;
+    let state = ballista_core::utils::default_session_builder(config)?;
+    let mut state = SessionStateBuilder::new_from_existing(state).with_runtime_env(node_runtime(None)?).build();
     for f in crate::sql::scalar_functions() {
         state.register_udf(Arc::new(f))?;
     }
     Ok(state)
+}
+
+/// A node's runtime: object stores opened as URLs name them ([`Stores`]: datasets by URL), spill files
+/// in `work_dir`.
+fn node_runtime(work_dir: Option<&str>) -> datafusion::common::Result<Arc<RuntimeEnv>> {
+    let mut builder = RuntimeEnvBuilder::new().with_object_store_registry(Arc::new(Stores::default()));
+    if let Some(dir) = work_dir {
+        builder = builder.with_temp_file_path(dir);
+    }
+    builder.build_arc()
 }
 
 fn runtime() -> Result<tokio::runtime::Runtime> {
@@ -91,7 +104,14 @@ pub fn run_executor(scheduler: &str, bind: SocketAddr, concurrency: usize) -> Re
         .ok_or_else(|| Error::Usage(format!("--scheduler {scheduler}: expected host:port")))?;
     // Ballista's executor waits for ever on a scheduler that does not answer.
     crate::sql::reachable(scheduler).map_err(|e| Error::Usage(format!("--scheduler {scheduler}: {e}")))?;
+    // Shuffle and spill files: one folder per executor of this machine.
+    let work_dir = std::env::temp_dir().join(format!("gedisim-executor-{}", bind.port()));
+    std::fs::create_dir_all(&work_dir).map_err(|e| Error::file(&work_dir, format!("cannot create: {e}")))?;
+    let work_dir = work_dir.to_string_lossy().into_owned();
+    let spill_dir = work_dir.clone();
     let config = ExecutorProcessConfig {
+        work_dir: Some(work_dir),
+        override_runtime_producer: Some(Arc::new(move |_| node_runtime(Some(&spill_dir)))),
         bind_host: bind.ip().to_string(),
         port: bind.port(),
         grpc_port: bind.port().checked_add(1).ok_or_else(|| Error::Usage(format!("--bind {bind}: no port above")))?,

@@ -12,7 +12,7 @@ use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 pub use crate::sql::{Engine, SessionLimits};
 
-/// Run `query` on `dataset` with `engine`; the result as a text table, or written to `out` (then `None`).
+/// Run `query` on `dataset` (a directory, or an `s3://`, `http(s)://` URL) with `engine`; the result as a text table, or written to `out` (then `None`).
 pub fn sql(
     dataset: &Path,
     query: &str,
@@ -20,13 +20,20 @@ pub fn sql(
     limits: &SessionLimits,
     engine: &Engine,
 ) -> Result<Option<String>> {
-    let ds = Dataset::open(dataset)?;
-    let rt = tokio::runtime::Runtime::new().map_err(|e| Error::Usage(e.to_string()))?;
+    // A dataset by URL (an object store) or a directory.
+    let (ds, url) = match crate::io::source::is_remote(dataset) {
+        true => (None, Some(url::Url::parse(&dataset.to_string_lossy()).map_err(|e| Error::file(dataset, e))?)),
+        false => (Some(Dataset::open(dataset)?), None),
+    };
     let sql_err = |e: datafusion::error::DataFusionError| {
         Error::Usage(format!("SQL: {}", crate::error::one_line(&e.to_string())))
     };
-    rt.block_on(async move {
-        let ctx = crate::sql::session_on(&ds, limits, engine).await?;
+    crate::sql::runtime()?.block_on(async move {
+        let ctx = match (&ds, &url) {
+            (_, Some(url)) => crate::sql::session_at_url(url, limits, engine).await?,
+            (Some(ds), None) => crate::sql::session_on(ds, limits, engine).await?,
+            (None, None) => return Err(Error::Usage("no dataset".into())),
+        };
         let plan = ctx.state().create_logical_plan(query).await.map_err(sql_err)?;
         crate::sql::statement_options(limits).verify_plan(&plan).map_err(|e| {
             Error::Usage(format!(
@@ -34,10 +41,10 @@ pub fn sql(
                 crate::error::one_line(&e.to_string())
             ))
         })?;
-        if let Some(location) = location_inside(&plan, ds.root()) {
+        if let Some(location) = ds.as_ref().and_then(|ds| location_inside(&plan, ds.root())) {
             return Err(Error::Usage(format!(
                 "SQL: {location} lies inside the dataset {}: its tables change only through gedisim's commands",
-                ds.root().display()
+                dataset.display()
             )));
         }
         let df = ctx.execute_logical_plan(plan).await.map_err(sql_err)?;

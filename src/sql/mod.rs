@@ -13,9 +13,7 @@ pub mod rh;
 pub mod simulate;
 pub mod twin;
 
-use std::path::Path;
-
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use arrow::datatypes::SchemaRef;
@@ -30,6 +28,8 @@ use datafusion::logical_expr::dml::InsertOp;
 use datafusion::logical_expr::{DocSection, Expr, ScalarUDF, TableProviderFilterPushDown};
 use datafusion::physical_plan::ExecutionPlan;
 use datafusion::prelude::{SQLOptions, SessionConfig, SessionContext};
+
+use url::Url;
 
 use crate::dataset::{self, Dataset};
 use crate::error::{Error, Result};
@@ -88,22 +88,7 @@ pub async fn session_with(ds: &Dataset, limits: &SessionLimits) -> Result<Sessio
 /// [`session_with`] whose plans run on `engine`. On a cluster the dataset's tables are plain
 /// Parquet listings (what Ballista ships) and no statement may write.
 pub async fn session_on(ds: &Dataset, limits: &SessionLimits, engine: &Engine) -> Result<SessionContext> {
-    let config = SessionConfig::new().with_information_schema(true);
-    let runtime = RuntimeEnvBuilder::new()
-        .with_memory_limit(limits.memory_limit, 1.0)
-        .build_arc()
-        .map_err(|e| Error::Usage(format!("SQL: {e}")))?;
-    let state =
-        SessionStateBuilder::new().with_config(config).with_runtime_env(runtime).with_default_features().build();
-    let ctx = match engine {
-        Engine::Local => SessionContext::new_with_state(state),
-        Engine::Cluster(url) => {
-            if limits.allow_writes {
-                return Err(Error::Usage("--allow-writes: not with --cluster (a cluster only reads)".into()));
-            }
-            SessionContext::new_with_state(cluster_state(state, url)?)
-        }
-    };
+    let ctx = new_session(limits, engine)?;
     register_functions(&ctx, ds);
     let read_only = *engine == Engine::Local;
     for entry in std::fs::read_dir(ds.root()).map_err(|e| Error::file(ds.root(), e))? {
@@ -119,6 +104,74 @@ pub async fn session_on(ds: &Dataset, limits: &SessionLimits, engine: &Engine) -
         }
     }
     Ok(ctx)
+}
+
+/// A session over the dataset at `url` (`s3://bucket/prefix`, `https://host/path`), read through an
+/// object store ([`crate::io::store`]): every table folder under it registered by name, as its
+/// Parquet files are listed now (a dataset copied to the store is read as it is), and gedisim's
+/// scalar functions. `gedi_simulate` says it is not available: the simulation reads ALS from a filesystem.
+pub async fn session_at_url(url: &Url, limits: &SessionLimits, engine: &Engine) -> Result<SessionContext> {
+    let ctx = new_session(limits, engine)?;
+    for f in scalar_functions() {
+        ctx.register_udf(f);
+    }
+    let why = format!("not on a dataset by URL ({url}): the simulation reads ALS points from a dataset directory");
+    ctx.register_udtf("gedi_simulate", Arc::new(simulate::GediSimulate::unavailable(why)));
+    let fail = |e: &dyn std::fmt::Display| Error::file(Path::new(url.as_str()), crate::error::one_line(&e.to_string()));
+    let store = ctx.runtime_env().object_store_registry.get_store(url).map_err(|e| fail(&e))?;
+    let prefix = object_store::path::Path::from_url_path(url.path()).map_err(|e| fail(&e))?;
+    let base = &url[..url::Position::BeforePath];
+    let folders = store.list_with_delimiter(Some(&prefix)).await.map_err(|e| fail(&e))?.common_prefixes;
+    let mut registered = 0;
+    for folder in folders {
+        let Some(name) = folder.filename().map(str::to_string) else { continue };
+        if name == dataset::tables::REPORT {
+            continue;
+        }
+        let mut files: Vec<String> = store
+            .list_with_delimiter(Some(&folder))
+            .await
+            .map_err(|e| fail(&e))?
+            .objects
+            .into_iter()
+            .filter(|o| o.location.extension() == Some("parquet"))
+            .map(|o| format!("{base}/{}", o.location))
+            .collect();
+        files.sort();
+        if files.is_empty() {
+            continue;
+        }
+        let urls = files.iter().map(|f| ListingTableUrl::parse(f).map_err(|e| fail(&e))).collect::<Result<_>>()?;
+        let read_only = *engine == Engine::Local;
+        register_listing(&ctx, &name, Path::new(&format!("{base}/{folder}")), urls, read_only).await?;
+        registered += 1;
+    }
+    if registered == 0 {
+        return Err(fail(&"no table folder with Parquet files there (the dataset's root, holding shots/, results/ …)"));
+    }
+    Ok(ctx)
+}
+
+/// A session under `limits` whose plans run on `engine`, reading object stores through
+/// [`crate::io::store::Stores`]; no table or function registered.
+fn new_session(limits: &SessionLimits, engine: &Engine) -> Result<SessionContext> {
+    let config = SessionConfig::new().with_information_schema(true);
+    let runtime = RuntimeEnvBuilder::new()
+        .with_memory_limit(limits.memory_limit, 1.0)
+        .with_object_store_registry(Arc::new(crate::io::store::Stores::default()))
+        .build_arc()
+        .map_err(|e| Error::Usage(format!("SQL: {e}")))?;
+    let state =
+        SessionStateBuilder::new().with_config(config).with_runtime_env(runtime).with_default_features().build();
+    match engine {
+        Engine::Local => Ok(SessionContext::new_with_state(state)),
+        Engine::Cluster(url) => {
+            if limits.allow_writes {
+                return Err(Error::Usage("--allow-writes: not with --cluster (a cluster only reads)".into()));
+            }
+            Ok(SessionContext::new_with_state(cluster_state(state, url)?))
+        }
+    }
 }
 
 /// `state` made a client of the Ballista scheduler at `url` (`df://host:port`), with gedisim's
@@ -203,14 +256,25 @@ pub fn register_functions(ctx: &SessionContext, ds: &Dataset) {
 /// `read_only`.
 pub async fn register_table(ctx: &SessionContext, name: &str, files: &[PathBuf], read_only: bool) -> Result<()> {
     let dir = files.first().and_then(|f| f.parent()).unwrap_or(Path::new("."));
-    let table_err = |e: datafusion::error::DataFusionError| Error::table(dir, e);
     let urls = files
         .iter()
         .map(|f| {
             let path = f.canonicalize().map_err(|e| Error::file(f, e))?;
-            ListingTableUrl::parse(path.to_string_lossy()).map_err(table_err)
+            ListingTableUrl::parse(path.to_string_lossy()).map_err(|e| Error::table(dir, e))
         })
         .collect::<Result<Vec<_>>>()?;
+    register_listing(ctx, name, dir, urls, read_only).await
+}
+
+/// Register the Parquet files `urls` of the table folder `dir` as the table `name`.
+async fn register_listing(
+    ctx: &SessionContext,
+    name: &str,
+    dir: &Path,
+    urls: Vec<ListingTableUrl>,
+    read_only: bool,
+) -> Result<()> {
+    let table_err = |e: datafusion::error::DataFusionError| Error::table(dir, e);
     let options = ListingOptions::new(Arc::new(ParquetFormat::default())).with_file_extension(".parquet");
     let config = ListingTableConfig::new_with_multi_paths(urls)
         .with_listing_options(options)

@@ -33,18 +33,28 @@ pub type FootprintPartition = Vec<(Footprint, Option<AppliedOffset>)>;
 /// The `gedi_simulate` table function of one dataset.
 #[derive(Debug)]
 pub struct GediSimulate {
-    dataset: Dataset,
+    /// The dataset, or why there is none to simulate from.
+    dataset: std::result::Result<Dataset, String>,
 }
 
 impl GediSimulate {
     /// Table function over `dataset`'s shots and ALS points.
     pub fn new(dataset: Dataset) -> Self {
-        GediSimulate { dataset }
+        GediSimulate { dataset: Ok(dataset) }
+    }
+
+    /// The function where it cannot run, saying `why` when called.
+    pub fn unavailable(why: String) -> Self {
+        GediSimulate { dataset: Err(why) }
     }
 }
 
 impl TableFunctionImpl for GediSimulate {
     fn call_with_args(&self, args: TableFunctionArgs) -> DfResult<Arc<dyn TableProvider>> {
+        let dataset = match &self.dataset {
+            Ok(ds) => ds.clone(),
+            Err(why) => return plan_err!("gedi_simulate: {why}"),
+        };
         let profile = match args.exprs() {
             [] => Profile::Default,
             [Expr::Literal(ScalarValue::Utf8(Some(p)), _)] => match Profile::from_name(p) {
@@ -53,7 +63,7 @@ impl TableFunctionImpl for GediSimulate {
             },
             other => return plan_err!("gedi_simulate([profile]): profile is 'default' or 'gedirat', got {other:?}"),
         };
-        Ok(Arc::new(SimulatedShots::every_shot(self.dataset.clone(), profile)))
+        Ok(Arc::new(SimulatedShots::every_shot(dataset, profile)))
     }
 }
 
