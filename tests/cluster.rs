@@ -82,13 +82,15 @@ struct Cluster {
 }
 
 impl Cluster {
-    fn start(dir: &Path, executors: usize, executor_timeout: u64) -> Cluster {
+    /// The cluster, its processes given the environment `env` besides this one's.
+    fn start(dir: &Path, executors: usize, executor_timeout: u64, env: &[(&str, String)]) -> Cluster {
         std::fs::create_dir_all(dir).unwrap();
         let spawn = |args: &[&str], log: &Path| {
             let file = std::fs::File::create(log).unwrap();
             let child = Command::new(BIN)
                 .args(args)
                 .env("RUST_LOG", "info")
+                .envs(env.iter().map(|(k, v)| (k, v)))
                 .stdout(Stdio::null())
                 .stderr(file)
                 .spawn()
@@ -265,7 +267,7 @@ fn table_files(ds: &Path, table: &str) -> Vec<(String, Vec<RecordBatch>, Option<
 fn every_query_and_gedi_simulate_give_the_local_rows() {
     let w = world();
     let tmp = tempfile::tempdir().unwrap();
-    let cluster = Cluster::start(tmp.path(), 2, 20);
+    let cluster = Cluster::start(tmp.path(), 2, 20, &[]);
     let engine = Engine::Cluster(cluster.url.clone());
     let ds = Dataset::open(&w.local).unwrap();
     let rt = tokio::runtime::Runtime::new().unwrap();
@@ -309,7 +311,7 @@ fn every_query_and_gedi_simulate_give_the_local_rows() {
 fn run_on_the_cluster_writes_the_local_results() {
     let w = world();
     let tmp = tempfile::tempdir().unwrap();
-    let cluster = Cluster::start(&tmp.path().join("cluster"), 2, 20);
+    let cluster = Cluster::start(&tmp.path().join("cluster"), 2, 20, &[]);
     let out = tmp.path().join("distributed");
     let args = run_args(&w.root, &out, Some(&cluster.url));
     let (ok, _, err) = gedisim(&args.iter().map(String::as_str).collect::<Vec<_>>());
@@ -335,7 +337,7 @@ fn a_query_survives_an_executor_killed_while_it_runs() {
     let w = world();
     let tmp = tempfile::tempdir().unwrap();
     // A short timeout: the scheduler gives a silent executor's tasks to the other after 6 s.
-    let mut cluster = Cluster::start(&tmp.path().join("cluster"), 2, 6);
+    let mut cluster = Cluster::start(&tmp.path().join("cluster"), 2, 6, &[]);
     let out = tmp.path().join("out.parquet");
     let sql = "select * from gedi_simulate() order by footprint_id, weighting";
     let mut client = Process(
@@ -404,5 +406,130 @@ fn a_bad_cluster_address_is_one_line_not_a_hang() {
         let errors: Vec<&String> = stderr.iter().filter(|l| l.starts_with("error")).collect();
         assert_eq!(errors.len(), 1, "{args:?}: {stderr:?}");
         assert!(errors[0].contains(names), "{args:?}: {stderr:?}");
+    }
+}
+
+/// An S3 server on loopback (moto's, `pip install "moto[server]"`), killed when dropped.
+struct S3Server {
+    endpoint: String,
+    _process: Process,
+}
+
+impl S3Server {
+    fn start() -> S3Server {
+        let port = free_port_pair();
+        let child = Command::new("moto_server")
+            .args(["-H", "127.0.0.1", "-p", &port.to_string()])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("moto_server (pip install \"moto[server]\") runs the S3 server of the dataset-by-URL test");
+        let process = Process(child);
+        let start = Instant::now();
+        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+            assert!(start.elapsed() < Duration::from_secs(60), "moto_server did not start");
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        S3Server { endpoint: format!("http://127.0.0.1:{port}"), _process: process }
+    }
+
+    /// What a client of this server needs in its environment.
+    fn env(&self) -> Vec<(&'static str, String)> {
+        vec![
+            ("AWS_ENDPOINT", self.endpoint.clone()),
+            ("AWS_ACCESS_KEY_ID", "gedisim".into()),
+            ("AWS_SECRET_ACCESS_KEY", "gedisim".into()),
+            ("AWS_REGION", "us-east-1".into()),
+        ]
+    }
+
+    /// Every file under `dir` copied to `s3://<bucket>/<prefix>/…` (the bucket created).
+    fn upload(&self, dir: &Path, bucket: &str, prefix: &str) {
+        let script = "import boto3, os, sys\n\
+            endpoint, root, bucket, prefix = sys.argv[1:]\n\
+            s3 = boto3.client('s3', endpoint_url=endpoint, aws_access_key_id='gedisim', \
+            aws_secret_access_key='gedisim', region_name='us-east-1')\n\
+            s3.create_bucket(Bucket=bucket)\n\
+            for d, _, files in os.walk(root):\n    \
+                for f in files:\n        \
+                    p = os.path.join(d, f)\n        \
+                    s3.upload_file(p, bucket, prefix + '/' + os.path.relpath(p, root))\n";
+        let out = Command::new("python3")
+            .args(["-c", script, &self.endpoint, dir.to_str().unwrap(), bucket, prefix])
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "upload: {}", String::from_utf8_lossy(&out.stderr));
+    }
+}
+
+/// The rows `gedisim sql --dataset <dataset> -f <query> [--cluster …]` writes, or its error.
+fn sql_rows(
+    dataset: &str,
+    query: &Path,
+    cluster: Option<&str>,
+    env: &[(&str, String)],
+    out: &Path,
+) -> Result<Vec<RecordBatch>, String> {
+    let mut cmd = Command::new(BIN);
+    cmd.args(["sql", "--dataset", dataset, "-f", query.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    if let Some(url) = cluster {
+        cmd.args(["--cluster", url]);
+    }
+    let result = cmd.envs(env.iter().map(|(k, v)| (k, v))).output().unwrap();
+    if !result.status.success() {
+        return Err(String::from_utf8_lossy(&result.stderr).into_owned());
+    }
+    let file = std::fs::File::open(out).unwrap();
+    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap().build().unwrap();
+    Ok(reader.map(|b| b.unwrap()).collect())
+}
+
+#[test]
+fn a_dataset_by_url_gives_the_local_rows_here_and_on_the_cluster() {
+    let w = world();
+    let tmp = tempfile::tempdir().unwrap();
+    let s3 = S3Server::start();
+    s3.upload(&w.local, "gedi", "runs/france");
+    let env = s3.env();
+    let cluster = Cluster::start(&tmp.path().join("cluster"), 2, 20, &env);
+    let url = "s3://gedi/runs/france";
+    let mut compared = 0;
+    for query in common::files_with_suffix(&Path::new(env!("CARGO_MANIFEST_DIR")).join("queries"), ".sql") {
+        let name = query.file_stem().unwrap().to_string_lossy().into_owned();
+        let out = |k: &str| tmp.path().join(format!("{name}.{k}.parquet"));
+        let local = sql_rows(w.local.to_str().unwrap(), &query, None, &[], &out("dir"));
+        let by_url = sql_rows(url, &query, None, &env, &out("url"));
+        let on_cluster = sql_rows(url, &query, Some(&cluster.url), &env, &out("cluster"));
+        // The simulation reads ALS points from a dataset directory: by URL it says so.
+        if std::fs::read_to_string(&query).unwrap().contains("gedi_simulate(") {
+            for err in [by_url.unwrap_err(), on_cluster.unwrap_err()] {
+                assert!(err.trim().lines().count() == 1 && err.contains("dataset directory"), "{name}: {err}");
+            }
+            continue;
+        }
+        match (local, by_url, on_cluster) {
+            (Ok(l), Ok(u), Ok(c)) => {
+                same_rows(&format!("queries/{name}.sql by URL"), &l, &u);
+                same_rows(&format!("queries/{name}.sql by URL on the cluster"), &l, &c);
+                compared += usize::from(l.iter().map(RecordBatch::num_rows).sum::<usize>() > 0);
+            }
+            // A query whose tables a run's dataset lacks fails the same way everywhere.
+            (Err(_), Err(u), Err(c)) => assert!(u.trim().lines().count() == 1 && c.trim().lines().count() == 1),
+            (l, u, c) => {
+                panic!("queries/{name}.sql: local {:?}, by URL {:?}, on the cluster {:?}", l.err(), u.err(), c.err())
+            }
+        }
+    }
+    assert!(compared >= 8, "only {compared} queries gave rows");
+    for log in &cluster.logs {
+        assert!(std::fs::read_to_string(log).unwrap().contains("Execute task"), "{log:?} ran no task");
+    }
+
+    // What the object store cannot give is one line.
+    let q = tmp.path().join("one.sql");
+    std::fs::write(&q, "select 1").unwrap();
+    for (dataset, expected) in [("s3://gedi/runs/nowhere", "no table folder"), ("s3://no-bucket/x", "no-bucket")] {
+        let err = sql_rows(dataset, &q, None, &env, &tmp.path().join("x.parquet")).unwrap_err();
+        assert!(err.trim().lines().count() == 1 && err.contains(expected), "{err}");
     }
 }

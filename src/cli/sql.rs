@@ -8,7 +8,8 @@ use gedisim::{Error, Result};
 
 #[derive(Args)]
 pub struct SqlArgs {
-    /// Dataset directory.
+    /// Dataset directory, or its URL (`s3://bucket/prefix` with the AWS_* environment, `https://…` on a
+    /// WebDAV server): its tables as listed now; `gedi_simulate` needs a directory.
     #[arg(long)]
     dataset: PathBuf,
     /// The SQL statement (or use -f).
@@ -28,7 +29,7 @@ pub struct SqlArgs {
     #[arg(long, value_parser = parse_size)]
     memory_limit: Option<usize>,
     /// Run on the Ballista cluster whose scheduler is at this address (`gedisim cluster`); every
-    /// node must see the dataset at the same path.
+    /// node must see the dataset at the same path, or its URL (with the same AWS_* environment).
     #[arg(long, value_name = "df://HOST:PORT")]
     cluster: Option<String>,
 }

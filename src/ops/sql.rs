@@ -1,5 +1,5 @@
-//! `gedisim sql`: one SQL statement over a dataset's tables (with gedisim's functions), printed as
-//! a table or written to a Parquet or CSV file.
+//! `gedisim sql`: one SQL statement over a dataset's tables (a directory, or an object store by URL;
+//! with gedisim's functions), printed as a table or written to a Parquet or CSV file.
 //!
 //! Read-only by default: DDL, DML and `COPY` need `allow_writes`, and even then no statement may
 //! name a location inside the dataset (its tables change only through gedisim's commands).
@@ -12,7 +12,8 @@ use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 pub use crate::sql::{Engine, SessionLimits};
 
-/// Run `query` on `dataset` (a directory, or an `s3://`, `http(s)://` URL) with `engine`; the result as a text table, or written to `out` (then `None`).
+/// Run `query` on `dataset` (a directory, or an `s3://`, `http(s)://` URL) with `engine`; the result as a
+/// text table, or written to `out` (then `None`).
 pub fn sql(
     dataset: &Path,
     query: &str,
