@@ -622,15 +622,18 @@ fn simulate_on(engine: &Engine, ds: &Dataset, plans: &mut [GranulePlan], progres
     let rt = crate::sql::runtime()?;
     let r = rt.block_on(async {
         let ctx = crate::sql::session_on(ds, &Default::default(), engine).await?;
-        let mut todo: Vec<&mut GranulePlan> = plans.iter_mut().filter(|p| p.needs_sim).collect();
-        while !todo.is_empty() {
-            let mut size = 0;
-            let n = todo.iter().take_while(|p| {
-                size += p.covered.len();
-                size - p.covered.len() < CLUSTER_JOB_FOOTPRINTS
-            });
-            let n = n.count().max(1);
-            let job: Vec<&mut GranulePlan> = todo.drain(..n).collect();
+        // Jobs of whole granules, each closed once it holds CLUSTER_JOB_FOOTPRINTS footprints.
+        let mut jobs: Vec<(usize, Vec<&mut GranulePlan>)> = Vec::new();
+        for p in plans.iter_mut().filter(|p| p.needs_sim) {
+            match jobs.last_mut() {
+                Some((size, job)) if *size < CLUSTER_JOB_FOOTPRINTS => {
+                    *size += p.covered.len();
+                    job.push(p);
+                }
+                _ => jobs.push((p.covered.len(), vec![p])),
+            }
+        }
+        for (_, job) in jobs {
             let groups =
                 job.iter().map(|p| p.covered.iter().map(|c| (c.footprint.clone(), c.offset.clone())).collect());
             let batches = simulate_groups(&ctx, ds, groups.collect(), Profile::Default).await?;
