@@ -328,8 +328,62 @@ fn run_on_the_cluster_writes_the_local_results() {
             assert_eq!(l.2, r.2, "{table}/{}: metadata", l.0);
         }
     }
-    // The collocation and the simulation ran as tasks on the executors.
-    assert!(cluster.logs.iter().all(|log| std::fs::read_to_string(log).unwrap().contains("Execute task")));
+    // The collocation and the simulation ran as jobs of tasks on the executors.
+    assert!(jobs_run(&cluster.logs).len() >= 2, "{:?}", jobs_run(&cluster.logs));
+}
+
+/// The Ballista jobs whose tasks the executors of `logs` ran (`Execute task … [TID <job>/…]`).
+fn jobs_run(logs: &[PathBuf]) -> std::collections::BTreeSet<String> {
+    let mut jobs = std::collections::BTreeSet::new();
+    for log in logs {
+        for line in std::fs::read_to_string(log).unwrap().lines().filter(|l| l.contains("Execute task")) {
+            if let Some(job) = line.split("[TID ").nth(1).and_then(|t| t.split('/').next()) {
+                jobs.insert(job.to_string());
+            }
+        }
+    }
+    jobs
+}
+
+/// A copy of the directory tree `from` at `to`.
+fn copy_tree(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let path = entry.unwrap().path();
+        let dest = to.join(path.file_name().unwrap());
+        if path.is_dir() {
+            copy_tree(&path, &dest);
+        } else {
+            std::fs::copy(&path, &dest).unwrap();
+        }
+    }
+}
+
+#[test]
+fn collocate_on_the_cluster_writes_the_local_offsets_and_report() {
+    let w = world();
+    let tmp = tempfile::tempdir().unwrap();
+    let cluster = Cluster::start(&tmp.path().join("cluster"), 2, 20, &[]);
+    let mut outcomes = Vec::new();
+    for (name, engine) in [("here", None), ("cluster", Some(cluster.url.as_str()))] {
+        let ds = tmp.path().join(name);
+        copy_tree(&w.local, &ds);
+        let ds = ds.to_str().unwrap().to_string();
+        let mut args = vec!["collocate", "--dataset", &ds, "--min-segment", "1", "--level", "granule"];
+        if let Some(url) = engine {
+            args.extend(["--cluster", url]);
+        }
+        let (ok, _, err) = gedisim(&args);
+        assert!(ok, "{err}");
+        // The report (short runs, shots not used, counts) as printed, without the dataset's path.
+        let report: Vec<String> = err.lines().map(|l| l.replace(&ds, "<dataset>")).collect();
+        outcomes.push((table_files(Path::new(&ds), "offsets"), report));
+    }
+    let (here, cluster_run) = (&outcomes[0], &outcomes[1]);
+    assert!(here.0[0].1[0].num_rows() > 0, "no offsets");
+    assert_eq!(here.0, cluster_run.0, "offsets/");
+    assert_eq!(here.1, cluster_run.1, "the printed report");
+    assert_eq!(jobs_run(&cluster.logs).len(), 1, "one plan");
 }
 
 #[test]
@@ -524,6 +578,18 @@ fn a_dataset_by_url_gives_the_local_rows_here_and_on_the_cluster() {
     for log in &cluster.logs {
         assert!(std::fs::read_to_string(log).unwrap().contains("Execute task"), "{log:?} ran no task");
     }
+
+    // No statement may write where a dataset by URL is.
+    let err = Command::new(BIN)
+        .args(["sql", "--dataset", url, "--allow-writes", "select 1"])
+        .envs(env.iter().map(|(k, v)| (k, v)))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&err.stderr);
+    assert!(
+        !err.status.success() && stderr.trim().lines().count() == 1 && stderr.contains("--allow-writes"),
+        "{stderr}"
+    );
 
     // What the object store cannot give is one line.
     let q = tmp.path().join("one.sql");

@@ -103,7 +103,13 @@ impl Dataset {
             return Ok(files);
         }
         let tiles = self.root.join(tables::TILES);
-        Ok(files.into_iter().filter(|f| f.file_name().is_some_and(|n| tiles.join(n).is_file())).collect())
+        Ok(files
+            .into_iter()
+            .filter(|f| {
+                let name = f.file_name().and_then(|n| n.to_str());
+                name.is_some_and(|n| is_visible(tables::ALS, n, |t| tiles.join(t).is_file()))
+            })
+            .collect())
     }
 
     /// The dataset's directory.
@@ -151,6 +157,13 @@ pub fn dataset_epsg(dataset: &Dataset) -> Result<Option<u32>> {
         }
     }
     Ok(found.map(|(e, _)| e))
+}
+
+/// Whether file `file` of table `table` is one readers may see, given whether `tiles/` has a file of
+/// that name (`has_tile`): an `als/` file appears with its `tiles/` row, written after it under the same
+/// name; every other table's files always.
+pub fn is_visible(table: &str, file: &str, has_tile: impl Fn(&str) -> bool) -> bool {
+    table != tables::ALS || has_tile(file)
 }
 
 /// The complete Parquet files of a table folder, sorted by name.

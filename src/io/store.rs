@@ -24,27 +24,30 @@ pub fn open(url: &Url) -> std::result::Result<Arc<dyn ObjectStore>, String> {
         retry_timeout: std::time::Duration::from_secs(30),
         backoff: Default::default(),
     };
-    // A plain `http://` URL or S3 endpoint, written as such, is allowed (object_store refuses it by
-    // default).
-    let http_endpoint =
-        ["AWS_ENDPOINT", "AWS_ENDPOINT_URL"].iter().any(|v| std::env::var(v).is_ok_and(|e| e.starts_with("http://")));
-    let client = object_store::ClientOptions::new()
-        .with_allow_http(url.scheme() == "http" || (url.scheme() == "s3" && http_endpoint))
-        .with_connect_timeout(std::time::Duration::from_secs(10));
     let built: std::result::Result<Arc<dyn ObjectStore>, object_store::Error> = match url.scheme() {
+        // A plain `http://` URL, written as such, is allowed (object_store refuses it by default).
         "http" | "https" => object_store::http::HttpBuilder::new()
             .with_url(&url[..url::Position::BeforePath])
-            .with_client_options(client)
+            .with_client_options(
+                object_store::ClientOptions::new()
+                    .with_allow_http(url.scheme() == "http")
+                    .with_connect_timeout(std::time::Duration::from_secs(10)),
+            )
             .with_retry(retry)
             .build()
             .map(|s| Arc::new(s) as Arc<dyn ObjectStore>),
-        // Credentials, region and endpoint from the AWS_* environment.
-        "s3" => object_store::aws::AmazonS3Builder::from_env()
-            .with_url(url.as_str())
-            .with_client_options(client)
-            .with_retry(retry)
-            .build()
-            .map(|s| Arc::new(s) as Arc<dyn ObjectStore>),
+        // Credentials, region, endpoint and client settings from the AWS_* environment; an endpoint
+        // written as `http://…` is allowed as such.
+        "s3" => {
+            let http_endpoint = ["AWS_ENDPOINT", "AWS_ENDPOINT_URL"]
+                .iter()
+                .any(|v| std::env::var(v).is_ok_and(|e| e.starts_with("http://")));
+            let mut builder = object_store::aws::AmazonS3Builder::from_env().with_url(url.as_str()).with_retry(retry);
+            if http_endpoint {
+                builder = builder.with_allow_http(true);
+            }
+            builder.build().map(|s| Arc::new(s) as Arc<dyn ObjectStore>)
+        }
         other => return Err(format!("{other}:// is not http://, https:// or s3://")),
     };
     built.map_err(|e| crate::error::one_line(&e.to_string()))

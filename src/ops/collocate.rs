@@ -83,6 +83,11 @@ fn solve_on_cluster(
     progress: &dyn Progress,
 ) -> Result<(Vec<RecordBatch>, CollocateReport)> {
     let names = files.iter().map(|f| shots_file_name(f)).collect::<Result<Vec<_>>>()?;
+    let mut report =
+        CollocateReport { table: ds.root().join(tables::OFFSETS).join("offsets.parquet"), ..Default::default() };
+    if names.is_empty() {
+        return Ok((Vec::new(), report));
+    }
     let failed = |e: datafusion::error::DataFusionError| {
         Error::Usage(format!("collocation on the cluster: {}", crate::error::one_line(&e.to_string())))
     };
@@ -99,8 +104,6 @@ fn solve_on_cluster(
         }
         Ok::<_, Error>(())
     })?;
-    let mut report =
-        CollocateReport { table: ds.root().join(tables::OFFSETS).join("offsets.parquet"), ..Default::default() };
     let mut batches = Vec::new();
     for name in names {
         let g = done

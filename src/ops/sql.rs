@@ -22,6 +22,12 @@ pub fn sql(
     engine: &Engine,
 ) -> Result<Option<String>> {
     // A dataset by URL (an object store) or a directory.
+    if limits.allow_writes && crate::io::source::is_remote(dataset) {
+        return Err(Error::Usage(format!(
+            "--allow-writes: not with a dataset by URL ({}): no statement may write where its tables are",
+            dataset.display()
+        )));
+    }
     let (ds, url) = match crate::io::source::is_remote(dataset) {
         true => (None, Some(url::Url::parse(&dataset.to_string_lossy()).map_err(|e| Error::file(dataset, e))?)),
         false => (Some(Dataset::open(dataset)?), None),

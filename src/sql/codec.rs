@@ -217,9 +217,9 @@ fn decode_collocation(buf: &[u8]) -> Option<DfResult<(CollocatedGranules, Option
         };
         let pulse = match w.pulse {
             WirePulse::Gaussian(sigma) => PulseModel::Gaussian(sigma.map(f32::from_bits)),
-            WirePulse::Recorded(name) => match PulseReference::ALL.into_iter().find(|r| r.name() == name) {
-                Some(r) => PulseModel::Recorded(r),
-                None => return exec_err!("collocation: unknown pulse reference {name:?}"),
+            WirePulse::Recorded(name) => match name.parse::<PulseReference>() {
+                Ok(r) => PulseModel::Recorded(r),
+                Err(e) => return exec_err!("collocation: {e}"),
             },
             WirePulse::File(path) => PulseModel::File(path),
         };

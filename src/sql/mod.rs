@@ -120,30 +120,50 @@ pub async fn session_at_url(url: &Url, limits: &SessionLimits, engine: &Engine) 
     let fail = |e: &dyn std::fmt::Display| Error::file(Path::new(url.as_str()), crate::error::one_line(&e.to_string()));
     let store = ctx.runtime_env().object_store_registry.get_store(url).map_err(|e| fail(&e))?;
     let prefix = object_store::path::Path::from_url_path(url.path()).map_err(|e| fail(&e))?;
-    let base = &url[..url::Position::BeforePath];
-    let folders = store.list_with_delimiter(Some(&prefix)).await.map_err(|e| fail(&e))?.common_prefixes;
-    let mut registered = 0;
-    for folder in folders {
+    // Every table folder's Parquet files (names sorted), then those readers may see.
+    let mut tables: Vec<(String, Vec<object_store::path::Path>)> = Vec::new();
+    for folder in store.list_with_delimiter(Some(&prefix)).await.map_err(|e| fail(&e))?.common_prefixes {
         let Some(name) = folder.filename().map(str::to_string) else { continue };
         if name == dataset::tables::REPORT {
             continue;
         }
-        let mut files: Vec<String> = store
-            .list_with_delimiter(Some(&folder))
-            .await
-            .map_err(|e| fail(&e))?
-            .objects
-            .into_iter()
-            .filter(|o| o.location.extension() == Some("parquet"))
-            .map(|o| format!("{base}/{}", o.location))
-            .collect();
+        let listed = store.list_with_delimiter(Some(&folder)).await.map_err(|e| fail(&e))?.objects;
+        let mut files: Vec<_> =
+            listed.into_iter().map(|o| o.location).filter(|l| l.extension() == Some("parquet")).collect();
         files.sort();
-        if files.is_empty() {
+        tables.push((name, files));
+    }
+    let tiles: std::collections::HashSet<String> = tables
+        .iter()
+        .filter(|(name, _)| name == dataset::tables::TILES)
+        .flat_map(|(_, files)| files.iter().filter_map(|f| f.filename().map(str::to_string)))
+        .collect();
+    let mut registered = 0;
+    for (name, files) in tables {
+        let urls: Vec<ListingTableUrl> = files
+            .iter()
+            .filter(|f| f.filename().is_some_and(|file| dataset::is_visible(&name, file, |t| tiles.contains(t))))
+            .map(|f| {
+                // The key's parts as path segments, so that any character of a key stays in the path.
+                let mut file_url = url.clone();
+                file_url.set_query(None);
+                file_url.set_fragment(None);
+                file_url.path_segments_mut().map_err(|_| fail(&"cannot hold a path"))?.clear().extend(f.parts());
+                ListingTableUrl::try_new(file_url, None).map_err(|e| fail(&e))
+            })
+            .collect::<Result<_>>()?;
+        if urls.is_empty() {
             continue;
         }
-        let urls = files.iter().map(|f| ListingTableUrl::parse(f).map_err(|e| fail(&e))).collect::<Result<_>>()?;
         let read_only = *engine == Engine::Local;
-        register_listing(&ctx, &name, Path::new(&format!("{base}/{folder}")), urls, read_only).await?;
+        register_listing(
+            &ctx,
+            &name,
+            Path::new(&format!("{}/{name}", url.as_str().trim_end_matches('/'))),
+            urls,
+            read_only,
+        )
+        .await?;
         registered += 1;
     }
     if registered == 0 {
