@@ -3,6 +3,9 @@
 //! Each world is the three bundled tiles (129 shots on 108 tracks), or a scene of one tile
 //! replicated for long tracks, generated with its own seed; the diagnosis is never told the
 //! effect.
+//!
+//! World suites: each test builds and diagnoses whole worlds (≈ 9 minutes together on 2 cores), so
+//! `cargo test` leaves them out and `.ci/run` runs them (`cargo test -- --ignored`).
 
 mod common;
 
@@ -112,6 +115,7 @@ fn assert_param(d: &Value, key: &str, planted: f64, tolerance: f64) {
 }
 
 #[test]
+#[ignore = "world suite (minutes): cargo test --test diagnose -- --ignored; .ci/run runs it"]
 fn datum_world_names_datum_and_recovers_dz() {
     let tmp = tempfile::tempdir().unwrap();
     let d = diagnose_world(tmp.path(), "datum", &["--magnitude", "2", "--seed", "11"]);
@@ -120,6 +124,7 @@ fn datum_world_names_datum_and_recovers_dz() {
 }
 
 #[test]
+#[ignore = "world suite (minutes): cargo test --test diagnose -- --ignored; .ci/run runs it"]
 fn ground_detection_world_names_ground_detection() {
     let tmp = tempfile::tempdir().unwrap();
     let d = diagnose_world(tmp.path(), "ground_detection", &["--seed", "12"]);
@@ -129,6 +134,7 @@ fn ground_detection_world_names_ground_detection() {
 }
 
 #[test]
+#[ignore = "world suite (minutes): cargo test --test diagnose -- --ignored; .ci/run runs it"]
 fn canopy_change_world_names_canopy_change() {
     // A waveform-shape effect: weighting and occlusion move the RH profile alike, the waveform
     // shape tells them apart.
@@ -139,6 +145,7 @@ fn canopy_change_world_names_canopy_change() {
 }
 
 #[test]
+#[ignore = "world suite (minutes): cargo test --test diagnose -- --ignored; .ci/run runs it"]
 fn pulse_world_names_pulse_and_recovers_its_width() {
     // On tracks of one or two shots the nominal collocation absorbs much of a pulse change into
     // the positions; the diagnosis re-places them for each hypothesis.
@@ -150,6 +157,7 @@ fn pulse_world_names_pulse_and_recovers_its_width() {
 }
 
 #[test]
+#[ignore = "world suite (minutes): cargo test --test diagnose -- --ignored; .ci/run runs it"]
 fn control_world_is_unexplained() {
     let tmp = tempfile::tempdir().unwrap();
     let d = diagnose_world(tmp.path(), "none", &["--seed", "13"]);
@@ -159,6 +167,7 @@ fn control_world_is_unexplained() {
 }
 
 #[test]
+#[ignore = "world suite (minutes): cargo test --test diagnose -- --ignored; .ci/run runs it"]
 fn per_shot_geolocation_on_long_tracks_is_named_and_its_control_is_not() {
     // On tracks of one or two shots the per-track collocation places each shot on its own; on
     // long tracks per-shot offsets survive it as spread, which the diagnosis judges against the
