@@ -295,13 +295,66 @@ fn sql_out_errors_leave_no_file() {
     std::fs::create_dir(&outdir).unwrap();
     let (ok, _, err) = sql(&ds, &["--out", s(&outdir)], "select 1 as a");
     one_line_error(ok, &err, &["outdir", "is a directory"]);
-    let csv = tmp.path().join("lists.csv");
-    let (ok, _, err) = sql(&ds, &["--out", s(&csv)], "select make_array(1.0, 2.0) as l");
-    one_line_error(ok, &err, &["lists.csv", "CSV"]);
+    // Never CSV into a `.json` file, nor a format guessed from a name that does not say it.
+    let json = tmp.path().join("result.json");
+    let (ok, _, err) = sql(&ds, &["--out", s(&json), "--format", "csv"], "select 1 as a");
+    one_line_error(ok, &err, &["result.json", "--format csv"]);
+    let txt = tmp.path().join("result.txt");
+    let (ok, _, err) = sql(&ds, &["--out", s(&txt)], "select 1 as a");
+    one_line_error(ok, &err, &["result.txt", "--format"]);
+    let (ok, _, err) = sql(&ds, &["--format", "parquet"], "select 1 as a");
+    one_line_error(ok, &err, &["--format parquet", "--out"]);
     let mut left: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
     left.sort();
     assert_eq!(left, ["ds", "outdir"], "nothing else written");
     assert!(std::fs::read_dir(&outdir).unwrap().next().is_none());
+}
+
+#[test]
+fn sql_writes_csv_json_and_parquet_with_lists_as_json_arrays() {
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = small_dataset(tmp.path());
+    let q = "select 'a,\"b\"' as name, make_array(1.5, 2.0) as rh, cast(null as double) as missing \
+             union all select 'c', make_array(), 3.0";
+    // By the file's extension, or by --format (printed).
+    let csv = tmp.path().join("r.csv");
+    let (ok, _, err) = sql(&ds, &["--out", s(&csv)], q);
+    assert!(ok, "{err}");
+    let (ok, printed, err) = sql(&ds, &["--format", "csv"], q);
+    assert!(ok, "{err}");
+    let written = std::fs::read_to_string(&csv).unwrap();
+    // `union all` gives its rows in either order.
+    let sorted = |t: &str| {
+        let mut lines: Vec<String> = t.trim_end().lines().map(String::from).collect();
+        lines[1..].sort();
+        lines
+    };
+    assert_eq!(sorted(&written), sorted(&printed));
+    let mut rows = csv::ReaderBuilder::new().from_reader(written.as_bytes());
+    assert_eq!(rows.headers().unwrap(), vec!["name", "rh", "missing"]);
+    let mut records: Vec<Vec<String>> = rows.records().map(|r| r.unwrap().iter().map(String::from).collect()).collect();
+    records.sort();
+    assert_eq!(records, [vec!["a,\"b\"", "[1.5,2.0]", ""], vec!["c", "[]", "3.0"]]);
+
+    let json = tmp.path().join("r.json");
+    let (ok, _, err) = sql(&ds, &["--out", s(&json)], q);
+    assert!(ok, "{err}");
+    let mut objects: Vec<serde_json::Value> = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    objects.sort_by_key(|o| o["name"].to_string());
+    assert_eq!(
+        objects,
+        [
+            serde_json::json!({"name": "a,\"b\"", "rh": [1.5, 2.0], "missing": null}),
+            serde_json::json!({"name": "c", "rh": [], "missing": 3.0})
+        ]
+    );
+
+    let parquet = tmp.path().join("r.out");
+    let (ok, _, err) = sql(&ds, &["--out", s(&parquet), "--format", "parquet"], q);
+    assert!(ok, "{err}");
+    let file = std::fs::File::open(&parquet).unwrap();
+    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap().build().unwrap();
+    assert_eq!(reader.map(|b| b.unwrap().num_rows()).sum::<usize>(), 2);
 }
 
 #[test]

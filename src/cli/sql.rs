@@ -17,9 +17,13 @@ pub struct SqlArgs {
     /// File holding the SQL statement.
     #[arg(short = 'f', long = "file")]
     file: Option<PathBuf>,
-    /// Write the result to this Parquet or CSV file instead of printing it.
+    /// Write the result to this file (.csv, .json or .parquet) instead of printing it.
     #[arg(long)]
     out: Option<PathBuf>,
+    /// table (printed), csv or json (printed or written), parquet (written); default: table, or
+    /// the format --out's extension names. CSV cells holding lists are JSON arrays.
+    #[arg(long, value_enum)]
+    format: Option<FormatArg>,
     /// Allow DDL (CREATE …), DML (INSERT …) and COPY … TO. Dataset tables stay read-only, and no
     /// statement may name a location inside the dataset.
     #[arg(long)]
@@ -32,6 +36,14 @@ pub struct SqlArgs {
     /// node must see the dataset at the same path, or its URL (with the same AWS_* environment).
     #[arg(long, value_name = "df://HOST:PORT")]
     cluster: Option<String>,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum FormatArg {
+    Table,
+    Csv,
+    Json,
+    Parquet,
 }
 
 /// `<number>[K|M|G|T]` (binary units) as bytes.
@@ -63,7 +75,14 @@ pub fn sql(a: SqlArgs) -> Result<()> {
         limits.memory_limit = bytes;
     }
     let engine = a.cluster.map(gedisim::ops::sql::Engine::Cluster).unwrap_or_default();
-    if let Some(table) = gedisim::ops::sql::sql(&a.dataset, &query, a.out.as_deref(), &limits, &engine)? {
+    use gedisim::ops::sql::{ResultFormat, SqlFormat};
+    let format = a.format.map(|f| match f {
+        FormatArg::Table => SqlFormat::Table,
+        FormatArg::Csv => SqlFormat::File(ResultFormat::Csv),
+        FormatArg::Json => SqlFormat::File(ResultFormat::Json),
+        FormatArg::Parquet => SqlFormat::File(ResultFormat::Parquet),
+    });
+    if let Some(table) = gedisim::ops::sql::sql(&a.dataset, &query, a.out.as_deref(), format, &limits, &engine)? {
         println!("{table}");
     }
     Ok(())
