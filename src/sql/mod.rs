@@ -89,7 +89,7 @@ pub async fn session_with(ds: &Dataset, limits: &SessionLimits) -> Result<Sessio
 /// Parquet listings (what Ballista ships) and no statement may write.
 pub async fn session_on(ds: &Dataset, limits: &SessionLimits, engine: &Engine) -> Result<SessionContext> {
     let ctx = new_session(limits, engine)?;
-    register_functions(&ctx, ds);
+    register_functions(&ctx, simulate::GediSimulate::new(ds.clone()));
     let read_only = *engine == Engine::Local;
     for entry in std::fs::read_dir(ds.root()).map_err(|e| Error::file(ds.root(), e))? {
         let dir = entry.map_err(|e| Error::file(ds.root(), e))?.path();
@@ -112,11 +112,8 @@ pub async fn session_on(ds: &Dataset, limits: &SessionLimits, engine: &Engine) -
 /// scalar functions. `gedi_simulate` says it is not available: the simulation reads ALS from a filesystem.
 pub async fn session_at_url(url: &Url, limits: &SessionLimits, engine: &Engine) -> Result<SessionContext> {
     let ctx = new_session(limits, engine)?;
-    for f in scalar_functions() {
-        ctx.register_udf(f);
-    }
     let why = format!("not on a dataset by URL ({url}): the simulation reads ALS points from a dataset directory");
-    ctx.register_udtf("gedi_simulate", Arc::new(simulate::GediSimulate::unavailable(why)));
+    register_functions(&ctx, simulate::GediSimulate::unavailable(why));
     let fail = |e: &dyn std::fmt::Display| Error::file(Path::new(url.as_str()), crate::error::one_line(&e.to_string()));
     let store = ctx.runtime_env().object_store_registry.get_store(url).map_err(|e| fail(&e))?;
     let prefix = object_store::path::Path::from_url_path(url.path()).map_err(|e| fail(&e))?;
@@ -264,12 +261,12 @@ pub fn scalar_functions() -> Vec<ScalarUDF> {
 }
 
 /// Register gedisim's SQL functions: [`scalar_functions`] and the table function
-/// `gedi_simulate([profile])` ([`simulate`]), which reads `ds`.
-pub fn register_functions(ctx: &SessionContext, ds: &Dataset) {
+/// `gedi_simulate([profile])` ([`simulate`]) over a dataset (or saying why there is none).
+pub fn register_functions(ctx: &SessionContext, gedi_simulate: simulate::GediSimulate) {
     for f in scalar_functions() {
         ctx.register_udf(f);
     }
-    ctx.register_udtf("gedi_simulate", Arc::new(simulate::GediSimulate::new(ds.clone())));
+    ctx.register_udtf("gedi_simulate", Arc::new(gedi_simulate));
 }
 
 /// Register the Parquet `files` (of one table folder) as the table `name`, refusing `INSERT` when
