@@ -34,7 +34,12 @@ fn diagnose_world(dir: &Path, effect: &str, extra: &[&str]) -> Value {
         out.to_str().unwrap(),
     ]);
     assert!(ok, "{err}");
-    assert!(stdout.contains("Baseline gap"), "{stdout}");
+    // One sign convention, stated (docs/diagnosis.md "Signs").
+    for text in
+        ["RH bias = simulated − GEDI RH", "ground bias = GEDI ground − ALS ground", "Baseline (", "Held-out gap"]
+    {
+        assert!(stdout.contains(text), "{text}: {stdout}");
+    }
     for f in [
         "diagnosis.json",
         "where_strata.csv",
@@ -57,6 +62,8 @@ fn num(v: &Value) -> f64 {
 
 /// The contract keys of diagnosis.json are present.
 fn check_contract(d: &Value) {
+    assert!(d["signs"]["rh_bias"].as_str().unwrap().starts_with("simulated − GEDI"), "{}", d["signs"]);
+    assert!(d["signs"]["ground_bias"].as_str().unwrap().starts_with("GEDI ground − ALS ground"), "{}", d["signs"]);
     assert!(num(&d["baseline"]["mean_abs_bias_rh1_99"]).is_finite());
     assert!(num(&d["baseline"]["msd"]).is_finite());
     assert!(d["unexplained"].is_boolean());
@@ -121,6 +128,15 @@ fn datum_world_names_datum_and_recovers_dz() {
     let d = diagnose_world(tmp.path(), "datum", &["--magnitude", "2", "--seed", "11"]);
     assert_named_first(&d, "datum");
     assert_param(&d, "dz_m", 1.0, 0.2);
+    // GEDI's heights planted 1 m above the ALS datum: GEDI ground − ALS ground is positive, and
+    // in the ALS frame GEDI's RH points stand higher than the simulated ones (simulated − GEDI < 0
+    // by the ground bias more than in the RH frame).
+    let ground = num(&d["baseline"]["ground_bias_m"]);
+    assert!(ground > 0.5, "baseline ground bias {ground}");
+    for p in d["where"]["percentiles"].as_array().unwrap() {
+        let (rh, als) = (num(&p["bias"]), num(&p["bias_als_frame"]));
+        assert!((rh - als - ground).abs() < 1e-6, "RH{}: {rh} − {als} ≠ {ground}", p["rh"]);
+    }
 }
 
 #[test]

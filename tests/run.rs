@@ -196,8 +196,13 @@ fn run_keeps_exactly_what_passes_the_filters_and_the_report_contracts_hold() {
 
     // The report on the run's output: the two table contracts and the MSD identity.
     let ds = Dataset::open(&ds_dir).unwrap();
-    let summary =
-        gedisim::ops::report::run_report(&ds, None, &Default::default(), &gedisim::ops::progress::NoProgress).unwrap();
+    let summary = gedisim::ops::report::run_report(
+        &ds,
+        &Default::default(),
+        &Default::default(),
+        &gedisim::ops::progress::NoProgress,
+    )
+    .unwrap();
     let gd = read_parquet(&summary.dir.join("ground_detection.parquet"));
     assert_eq!(
         columns(&gd),
@@ -348,6 +353,29 @@ fn demo_runs_on_the_bundled_tiles_and_prints_the_headline_tables() {
     assert!(stdout.contains(&format!("report: {}", html.display())) && html.is_file(), "{stdout}");
     let default_row = stdout.lines().find(|l| l.starts_with("default")).unwrap();
     assert!(default_row.contains('+'), "a positive ground bias (planted +0.5 m): {default_row}");
+    // One sign convention, stated where the numbers are (docs/diagnosis.md "Signs").
+    for text in [
+        "bias = GEDI ground − ALS ground",
+        "GEDI ground in the ALS vertical datum through: geoid",
+        "RH bias = simulated − GEDI RH",
+        "Held-out gap, what the causes below are judged by (not comparable with the baseline)",
+    ] {
+        assert!(stdout.contains(text), "{text}: {stdout}");
+    }
+    // The page: titled by the dataset, the paper's figures, the diagnosis inside.
+    let page = std::fs::read_to_string(&html).unwrap();
+    assert!(page.contains("<title>demo/dataset — gedisim study report</title>"), "title");
+    for text in ["alt=\"rh_scatter\"", "alt=\"shot_map\"", "<h2 id=\"diagnosis\">", "Verdict: ", "<th>bias (m)</th>"] {
+        assert!(page.contains(text), "{text} missing from report.html");
+    }
+    assert!(page.contains("alt=\"bias_profile_before_after\"") && page.contains("alt=\"waveform_residual\""));
+    // `report --diagnosis` by hand: the same section; a folder without diagnosis.json is one line.
+    let (ds, diag) = (out.join("dataset"), out.join("diagnosis"));
+    let (ok, _, err) = gedisim(&["report", "--dataset", ds.to_str().unwrap(), "--diagnosis", diag.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    assert!(std::fs::read_to_string(&html).unwrap().contains("Verdict: "));
+    let (ok, _, err) = gedisim(&["report", "--dataset", ds.to_str().unwrap(), "--diagnosis", ds.to_str().unwrap()]);
+    assert!(!ok && err.trim().lines().count() == 1 && err.contains("diagnosis.json"), "{err}");
     // Again: the world is reused and run finds nothing new.
     let (ok, _, err) = gedisim(&["demo", "--out", o, "--passes", "1"]);
     assert!(ok, "{err}");

@@ -13,7 +13,7 @@ use std::path::Path;
 use arrow::array::{Array, AsArray, RecordBatch};
 use arrow::datatypes::{DataType, Float32Type, Float64Type, Int64Type, UInt64Type};
 use gedisim::dataset::Dataset;
-use gedisim::ops::report::run_report;
+use gedisim::ops::report::{run_report, ReportOptions};
 
 const N_SHOTS: usize = 90;
 
@@ -22,6 +22,7 @@ fn full_dataset(dir: &Path) -> Dataset {
     study::write_results(&ds, &study::synthetic_results(N_SHOTS));
     study::write_offsets(&ds, 12);
     study::write_shots_and_sim(&ds, N_SHOTS);
+    study::write_tiles(&ds);
     ds
 }
 
@@ -86,7 +87,7 @@ fn report_tables_contracts_and_msd_identity() {
     let dir = tempfile::tempdir().unwrap();
     let ds = full_dataset(&dir.path().join("ds"));
     let progress = common::Recorder::default();
-    let summary = run_report(&ds, None, &Default::default(), &progress).unwrap();
+    let summary = run_report(&ds, &Default::default(), &Default::default(), &progress).unwrap();
     let steps = progress.events.lock().unwrap();
     let out = ds.root().join("report");
     assert_eq!(summary.dir, out);
@@ -126,6 +127,32 @@ fn report_tables_contracts_and_msd_identity() {
     // The planted ground error of a3 (−0.5 m, noise 0.3 m) shows in its bias over all shots.
     let a3 = (0..gd.num_rows()).find(|&i| ga[i] == "a3" && gg[i] == "all").unwrap();
     assert!((gb[a3] + 0.5).abs() < 0.15, "a3 bias {}", gb[a3]);
+
+    // rh_agreement (the 1:1 scatter's figures): bias = simulated − aligned GEDI, RMSE and R² of
+    // RH98 and RH50, the default algorithm, recomputed from the rows.
+    let ag = study::read(&out.join("rh_agreement.parquet"));
+    let (aw, am, an) = (s(&ag, "weighting"), s(&ag, "metric"), f(&ag, "n"));
+    let (ab, ar, ar2) = (f(&ag, "bias"), f(&ag, "rmse"), f(&ag, "r2"));
+    assert_eq!(ag.num_rows(), 6);
+    for i in 0..ag.num_rows() {
+        let k = if am[i] == "RH98" { 98 } else { 50 };
+        let pairs: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| r.weighting == aw[i] && r.algorithm == "default")
+            .map(|r| (r.yhat[k], r.y[k]))
+            .collect();
+        let n = pairs.len() as f64;
+        assert_eq!(an[i], n);
+        let bias = pairs.iter().map(|(p, y)| p - y).sum::<f64>() / n;
+        let rmse = (pairs.iter().map(|(p, y)| (p - y) * (p - y)).sum::<f64>() / n).sqrt();
+        let (mp, my) = (pairs.iter().map(|p| p.0).sum::<f64>() / n, pairs.iter().map(|p| p.1).sum::<f64>() / n);
+        let cov: f64 = pairs.iter().map(|(p, y)| (p - mp) * (y - my)).sum();
+        let (vp, vy): (f64, f64) =
+            (pairs.iter().map(|(p, _)| (p - mp).powi(2)).sum(), pairs.iter().map(|(_, y)| (y - my).powi(2)).sum());
+        let r2 = cov * cov / (vp * vy);
+        assert!((ab[i] - bias).abs() < 1e-6 && (ar[i] - rmse).abs() < 1e-6, "{} {}: {} {}", aw[i], am[i], ab[i], bias);
+        assert!((ar2[i] - r2).abs() < 1e-6, "{} {}: R² {} vs {r2}", aw[i], am[i], ar2[i]);
+    }
 
     // msd: exact contract, identity, and equality with the direct mean of (y − ŷ)² over RH1..RH99.
     let msd = study::read(&out.join("msd.parquet"));
@@ -296,7 +323,7 @@ fn figures_html_and_geoparquet() {
             std::fs::copy(e.path(), keep.join(e.file_name())).unwrap();
         }
     }
-    for name in ["msd_bars", "bias_profiles", "phenology", "collocation", "waveforms"] {
+    for name in ["msd_bars", "bias_profiles", "phenology", "collocation", "waveforms", "rh_scatter", "shot_map"] {
         let png = out.join(format!("{name}.png"));
         let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
         let reader = decoder.read_info().unwrap();
@@ -305,12 +332,25 @@ fn figures_html_and_geoparquet() {
         let svg = std::fs::read_to_string(out.join(format!("{name}.svg"))).unwrap();
         assert!(svg.starts_with("<svg") && svg.contains("</svg>"), "{name}");
         assert!(
-            svg.contains("RH percentile") || svg.contains("elevation") || svg.contains("Pearson"),
+            ["RH percentile", "elevation", "Pearson", "aligned GEDI RH98", "north"].iter().any(|t| svg.contains(t)),
             "{name}: axis text in the SVG"
         );
     }
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
-    assert_eq!(html.matches("data:image/png;base64,").count(), 5);
+    assert_eq!(html.matches("data:image/png;base64,").count(), 7);
+    // Units in the headers; every numeric column of every table has a known unit.
+    for th in ["<th>bias (m)</th>", "<th>msd (m²)</th>", "<th>leaf_off_pct (%)</th>", "<th>r2</th>"] {
+        assert!(html.contains(th), "{th}");
+    }
+    for e in std::fs::read_dir(&out).unwrap().flatten().filter(|e| e.path().extension().is_some_and(|x| x == "parquet"))
+    {
+        for field in study::read(&e.path()).schema().fields() {
+            if field.data_type().is_numeric() {
+                let name = field.name();
+                assert!(gedisim::ops::report::html::unit(name).is_some(), "{:?}: no unit for {name}", e.file_name());
+            }
+        }
+    }
     for t in ["ground_detection", "msd", "bias_summary", "phenology", "dataset_summary", "collocation"] {
         assert!(html.contains(&format!("href=\"{t}.csv\"")), "{t}");
     }
@@ -389,7 +429,13 @@ fn results_alone_skips_what_needs_other_tables() {
     }
     study::write_results(&ds, &rows);
     let out = dir.path().join("elsewhere");
-    let summary = run_report(&ds, Some(&out), &Default::default(), &gedisim::ops::progress::NoProgress).unwrap();
+    let summary = run_report(
+        &ds,
+        &ReportOptions { out: Some(out.clone()), diagnosis: None },
+        &Default::default(),
+        &gedisim::ops::progress::NoProgress,
+    )
+    .unwrap();
     let skipped: HashMap<String, Vec<String>> = summary.skipped.iter().cloned().collect();
     assert_eq!(skipped["collocation"], ["offsets"]);
     assert_eq!(skipped["waveform_examples"], ["shots", "sim"]);

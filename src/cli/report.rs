@@ -15,6 +15,9 @@ pub struct ReportArgs {
     /// Output directory (default <dataset>/report).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Show a diagnosis in report.html: the folder `gedisim diagnose --out` wrote.
+    #[arg(long, value_name = "DIR")]
+    diagnosis: Option<PathBuf>,
     /// Run the report's queries on the Ballista cluster whose scheduler is at this address
     /// (`gedisim cluster`); every node must see the dataset at the same path.
     #[arg(long, value_name = "df://HOST:PORT")]
@@ -24,7 +27,8 @@ pub struct ReportArgs {
 pub fn report(a: ReportArgs) -> Result<()> {
     let ds = super::reporters::writer(&a.dataset)?;
     let engine = a.cluster.map(gedisim::ops::report::Engine::Cluster).unwrap_or_default();
-    let s = gedisim::ops::report::run_report(&ds, a.out.as_deref(), &engine, &Bars::new())?;
+    let opts = gedisim::ops::report::ReportOptions { out: a.out, diagnosis: a.diagnosis };
+    let s = gedisim::ops::report::run_report(&ds, &opts, &engine, &Bars::new())?;
     for (name, rows) in &s.tables {
         eprintln!("{name}: {rows} rows");
     }

@@ -125,6 +125,25 @@ pub fn results_batch(rows: &[ResultInput]) -> Result<RecordBatch> {
     RecordBatch::try_new(results_schema(), columns).map_err(|e| Error::table("results", e))
 }
 
+/// Shots of the results table (`dataset`'s `results/`) by `vertical_reference`: how GEDI's ground
+/// was brought into the ALS datum, counted once per shot (rows of the `count` weighting and the
+/// `default` algorithm).
+pub fn vertical_references(dataset: &super::Dataset) -> Result<std::collections::BTreeMap<String, usize>> {
+    let mut counts = std::collections::BTreeMap::new();
+    let files = dataset.visible_files("results").map_err(|e| Error::file(dataset.root(), e))?;
+    for path in files {
+        let columns = ["weighting", "algorithm", "vertical_reference"];
+        super::read::for_each_batch(&path, Some(&columns), None, |c| {
+            let (w, a, v) = (c.strings("weighting")?, c.strings("algorithm")?, c.strings("vertical_reference")?);
+            for i in (0..c.num_rows()).filter(|&i| w.value(i) == "count" && a.value(i) == "default") {
+                *counts.entry(v.value(i).to_string()).or_insert(0) += 1;
+            }
+            Ok(())
+        })?;
+    }
+    Ok(counts)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

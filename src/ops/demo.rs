@@ -132,15 +132,21 @@ pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoRepor
     };
     let run = run_study(&run_opts, progress)?;
     let ds = Dataset::open(&ds_dir)?;
-    let report = crate::ops::report::run_report(&ds, None, &Default::default(), progress)?;
-    let headline = Headline::read(&report.dir)?;
-    // The diagnosis of the world, told nothing about the withheld effect.
+    // The diagnosis of the world, told nothing about the withheld effect; then the report, which
+    // shows it.
+    let diagnosis_dir = opts.out.join("diagnosis");
     let diagnosis = crate::ops::diagnose::diagnose_dataset(
         &ds,
-        &opts.out.join("diagnosis"),
+        &diagnosis_dir,
         &[],
         &crate::kernels::sim::PulseModel::Recorded(Default::default()),
         progress,
     )?;
+    let report_opts = crate::ops::report::ReportOptions { out: None, diagnosis: Some(diagnosis_dir) };
+    let report = crate::ops::report::run_report(&ds, &report_opts, &Default::default(), progress)?;
+    let headline = Headline {
+        vertical_references: crate::dataset::results::vertical_references(&ds)?,
+        ..Headline::read(&report.dir)?
+    };
     Ok(DemoReport { world, world_dir, run, report, headline, diagnosis })
 }

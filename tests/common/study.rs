@@ -149,6 +149,36 @@ fn gauss(z: f64, mu: f64, s: f64) -> f64 {
 
 /// Minimal `shots` and `sim` tables for the first `n` shots: positions around (5°E, 45°N), a real
 /// waveform (ground + canopy Gaussians over noise 200 counts) and three simulated ones.
+/// A `tiles` table of two 1 km tiles under the shots of [`write_shots_and_sim`] (only the columns
+/// the report's `tile_extents` reads).
+#[allow(dead_code)]
+pub fn write_tiles(ds: &Dataset) {
+    let schema = Arc::new(Schema::new(vec![
+        Field::new("tile", DataType::Utf8, false),
+        Field::new("xmin", DataType::Float64, false),
+        Field::new("ymin", DataType::Float64, false),
+        Field::new("xmax", DataType::Float64, false),
+        Field::new("ymax", DataType::Float64, false),
+        Field::new("n_points", DataType::UInt64, false),
+        Field::new("epsg", DataType::UInt32, false),
+    ]));
+    let f64s = |v: [f64; 2]| Arc::new(Float64Array::from(v.to_vec())) as ArrayRef;
+    let b = RecordBatch::try_new(
+        schema.clone(),
+        vec![
+            Arc::new(StringArray::from(vec!["west", "east"])),
+            f64s([899_900.0, 1_199_900.0]),
+            f64s([6_399_900.0, 6_399_900.0]),
+            f64s([900_900.0, 1_200_900.0]),
+            f64s([6_400_900.0, 6_400_900.0]),
+            Arc::new(UInt64Array::from(vec![1000, 1000])),
+            Arc::new(UInt32Array::from(vec![2154, 2154])),
+        ],
+    )
+    .unwrap();
+    write_parquet(&ds.table_file("tiles", "t").unwrap(), schema, &[b], &Default::default()).unwrap();
+}
+
 pub fn write_shots_and_sim(ds: &Dataset, n: usize) {
     let list = || ListBuilder::new(Float32Builder::new());
     let (mut rx, mut sim_wave) = (list(), list());
@@ -211,6 +241,9 @@ pub fn write_shots_and_sim(ds: &Dataset, n: usize) {
         Field::new("rx_waveform", lf(), true),
         Field::new("noise_mean_corrected", DataType::Float64, true),
         Field::new("elev_lowestmode", DataType::Float64, true),
+        Field::new("granule", DataType::Utf8, false),
+        Field::new("x", DataType::Float64, true),
+        Field::new("y", DataType::Float64, true),
     ]));
     let shots = RecordBatch::try_new(
         shots_schema.clone(),
@@ -229,6 +262,10 @@ pub fn write_shots_and_sim(ds: &Dataset, n: usize) {
             Arc::new(rx.finish()),
             f64s(noise),
             f64s(elev),
+            Arc::new((0..n).map(|_| Some("GEDI02_A_2019108080338_O01964_T05337_02_001_01")).collect::<StringArray>()),
+            // Two areas 300 km apart (Lambert-93 metres), as shots on two tiles would be.
+            f64s((0..n).map(|i| 900_000.0 + (i % 2) as f64 * 300_000.0 + i as f64 * 25.0).collect()),
+            f64s((0..n).map(|i| 6_400_000.0 + i as f64 * 15.0).collect()),
         ],
     )
     .unwrap();

@@ -57,9 +57,9 @@ impl Moments {
         }
     }
 
-    /// Bias (real − simulated) of percentile k.
+    /// Bias of percentile k, simulated − real (the study's sign, docs/diagnosis.md "Signs").
     pub fn bias(&self, k: usize) -> f64 {
-        (self.sy[k] - self.sp[k]) / self.n
+        (self.sp[k] - self.sy[k]) / self.n
     }
 
     /// Kobayashi–Salam split of percentile k (population moments).
@@ -81,7 +81,7 @@ pub struct GapSums {
     pub rh: Moments,
     /// ALS frame.
     pub als: Moments,
-    /// Σ and Σ² of the ground difference (real − simulated, m).
+    /// Σ and Σ² of the ground difference, real − simulated (GEDI ground − ALS ground, m).
     pub ground: [f64; 2],
     /// Shots the pairs come from (the pairs of one shot share its waveform, so the standard
     /// error of a bias counts shots, not pairs).
@@ -212,6 +212,19 @@ mod tests {
         assert!((m.mean_abs_bias_als - 1.0).abs() < 1e-9);
         assert!((m.mean_abs_bias - 0.5).abs() < 1e-9);
         assert!((m.ground_bias - 1.0).abs() < 1e-12);
+        // GEDI's RH points sit 1 m higher above the ALS ground than the simulated ones: the
+        // simulation is 1 m short in that frame (simulated − real = −1 m).
+        assert!(m.bias_als.iter().all(|b| (b + 1.0).abs() < 1e-6), "{:?}", &m.bias_als[..3]);
+    }
+
+    #[test]
+    fn bias_is_simulated_minus_real() {
+        // Simulated canopy 2 m taller than GEDI's at every percentile, same grounds.
+        let mut s = GapSums::default();
+        s.add(&rh(|k| k as f32 * 0.2), 100.0, &rh(|k| k as f32 * 0.2 + 2.0), 100.0);
+        let m = s.metrics();
+        assert!(m.bias_rh.iter().chain(&m.bias_als).all(|b| (b - 2.0).abs() < 1e-6), "{:?}", &m.bias_rh[..3]);
+        assert!(m.ground_bias.abs() < 1e-12);
     }
 
     #[test]

@@ -18,6 +18,11 @@ pub type Params = BTreeMap<String, ParamValue>;
 /// The whole file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DiagnosisJson {
+    /// The sign of every bias in the file.
+    pub signs: Signs,
+    /// The verdict in a few lines, as `gedisim diagnose` prints it.
+    #[serde(default)]
+    pub summary: Vec<String>,
     pub baseline: Baseline,
     /// The nominal chain's held-out gap (every effect's "before").
     pub nominal_chain: Gap,
@@ -35,6 +40,26 @@ pub struct DiagnosisJson {
     pub where_: WhereJson,
     pub shots: ShotsJson,
     pub settings: Settings,
+}
+
+/// The sign conventions (the study's, the same as the report's).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Signs {
+    pub rh_bias: String,
+    pub ground_bias: String,
+    pub waveform_residual: String,
+}
+
+impl Default for Signs {
+    fn default() -> Self {
+        Signs {
+            rh_bias: "simulated − GEDI RH (m); in the ALS frame, simulated − GEDI RH brought onto the ALS ground"
+                .into(),
+            ground_bias: "GEDI ground − ALS ground (m), GEDI's elev_lowestmode in the ALS datum through the geoid"
+                .into(),
+            waveform_residual: "simulated − real normalised waveform".into(),
+        }
+    }
 }
 
 /// The study's baseline gap.
@@ -285,6 +310,8 @@ impl DiagnosisJson {
             finite(w.percentiles.iter().map(f).sum::<f64>() / N_PCT as f64)
         };
         DiagnosisJson {
+            signs: Signs::default(),
+            summary: Vec::new(),
             baseline: Baseline {
                 description: "study baseline: real RH of the selected algorithm as stored vs noise-free simulated RH \
                               (count, 15 ns, σf 5.5 m) from the ALS ground, per-beam collocated, nominal geoid"

@@ -40,7 +40,8 @@ pub struct WaveResidual {
     pub height: Vec<f64>,
     pub real: Vec<f64>,
     pub simulated: Vec<f64>,
-    /// real − simulated (fraction of the waveform energy per bin).
+    /// simulated − real (fraction of the waveform energy per bin): positive where the simulation
+    /// puts energy that GEDI did not record.
     pub residual: Vec<f64>,
     pub n_shots: usize,
 }
@@ -133,7 +134,7 @@ pub fn residual(cases: &[ShotCase]) -> WaveResidual {
     real.iter_mut().chain(sim.iter_mut()).for_each(|v| *v *= scale);
     WaveResidual {
         height: heights(),
-        residual: real.iter().zip(&sim).map(|(a, b)| a - b).collect(),
+        residual: sim.iter().zip(&real).map(|(s, r)| s - r).collect(),
         real,
         simulated: sim,
         n_shots: n,

@@ -98,12 +98,12 @@ where
     Ok(())
 }
 
-fn font(size: u32) -> TextStyle<'static> {
+pub(super) fn font(size: u32) -> TextStyle<'static> {
     (FAMILY, size).into_font().color(&BLACK)
 }
 
 /// Axis tick text: at most two decimals, trailing zeros dropped (10 not 10.0, 0.25, 1.5).
-fn tick(v: &f64) -> String {
+pub(super) fn tick(v: &f64) -> String {
     let t = format!("{v:.2}");
     let t = t.trim_end_matches('0').trim_end_matches('.');
     if t == "-0" {
@@ -114,7 +114,7 @@ fn tick(v: &f64) -> String {
 }
 
 /// Colour of the fine grid lines.
-const LIGHT: RGBColor = RGBColor(236, 236, 236);
+pub(super) const LIGHT: RGBColor = RGBColor(236, 236, 236);
 
 /// Range of `values` with a margin; a fallback when empty or flat.
 fn padded_range(values: impl Iterator<Item = f64>, include_zero: bool) -> std::ops::Range<f64> {

@@ -37,6 +37,9 @@ pub struct MsdRow {
 pub struct Headline {
     pub ground: Vec<GroundRow>,
     pub msd: Vec<MsdRow>,
+    /// Shots by `results.vertical_reference` (how GEDI's ground came into the ALS datum), for the
+    /// ground table's header (`dataset::results::vertical_references`).
+    pub vertical_references: std::collections::BTreeMap<String, usize>,
 }
 
 fn read(path: &Path) -> Result<Vec<RecordBatch>> {
@@ -118,7 +121,15 @@ impl Headline {
     /// `ground_detection`, one line per algorithm: all shots, then the low and high sensitivity groups.
     pub fn ground_table(&self) -> String {
         let mut s = String::new();
-        let _ = writeln!(s, "Ground detection: GEDI ground − ALS ground, count weighting (m)");
+        let _ = writeln!(
+            s,
+            "Ground detection (m): bias = GEDI ground − ALS ground (positive: GEDI's ground is higher), per L2A \
+             algorithm, count weighting, shots kept by the study's filters"
+        );
+        if !self.vertical_references.is_empty() {
+            let refs: Vec<String> = self.vertical_references.iter().map(|(r, n)| format!("{r} ({n} shots)")).collect();
+            let _ = writeln!(s, "GEDI ground in the ALS vertical datum through: {}", refs.join(", "));
+        }
         let _ = writeln!(
             s,
             "{:<10} {:>6} {:>8} {:>7} │ {:>6} {:>8} │ {:>6} {:>8}",
@@ -213,12 +224,15 @@ mod tests {
         let h = Headline {
             ground: vec![g("default", "low", 4, 0.4), g("default", "all", 12, 0.5), g("a1", "all", 10, -0.25)],
             msd: vec![m("count", "default"), m("int", "a1")],
+            vertical_references: [("geoid".to_string(), 2), ("geoid+collocation_dz".to_string(), 10)].into(),
         };
         let t = h.ground_table();
         let lines: Vec<&str> = t.lines().collect();
-        assert_eq!(lines.len(), 4, "{t}");
-        assert!(lines[2].starts_with("default") && lines[2].contains("+0.500") && lines[2].contains("+0.400"), "{t}");
-        assert!(lines[3].starts_with("a1") && lines[3].contains("-0.250"), "{t}");
+        assert_eq!(lines.len(), 5, "{t}");
+        assert!(lines[0].contains("GEDI ground − ALS ground"), "the sign is stated: {t}");
+        assert!(lines[1].contains("geoid (2 shots), geoid+collocation_dz (10 shots)"), "{t}");
+        assert!(lines[3].starts_with("default") && lines[3].contains("+0.500") && lines[3].contains("+0.400"), "{t}");
+        assert!(lines[4].starts_with("a1") && lines[4].contains("-0.250"), "{t}");
         let t = h.msd_table();
         assert!(t.contains("4.00 (25/13/63)"), "{t}");
         let a1 = t.lines().find(|l| l.starts_with("a1")).unwrap();

@@ -14,8 +14,8 @@ use crate::error::{Error, Result};
 /// Rows shown of a table in the page (the CSV has them all).
 const MAX_ROWS: usize = 100;
 
-/// Per-percentile tables: linked only (their figures show them).
-const LINK_ONLY: [&str; 4] = ["msd_profile", "bias_profiles", "phenology", "waveform_examples"];
+/// Per-percentile and per-shot tables: linked only (their figures show them).
+const LINK_ONLY: [&str; 5] = ["msd_profile", "bias_profiles", "phenology", "waveform_examples", "shot_agreement"];
 
 /// Escape text for HTML.
 pub fn escape(s: &str) -> String {
@@ -39,12 +39,75 @@ pub fn base64(bytes: &[u8]) -> String {
     out
 }
 
+/// The unit of a numeric column of the report's tables, shown in its header (`Some("")`:
+/// a count, an identifier or a dimensionless number); `None` for a column this list does not
+/// know (a test keeps every report column known).
+pub fn unit(column: &str) -> Option<&'static str> {
+    const METRES: [&str; 20] = [
+        "bias",
+        "rmse",
+        "mean_abs_bias",
+        "mean_bias",
+        "dx",
+        "dy",
+        "dz",
+        "mean_dx",
+        "mean_dy",
+        "mean_dz",
+        "mean_dx_halfwidth",
+        "mean_dy_halfwidth",
+        "x",
+        "y",
+        "xmin",
+        "ymin",
+        "xmax",
+        "ymax",
+        "z0",
+        "ground_bias_m",
+    ];
+    const PLAIN: [&str; 14] = [
+        "n",
+        "n_shots",
+        "n_segments",
+        "n_points",
+        "percentile",
+        "r2",
+        "r_before",
+        "r_after",
+        "mean_r_before",
+        "mean_r_after",
+        "mean_gain",
+        "epsg",
+        "shot_number",
+        "step",
+    ];
+    let rh = |c: &str| c.strip_prefix("rh").is_some_and(|r| r.starts_with(|ch: char| ch.is_ascii_digit()));
+    match column {
+        c if METRES.contains(&c) || rh(c) => Some("m"),
+        "sb" | "sdsd" | "lcs" | "msd" => Some("m²"),
+        c if c.ends_with("_pct") => Some("%"),
+        c if c.ends_with("_deg") => Some("°"),
+        "mean_cover" => Some("fraction"),
+        "noise_mean" => Some("DN"),
+        c if PLAIN.contains(&c) => Some(""),
+        _ => None,
+    }
+}
+
+/// A column's header: its name and unit, `bias (m)`.
+fn header(name: &str) -> String {
+    match unit(name) {
+        Some(u) if !u.is_empty() => format!("{name} ({u})"),
+        _ => name.to_string(),
+    }
+}
+
 /// An HTML table of `b` (floats with 3 decimals), at most `max_rows` rows.
 pub fn html_table(b: &RecordBatch, max_rows: usize) -> std::result::Result<String, arrow::error::ArrowError> {
     let opts = FormatOptions::default().with_null("–");
     let mut s = String::from("<table>\n<thead><tr>");
     for f in b.schema().fields() {
-        let _ = write!(s, "<th>{}</th>", escape(f.name()));
+        let _ = write!(s, "<th>{}</th>", escape(&header(f.name())));
     }
     s.push_str("</tr></thead>\n<tbody>\n");
     let fmts = b
@@ -74,6 +137,18 @@ pub fn html_table(b: &RecordBatch, max_rows: usize) -> std::result::Result<Strin
     Ok(s)
 }
 
+/// The name a dataset is known by: its folder's name, with the parent's when the folder is named
+/// `dataset` (`gedisim run --out`, `diagnose --out` and `demo --out` make `<out>/dataset`).
+pub fn dataset_name(root: &std::path::Path) -> String {
+    let root = root.canonicalize().unwrap_or_else(|_| root.to_path_buf());
+    let name = |p: &std::path::Path| p.file_name().map(|n| n.to_string_lossy().into_owned());
+    match (name(&root), root.parent().and_then(name)) {
+        (Some(n), Some(parent)) if n == "dataset" => format!("{parent}/{n}"),
+        (Some(n), _) => n,
+        (None, _) => root.display().to_string(),
+    }
+}
+
 /// The page.
 pub fn page(
     ds: &Dataset,
@@ -81,12 +156,10 @@ pub fn page(
     summary: &ReportSummary,
     figures: &[(&str, String)],
     geo_notes: &[String],
+    diagnosis: Option<&str>,
 ) -> Result<String> {
     let mut s = String::new();
-    let title = format!(
-        "gedisim study report — {}",
-        ds.root().file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()
-    );
+    let title = format!("{} — gedisim study report", dataset_name(ds.root()));
     let _ = write!(
         s,
         "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{}</title>\n<style>\n\
@@ -104,13 +177,21 @@ pub fn page(
         s,
         "<p>Simulated GEDI RH against real GEDI RH aligned to the ALS ground \
          (<code>RH_aligned = RH_GEDI + (z_ground,GEDI − z_ALS)</code>). \
-         Bias is simulated − real unless said otherwise; ground detection is GEDI ground − ALS ground. \
+         Bias is simulated − aligned GEDI RH unless said otherwise (positive: the simulation is taller); \
+         ground detection is GEDI ground − ALS ground (positive: GEDI's ground is higher). \
          MSD split after Kobayashi &amp; Salam (2000), population moments. \
          Every table is also in this folder as Parquet and CSV; the SQL is in <code>queries/</code>.</p>"
     );
+    let mut contents = vec![("figures", "Figures")];
+    if diagnosis.is_some() {
+        contents.push(("diagnosis", "Diagnosis"));
+    }
+    contents.push(("tables", "Tables"));
+    let links: Vec<String> = contents.iter().map(|(id, name)| format!("<a href=\"#{id}\">{name}</a>")).collect();
+    let _ = writeln!(s, "<p>Contents: {}.</p>", links.join(" · "));
     // Figures first, then the tables in report order.
     if !figures.is_empty() {
-        s.push_str("<h2>Figures</h2>\n");
+        s.push_str("<h2 id=\"figures\">Figures</h2>\n");
     }
     for (name, caption) in figures {
         let png = summary.dir.join(format!("{name}.png"));
@@ -127,7 +208,10 @@ pub fn page(
     for note in &summary.figure_notes {
         let _ = writeln!(s, "<p class=\"note\">Figure not drawn — {}</p>", escape(note));
     }
-    s.push_str("<h2>Tables</h2>\n");
+    if let Some(section) = diagnosis {
+        s.push_str(section);
+    }
+    s.push_str("<h2 id=\"tables\">Tables</h2>\n");
     for t in ran {
         let _ = writeln!(
             s,
@@ -188,6 +272,31 @@ mod tests {
         ] {
             assert_eq!(base64(i.as_bytes()), o);
         }
+    }
+
+    #[test]
+    fn headers_carry_units() {
+        for (column, text) in [
+            ("bias", "bias (m)"),
+            ("rh98_sim", "rh98_sim (m)"),
+            ("msd", "msd (m²)"),
+            ("leaf_off_pct", "leaf_off_pct (%)"),
+            ("mean_slope_deg", "mean_slope_deg (°)"),
+            ("n", "n"),
+            ("algorithm", "algorithm"),
+        ] {
+            assert_eq!(header(column), text);
+        }
+        assert_eq!(unit("rhx"), None);
+    }
+
+    #[test]
+    fn dataset_names() {
+        let dir = tempfile::tempdir().unwrap();
+        let demo = dir.path().join("demo-x").join("dataset");
+        std::fs::create_dir_all(&demo).unwrap();
+        assert_eq!(dataset_name(&demo), "demo-x/dataset");
+        assert_eq!(dataset_name(&dir.path().join("demo-x")), "demo-x");
     }
 
     #[test]

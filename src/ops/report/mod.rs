@@ -6,6 +6,8 @@
 //! A query names the tables it needs on a `-- requires: a, b` line; when one is missing the query
 //! is skipped and the report says so.
 
+pub mod agreement;
+pub mod diagnosis;
 pub mod figures;
 pub mod geoparquet;
 pub mod headline;
@@ -39,6 +41,9 @@ macro_rules! query {
 /// The study's tables, in report order (the files of `queries/`, bundled).
 pub const QUERIES: &[Query] = &[
     query!("dataset_summary", "Dataset summary by forest type and beam type"),
+    query!("rh_agreement", "Simulated vs aligned GEDI RH98 and RH50: n, bias (m), RMSE (m), R²"),
+    query!("shot_agreement", "RH98 and RH50 of each shot, simulated and aligned GEDI (m), and its position"),
+    query!("tile_extents", "Extents of the ALS tiles"),
     query!("ground_detection", "Ground detection: GEDI ground − ALS ground"),
     query!("msd", "MSD of simulated vs real RH (mean over RH1–RH99), split into SB, SDSD, LCS"),
     query!("msd_profile", "MSD split per percentile"),
@@ -215,20 +220,36 @@ pub struct ReportSummary {
     pub dir: PathBuf,
 }
 
-/// `gedisim report`: the whole report into `out` (default `<dataset>/report/`), as one
-/// [`Step::Report`] whose notes name what it is doing; its queries run on `engine`.
-pub fn run_report(ds: &Dataset, out: Option<&Path>, engine: &Engine, progress: &dyn Progress) -> Result<ReportSummary> {
+/// Where `report` writes, and what else it shows.
+#[derive(Debug, Clone, Default)]
+pub struct ReportOptions {
+    /// Output directory (default `<dataset>/report/`).
+    pub out: Option<PathBuf>,
+    /// A `gedisim diagnose --out` folder whose verdict, effects and figures the page shows.
+    pub diagnosis: Option<PathBuf>,
+}
+
+/// `gedisim report`: the whole report, as one [`Step::Report`] whose notes name what it is doing;
+/// its queries run on `engine`.
+pub fn run_report(
+    ds: &Dataset,
+    opts: &ReportOptions,
+    engine: &Engine,
+    progress: &dyn Progress,
+) -> Result<ReportSummary> {
     progress.start(Step::Report, 0);
-    let summary = report(ds, out, engine, &|what| progress.note(what));
+    let summary = report(ds, opts, engine, &|what| progress.note(what));
     progress.finish();
     summary
 }
 
-fn report(ds: &Dataset, out: Option<&Path>, engine: &Engine, on_step: &dyn Fn(&str)) -> Result<ReportSummary> {
-    let dir = match out {
-        Some(d) => d.to_path_buf(),
+fn report(ds: &Dataset, opts: &ReportOptions, engine: &Engine, on_step: &dyn Fn(&str)) -> Result<ReportSummary> {
+    let dir = match &opts.out {
+        Some(d) => d.clone(),
         None => ds.root().join(tables::REPORT),
     };
+    // Read before anything is written: a bad folder fails in one line and leaves no report.
+    let diagnosis = opts.diagnosis.as_deref().map(diagnosis::section).transpose()?;
     std::fs::create_dir_all(&dir).map_err(|e| Error::file(&dir, format!("cannot create report directory: {e}")))?;
     let rt = crate::sql::runtime()?;
     let outcomes = rt.block_on(run_queries(ds, engine, &|name| on_step(&format!("query {name}"))))?;
@@ -254,6 +275,8 @@ fn report(ds: &Dataset, out: Option<&Path>, engine: &Engine, on_step: &dyn Fn(&s
             AnyFigure::Phenology(f) => figures::render(f, &dir, name)?,
             AnyFigure::Collocation(f) => figures::render(f, &dir, name)?,
             AnyFigure::Waveforms(f) => figures::render(f, &dir, name)?,
+            AnyFigure::Scatter(f) => figures::render(f, &dir, name)?,
+            AnyFigure::Map(f) => figures::render(f, &dir, name)?,
         };
         summary.figures.extend(files.iter().cloned());
         drawn.push((name, fig.caption()));
@@ -272,7 +295,7 @@ fn report(ds: &Dataset, out: Option<&Path>, engine: &Engine, on_step: &dyn Fn(&s
         on_step(&format!("{table}.geoparquet: {rows} rows"));
     }
     on_step("report.html");
-    let page = html::page(ds, &ran, &summary, &drawn, &geo_notes)?;
+    let page = html::page(ds, &ran, &summary, &drawn, &geo_notes, diagnosis.as_deref())?;
     summary.html = dir.join("report.html");
     crate::dataset::write_atomic(&summary.html, page.as_bytes())?;
     Ok(summary)
@@ -286,6 +309,8 @@ pub enum AnyFigure {
     Phenology(figures::PhenologyBands),
     Collocation(figures::CollocationScatter),
     Waveforms(figures::Waveforms),
+    Scatter(agreement::RhScatter),
+    Map(agreement::ShotMap),
 }
 
 impl AnyFigure {
@@ -308,6 +333,8 @@ impl AnyFigure {
                                           position and at the collocated offset."
                     .into()
             }
+            AnyFigure::Scatter(f) => f.caption(),
+            AnyFigure::Map(f) => f.caption(),
             AnyFigure::Waveforms(_) => {
                 "Real GEDI waveform (noise mean removed) and the simulated waveforms of the three \
                                         weightings, each scaled to unit area, on the ALS vertical datum."
@@ -347,6 +374,7 @@ pub fn floats(b: &RecordBatch, name: &str) -> Result<Vec<f64>> {
 /// Build the figures' data from the report tables.
 pub fn figure_data(ran: &[TableOutput]) -> Result<FigureData> {
     let mut fd = FigureData::default();
+    agreement::add_figures(ran, &mut fd)?;
     // MSD bars: baseline count–default and the (weighting, algorithm) of lowest MSD over all shots.
     if let (Some(msd), Some(profile)) = (table(ran, "msd"), table(ran, "msd_profile")) {
         let b = msd.batch()?;
@@ -416,7 +444,19 @@ pub fn figure_data(ran: &[TableOutput]) -> Result<FigureData> {
         let mut panels = Vec::new();
         for group in ["low", "high", "all"] {
             let mut series: Vec<figures::Series> = Vec::new();
-            for ft in crate::kernels::study::classes::FOREST_TYPES.iter().copied().chain(["all"]) {
+            let present = |ft: &str| {
+                (0..b.num_rows()).any(|i| {
+                    w[i].as_deref() == Some("count")
+                        && a[i].as_deref() == Some("default")
+                        && g[i].as_deref() == Some(group)
+                        && f[i].as_deref() == Some(ft)
+                })
+            };
+            let types: Vec<&str> =
+                crate::kernels::study::classes::FOREST_TYPES.iter().copied().filter(|ft| present(ft)).collect();
+            // One forest type alone is the same shots as `all`: drawn once and labelled so.
+            let only = types.len() == 1;
+            for ft in types.iter().copied().chain((!only).then_some("all")) {
                 let rows: Vec<usize> = (0..b.num_rows())
                     .filter(|&i| {
                         w[i].as_deref() == Some("count")
@@ -429,7 +469,12 @@ pub fn figure_data(ran: &[TableOutput]) -> Result<FigureData> {
                     continue;
                 }
                 let shots = rows.iter().map(|&i| n[i]).fold(0.0, f64::max);
-                series.push((format!("{ft} (n={shots})"), rows.iter().map(|&i| (p[i], bias[i])).collect()));
+                let label = if only {
+                    format!("{ft} (n={shots}): the only forest type (= all shots)")
+                } else {
+                    format!("{ft} (n={shots})")
+                };
+                series.push((label, rows.iter().map(|&i| (p[i], bias[i])).collect()));
             }
             if !series.is_empty() {
                 panels.push((format!("sensitivity: {group}"), series));
@@ -583,7 +628,11 @@ mod tests {
             let req = required_tables(q.sql);
             assert!(!req.is_empty(), "{} has no `-- requires:` line", q.name);
             for t in &req {
-                assert!(["results", "shots", "sim", "offsets", "strata"].contains(&t.as_str()), "{}: {t}", q.name);
+                assert!(
+                    ["results", "shots", "sim", "offsets", "strata", "tiles"].contains(&t.as_str()),
+                    "{}: {t}",
+                    q.name
+                );
             }
         }
         assert_eq!(required_tables("-- requires: results, shots\nselect 1"), ["results", "shots"]);

@@ -1,0 +1,118 @@
+//! The diagnosis in `report.html` (`gedisim report --diagnosis <dir>`, and `gedisim demo`): the
+//! verdict as `gedisim diagnose` printed it, the effects tried and the ladder, and the before/after
+//! figures, read from a `gedisim diagnose --out <dir>` folder (docs/diagnosis.md).
+
+use std::fmt::Write;
+use std::path::Path;
+
+use super::html::{base64, escape};
+use crate::error::{Error, Result};
+use crate::kernels::diagnose::json::{DiagnosisJson, TrialJson};
+use crate::kernels::scenario::effects::ParamValue;
+
+/// The figures of a diagnosis shown in the page, with their captions.
+const FIGURES: [(&str, &str); 2] = [
+    (
+        "bias_profile_before_after",
+        "Held-out RH bias (simulated − GEDI) per percentile: the study's baseline, the nominal chain and each \
+         step of the ladder, above each side's own ground and above the ALS ground.",
+    ),
+    (
+        "waveform_residual",
+        "Mean normalised real and simulated waveforms by height above the ALS ground, and their difference \
+         (simulated − real).",
+    ),
+];
+
+/// The section's HTML, from the diagnosis folder `dir`.
+pub fn section(dir: &Path) -> Result<String> {
+    let path = dir.join("diagnosis.json");
+    let text = std::fs::read_to_string(&path).map_err(|e| Error::file(&path, format!("cannot read: {e}")))?;
+    let d: DiagnosisJson = serde_json::from_str(&text)
+        .map_err(|e| Error::file(&path, format!("not a diagnosis.json of this gedisim version: {e}")))?;
+    let mut s = String::from("<h2 id=\"diagnosis\">Diagnosis</h2>\n");
+    let _ = writeln!(
+        s,
+        "<p class=\"note\">From <code>{}</code> (<code>gedisim diagnose</code>: which unmodelled effect explains \
+         the gap, judged on held-out tracks). Signs: RH bias = {}; ground bias = {}.</p>",
+        escape(&dir.display().to_string()),
+        escape(&d.signs.rh_bias),
+        escape(&d.signs.ground_bias)
+    );
+    let verdict = if d.unexplained {
+        "unexplained: no effect shrinks the held-out gap enough to be named".to_string()
+    } else {
+        let names: Vec<&str> = d.ladder.iter().map(|t| t.name.as_str()).collect();
+        format!("explained by {}", names.join(" + "))
+    };
+    let _ = writeln!(s, "<p><strong>Verdict: {}.</strong></p>", escape(&verdict));
+    if !d.summary.is_empty() {
+        s.push_str("<ul>\n");
+        for line in &d.summary {
+            let _ = writeln!(s, "<li>{}</li>", escape(line.trim()));
+        }
+        s.push_str("</ul>\n");
+    }
+    for (title, trials) in
+        [("Ladder (effects added in order)", &d.ladder), ("Every effect tried, best first", &d.effects)]
+    {
+        if trials.is_empty() {
+            continue;
+        }
+        let _ = writeln!(s, "<h3>{}</h3>", escape(title));
+        s.push_str(&trial_table(trials));
+    }
+    for (name, caption) in FIGURES {
+        let png = dir.join(format!("{name}.png"));
+        let bytes = std::fs::read(&png).map_err(|e| Error::file(&png, format!("cannot read: {e}")))?;
+        let _ = writeln!(
+            s,
+            "<figure><img alt=\"{}\" src=\"data:image/png;base64,{}\">\n<figcaption>{}</figcaption></figure>",
+            escape(name),
+            base64(&bytes),
+            escape(caption)
+        );
+    }
+    Ok(s)
+}
+
+/// Effects with their parameters and held-out figures (units in the headers).
+fn trial_table(trials: &[TrialJson]) -> String {
+    let mut s = String::from(
+        "<table>\n<thead><tr><th>effect</th><th>parameters</th><th>held-out gap before (m)</th>\
+         <th>after (m)</th><th>shrink (%)</th><th>95 % CI (%)</th><th>note</th></tr></thead>\n<tbody>\n",
+    );
+    let num = |v: Option<f64>, scale: f64| v.map_or("–".to_string(), |x| format!("{:.2}", x * scale));
+    let pct = |v: Option<f64>| v.map_or("–".to_string(), |x| format!("{:.0}", 100.0 * x));
+    for t in trials {
+        let params: Vec<String> = t
+            .params
+            .iter()
+            .map(|(k, v)| match v {
+                ParamValue::Number(x) => format!("{k} = {x:.3}"),
+                other => format!("{k} = {other}"),
+            })
+            .collect();
+        let h = &t.held_out;
+        let note = match (&t.at_bound, &t.equivalent_to) {
+            (_, Some(e)) => format!("equivalent to the simpler {}", e.name),
+            (Some(b), None) => format!("fit on the edge of its range ({b})"),
+            (None, None) => String::new(),
+        };
+        let _ = writeln!(
+            s,
+            "<tr><td>{}</td><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td>\
+             <td class=\"num\">{} to {}</td><td>{}</td></tr>",
+            escape(&t.name),
+            escape(&params.join(", ")),
+            num(h.mean_abs_bias_rh1_99_before, 1.0),
+            num(h.mean_abs_bias_rh1_99_after, 1.0),
+            pct(h.shrink),
+            pct(h.ci95[0]),
+            pct(h.ci95[1]),
+            escape(&note)
+        );
+    }
+    s.push_str("</tbody>\n</table>\n");
+    s
+}
