@@ -180,6 +180,24 @@ fn control_world_is_unexplained() {
     check_contract(&d);
     assert_eq!(d["unexplained"], true, "{:#}", d["effects"][0]);
     assert!(d["ladder"].as_array().unwrap().is_empty());
+    // The same inputs again: the diagnosis is reused, and `--json` says what it found.
+    let (world, out) = (tmp.path().join("world"), tmp.path().join("diagnosis"));
+    let g = world.join("gedi");
+    let (g, a, o) = (g.to_str().unwrap(), world.join("als"), out.to_str().unwrap());
+    let args = ["diagnose", "--als", a.to_str().unwrap(), "--l1b", g, "--l2a", g, "--out", o, "--json"];
+    let (ok, stdout, err) = gedisim(&args);
+    assert!(ok, "{err}");
+    assert!(err.contains("inputs unchanged") && err.contains("diagnosis reused"), "{err}");
+    let j: Value = serde_json::from_str(stdout.trim()).unwrap_or_else(|e| panic!("{e}: {stdout}"));
+    assert_eq!(j["unexplained"], true);
+    assert_eq!(j["summary"], d["summary"]);
+    assert_eq!(j["shots"], d["shots"]);
+    assert!(j["files"].as_array().unwrap().len() >= 10);
+    // --force recomputes: the same verdict (the diagnosis is deterministic).
+    let (ok, stdout, err) = gedisim(&[&args[..], &["--force"]].concat());
+    assert!(ok && !err.contains("diagnosis reused"), "{err}");
+    let again: Value = serde_json::from_str(stdout.trim()).unwrap();
+    assert_eq!(again["summary"], d["summary"]);
 }
 
 #[test]

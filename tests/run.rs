@@ -316,6 +316,16 @@ fn rerun_does_nothing_and_a_granule_added_later_is_processed_alone() {
     assert!(ok, "{err}");
     assert!(err.contains("nothing new") && err.contains("nothing simulated"), "{err}");
     assert!(out.contains("rows kept") && out.contains("quality_flag = 1 and degrade_flag = 0"), "{out}");
+    // For scripts: `--json` on stdout, `-q` silences stderr; `--dataset` names the dataset as in
+    // every other command (`--out` still works, above).
+    let (ok, out, err) = gedisim(&["run", "--dataset", ds_dir.to_str().unwrap(), "--json", "-q"]);
+    assert!(ok, "{err}");
+    assert!(err.is_empty(), "-q: {err}");
+    let j: serde_json::Value = serde_json::from_str(out.trim()).unwrap_or_else(|e| panic!("{e}: {out}"));
+    assert_eq!(j["nothing_new"], true);
+    assert_eq!(j["rows"]["kept"].as_u64(), Some(r3.rows()));
+    assert_eq!(j["granules"]["in_dataset"].as_u64(), Some(3));
+    assert_eq!(j["filters"].as_array().unwrap().len(), gedisim::kernels::study::select::Filter::ALL.len());
 }
 
 #[test]
@@ -380,6 +390,7 @@ fn demo_runs_on_the_bundled_tiles_and_prints_the_headline_tables() {
     let (ok, _, err) = gedisim(&["demo", "--out", o, "--passes", "1"]);
     assert!(ok, "{err}");
     assert!(err.contains("reusing") && err.contains("nothing new"), "{err}");
+    assert!(err.contains("diagnosis: inputs unchanged"), "the diagnosis is not recomputed: {err}");
     // Another effect needs --force.
     let (ok, _, err) = gedisim(&["demo", "--out", o, "--passes", "1", "--effect", "none"]);
     assert!(!ok && err.contains("--force") && err.trim().lines().count() == 1, "{err}");

@@ -1,6 +1,7 @@
 //! `gedisim cluster scheduler|executor` (feature `cluster`).
 
 use std::net::SocketAddr;
+use tracing::info;
 
 use clap::Subcommand;
 
@@ -33,18 +34,16 @@ pub enum ClusterCommand {
 }
 
 pub fn cluster(c: ClusterCommand) -> Result<()> {
-    // Ballista's own messages (warnings and up unless RUST_LOG says otherwise), on stderr.
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    // Ballista's own messages come through the command line's logger (cli/log.rs): warnings and
+    // up unless `-vv` or `RUST_LOG` says otherwise.
     match c {
         ClusterCommand::Scheduler { bind, executor_timeout } => {
-            eprintln!("gedisim cluster scheduler on {bind}");
+            info!("gedisim cluster scheduler on {bind}");
             gedisim::ops::cluster::run_scheduler(bind, executor_timeout)
         }
         ClusterCommand::Executor { scheduler, bind, concurrency } => {
             let n = concurrency.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-            eprintln!("gedisim cluster executor on {bind}, scheduler {scheduler}, {n} tasks at once");
+            info!("gedisim cluster executor on {bind}, scheduler {scheduler}, {n} tasks at once");
             gedisim::ops::cluster::run_executor(&scheduler, bind, n)
         }
     }

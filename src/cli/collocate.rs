@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 use std::time::Instant;
+use tracing::info;
 
 use clap::Args;
 
@@ -68,13 +69,13 @@ pub fn collocate(a: CollocateArgs) -> Result<()> {
     let engine = a.cluster.map(gedisim::ops::collocate::Engine::Cluster).unwrap_or_default();
     let report = gedisim::ops::collocate::collocate_on(&engine, &ds, &opts, &Bars::new())?;
     for s in &report.short_runs {
-        eprintln!("too short, not collocated: {s}");
+        info!("too short, not collocated: {s}");
     }
     let skipped: Vec<String> = report.skipped.iter().map(|(k, v)| format!("{k} {v}")).collect();
     if !skipped.is_empty() {
-        eprintln!("shots not used: {}", skipped.join(", "));
+        info!("shots not used: {}", skipped.join(", "));
     }
-    eprintln!("{} shots read, {} {} offsets → {}", report.shots, report.segments, level.name(), report.table.display());
+    info!("{} shots read, {} {} offsets → {}", report.shots, report.segments, level.name(), report.table.display());
     if a.stats {
         println!(
             "collocate: {:.2} s, CPU {:.2} s, peak RSS {:.1} MB, {} ALS points kept from {} row groups",

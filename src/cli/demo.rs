@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 use std::time::Instant;
+use tracing::info;
 
 use clap::Args;
 
@@ -40,7 +41,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
     };
     let d = gedisim::ops::demo::run_demo(&opts, &Bars::new())?;
     match &d.world {
-        Some(w) => eprintln!(
+        Some(w) => info!(
             "world: {} tiles, {} granules, {} shots, effect {} → {}",
             w.tiles,
             w.granules,
@@ -48,11 +49,11 @@ pub fn demo(a: DemoArgs) -> Result<()> {
             opts.effect,
             d.world_dir.display()
         ),
-        None => eprintln!("world: reusing {} (effect {}, seed {})", d.world_dir.display(), opts.effect, opts.seed),
+        None => info!("world: reusing {} (effect {}, seed {})", d.world_dir.display(), opts.effect, opts.seed),
     }
     print_run(&d.run);
     for (name, missing) in &d.report.skipped {
-        eprintln!("report: {name} skipped (no {} table)", missing.join(", "));
+        info!("report: {name} skipped (no {} table)", missing.join(", "));
     }
     println!();
     print!("{}", d.headline.ground_table());
@@ -62,10 +63,13 @@ pub fn demo(a: DemoArgs) -> Result<()> {
     println!("report: {}", d.report.html.display());
     println!();
     println!("Diagnosis (the withheld effect is not told; truth: {}):", d.world_dir.join("truth.json").display());
-    for line in gedisim::ops::diagnose::summary_lines(&d.diagnosis.diagnosis) {
+    if d.diagnosis.reused {
+        info!("diagnosis: inputs unchanged since {}, reused", a.out.join("diagnosis").display());
+    }
+    for line in &d.diagnosis.json.summary {
         println!("  {line}");
     }
     println!("diagnosis: {}", a.out.join("diagnosis").join("diagnosis.json").display());
-    eprintln!("demo finished in {:.0} s", start.elapsed().as_secs_f64());
+    info!("demo finished in {:.0} s", start.elapsed().as_secs_f64());
     Ok(())
 }

@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 use std::time::Instant;
+use tracing::info;
 
 use clap::Args;
 
@@ -35,6 +36,12 @@ pub struct DiagnoseArgs {
     effects: Vec<String>,
     #[command(flatten)]
     pulse: PulseArgs,
+    /// Print the verdict as one JSON object on stdout (instead of the summary lines).
+    #[arg(long)]
+    json: bool,
+    /// Diagnose again even when <out> holds the diagnosis of the same inputs.
+    #[arg(long)]
+    force: bool,
 }
 
 pub fn diagnose(a: DiagnoseArgs) -> Result<()> {
@@ -47,23 +54,47 @@ pub fn diagnose(a: DiagnoseArgs) -> Result<()> {
         None => DiagnoseInput::Chain(Box::new(a.chain.run_options(a.als, a.l1b, a.l2a, &a.out.join("dataset")))),
     };
     let pulse = a.pulse.model("recorded", None);
-    let r = gedisim::ops::diagnose::diagnose(input, &a.out, &a.effects, &pulse, &Bars::new())?;
+    let r = gedisim::ops::diagnose::diagnose(input, &a.out, &a.effects, &pulse, a.force, &Bars::new())?;
     if let Some(chain) = &r.chain {
         print_ingest_and_collocation(chain);
     }
     if let Some(c) = &r.collocated {
-        eprintln!("no offsets table: collocated per beam first ({} segments → {})", c.segments, c.table.display());
+        info!("no offsets table: collocated per beam first ({} segments → {})", c.segments, c.table.display());
     }
     let out = &r.output;
-    eprintln!(
-        "shots: {} read, {} used; dropped: {}",
-        out.cases.shots_read,
-        out.diagnosis.n_shots,
-        gedisim::ops::diagnose::dropped_text(&out.cases)
-    );
-    for line in gedisim::ops::diagnose::summary_lines(&out.diagnosis) {
-        println!("{line}");
+    let shots = &out.json.shots;
+    let dropped: Vec<String> = shots.dropped.iter().map(|d| format!("{} ({})", d.reason, d.n)).collect();
+    let dropped = if dropped.is_empty() { "none dropped".to_string() } else { dropped.join(", ") };
+    info!("shots: {} read, {} used; dropped: {dropped}", shots.read, shots.used);
+    if out.reused {
+        info!(
+            "inputs unchanged since {}: diagnosis reused (--force recomputes)",
+            a.out.join("diagnosis.json").display()
+        );
     }
-    eprintln!("diagnosis.json, tables, figures → {} ({:.1} s)", a.out.display(), start.elapsed().as_secs_f64());
+    if a.json {
+        let j = &out.json;
+        let value = serde_json::json!({
+            "out": a.out,
+            "diagnosis_json": a.out.join("diagnosis.json"),
+            "unexplained": j.unexplained,
+            "ladder": j.ladder.iter().map(|t| serde_json::json!({
+                "name": t.name, "params": t.params, "shrink": t.held_out.shrink, "ci95": t.held_out.ci95
+            })).collect::<Vec<_>>(),
+            "ambiguous_with": j.ambiguous_with,
+            "signs": j.signs,
+            "baseline": j.baseline,
+            "shots": j.shots,
+            "summary": j.summary,
+            "files": out.files,
+            "seconds": start.elapsed().as_secs_f64(),
+        });
+        println!("{value}");
+    } else {
+        for line in &out.json.summary {
+            println!("{line}");
+        }
+    }
+    info!("diagnosis.json, tables, figures → {} ({:.1} s)", a.out.display(), start.elapsed().as_secs_f64());
     Ok(())
 }

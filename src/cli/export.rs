@@ -1,6 +1,7 @@
 //! `gedisim export geoparquet`.
 
 use std::path::PathBuf;
+use tracing::info;
 
 use clap::Args;
 
@@ -21,6 +22,6 @@ pub struct ExportGeoArgs {
 
 pub fn export_geoparquet(a: ExportGeoArgs) -> Result<()> {
     let rows = gedisim::ops::export::export_geoparquet(&a.dataset, &a.table, &a.out)?;
-    eprintln!("{rows} rows → {}", a.out.display());
+    info!("{rows} rows → {}", a.out.display());
     Ok(())
 }

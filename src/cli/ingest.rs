@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 use std::time::Instant;
+use tracing::{info, warn};
 
 use clap::Args;
 
@@ -13,12 +14,15 @@ use super::reporters::{peak_rss_mb, Bars};
 
 #[derive(Args)]
 pub struct IngestAlsArgs {
-    /// LAS/LAZ files, or folders holding them.
-    #[arg(required = true)]
+    /// LAS/LAZ/COPC files or folders holding them (local, https:// or s3://).
+    #[arg(long, num_args = 1.., required_unless_present = "inputs")]
+    als: Vec<PathBuf>,
+    /// The same as --als (the form of earlier versions).
+    #[arg(hide = true)]
     inputs: Vec<PathBuf>,
     /// Dataset directory (created if needed).
-    #[arg(long)]
-    out: PathBuf,
+    #[arg(long, alias = "out")]
+    dataset: PathBuf,
     /// Keep noise (7, 18) and IGN artefact/virtual classes (64–67).
     #[arg(long)]
     keep_all_classes: bool,
@@ -43,8 +47,8 @@ pub struct IngestGediArgs {
     #[arg(long, num_args = 1..)]
     l2a: Vec<PathBuf>,
     /// Dataset directory (created if needed).
-    #[arg(long)]
-    out: PathBuf,
+    #[arg(long, alias = "out")]
+    dataset: PathBuf,
     /// Projected CRS of the shots' x, y (default: the dataset's ALS CRS, else 2154).
     #[arg(long)]
     epsg: Option<u32>,
@@ -68,29 +72,30 @@ pub struct IngestStrataArgs {
 
 pub fn ingest_als(a: IngestAlsArgs) -> Result<()> {
     let start = Instant::now();
-    let ds = super::reporters::writer(&a.out)?;
+    let inputs: Vec<PathBuf> = a.als.into_iter().chain(a.inputs).collect();
+    let ds = super::reporters::writer(&a.dataset)?;
     let windows = match a.whole_tiles {
         true => None,
         false => als::shot_windows(&ds, als::run_window_half(CollocateOptions::default().max_shift))?,
     };
     if let Some(w) = &windows {
-        eprintln!(
+        info!(
             "COPC tiles are read within {:.1} m of the dataset's {} shots (--whole-tiles reads them whole)",
             w.half(),
             w.len()
         );
     }
     let opts = AlsOptions { keep_all_classes: a.keep_all_classes, epsg: a.epsg, windows };
-    let outcomes = als::ingest(&ds, &a.inputs, &opts, &Bars::new())?;
-    super::reporters::print_fetched(&a.inputs);
+    let outcomes = als::ingest(&ds, &inputs, &opts, &Bars::new())?;
+    super::reporters::print_fetched(&inputs);
     let (mut read, mut written) = (0, 0);
     for o in &outcomes {
         match o {
             TileOutcome::Ingested { tile, points, dropped, window } => {
                 (read, written) = (read + points + dropped, written + points);
                 match window {
-                    None => eprintln!("{tile}: {points} points ({dropped} dropped by class)"),
-                    Some(w) => eprintln!(
+                    None => info!("{tile}: {points} points ({dropped} dropped by class)"),
+                    Some(w) => info!(
                         "{tile}: {points} points ({dropped} dropped by class) in {} new cells of {} m, {} read so \
                          far; COPC: {}",
                         w.cells_new,
@@ -100,7 +105,7 @@ pub fn ingest_als(a: IngestAlsArgs) -> Result<()> {
                     ),
                 }
             }
-            TileOutcome::AlreadyIngested { tile } => eprintln!("{tile}: already ingested (same content), skipped"),
+            TileOutcome::AlreadyIngested { tile } => info!("{tile}: already ingested (same content), skipped"),
         }
     }
     if a.stats {
@@ -120,17 +125,17 @@ pub fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
     if a.l1b.is_empty() && a.l2a.is_empty() {
         return Err(Error::Usage("give --l1b and/or --l2a files".into()));
     }
-    let ds = super::reporters::writer(&a.out)?;
+    let ds = super::reporters::writer(&a.dataset)?;
     let (outcomes, report) =
         gedisim::ops::ingest_gedi::ingest(&ds, &a.l1b, &a.l2a, a.epsg, a.geoid_offset, a.strict_join, &Bars::new())?;
     for w in report.warnings() {
-        eprintln!("warning: {w}");
+        warn!("{w}");
     }
     for o in outcomes {
         match o {
-            GranuleOutcome::Ingested { granule, shots } => eprintln!("{granule}: {shots} shots"),
+            GranuleOutcome::Ingested { granule, shots } => info!("{granule}: {shots} shots"),
             GranuleOutcome::AlreadyIngested { granule } => {
-                eprintln!("{granule}: already ingested (same content), skipped")
+                info!("{granule}: already ingested (same content), skipped")
             }
         }
     }
@@ -143,15 +148,15 @@ pub fn ingest_strata(a: IngestStrataArgs) -> Result<()> {
     let mut counts: Vec<_> = report.counts.iter().collect();
     counts.sort();
     let counts: Vec<String> = counts.iter().map(|(k, v)| format!("{k} {v}")).collect();
-    eprintln!("{} shots → {} ({})", report.rows, report.path.display(), counts.join(", "));
+    info!("{} shots → {} ({})", report.rows, report.path.display(), counts.join(", "));
     if report.outside > 0 || report.no_position > 0 {
-        eprintln!(
+        info!(
             "{} shots outside the raster and {} without a position: forest type `unknown`",
             report.outside, report.no_position
         );
     }
     if report.not_in_dataset > 0 {
-        eprintln!("warning: {} CSV rows name shots that are not in the dataset's shots table", report.not_in_dataset);
+        warn!("{} CSV rows name shots that are not in the dataset's shots table", report.not_in_dataset);
     }
     Ok(())
 }

@@ -1,6 +1,7 @@
 //! `gedisim l2a`.
 
 use std::path::PathBuf;
+use tracing::{info, warn};
 
 use clap::Args;
 
@@ -22,8 +23,8 @@ pub struct L2aArgs {
 pub fn l2a(a: L2aArgs) -> Result<()> {
     let r = gedisim::ops::l2a::l2a(&a.l1b, &a.algorithms, &a.out)?;
     for w in &r.warnings {
-        eprintln!("warning: {w}");
+        warn!("{w}");
     }
-    eprintln!("{} shots × {} algorithms → {} rows in {}", r.shots, a.algorithms.len(), r.rows, a.out.display());
+    info!("{} shots × {} algorithms → {} rows in {}", r.shots, a.algorithms.len(), r.rows, a.out.display());
     Ok(())
 }

@@ -10,6 +10,7 @@ mod diagnose;
 mod export;
 mod ingest;
 mod l2a;
+mod log;
 mod read_granule;
 mod report;
 mod reporters;
@@ -45,6 +46,15 @@ use sql::SqlArgs;
 pub struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Say more on stderr (-v: details, -vv: every library's too). `RUST_LOG` overrides.
+    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
+    verbose: u8,
+    /// Say only warnings and errors on stderr, without progress bars (results still go to stdout).
+    #[arg(short, long, global = true, conflicts_with = "verbose")]
+    quiet: bool,
+    /// Worker threads for simulation, ingest, collocation, diagnosis and SQL (default: one per core).
+    #[arg(long, global = true, value_name = "N")]
+    threads: Option<std::num::NonZeroUsize>,
 }
 
 #[derive(Subcommand)]
@@ -78,11 +88,16 @@ pub enum Command {
     /// Where the sim-to-real gap lies, which unmodelled effect causes it and how far it shrinks
     /// once modelled (held-out tracks) → <out>/diagnosis.json, tables, figures (docs/diagnosis.md).
     Diagnose(DiagnoseArgs),
-    /// Measurements used by the benchmarks.
+    /// Shell completions: `gedisim completions bash > ~/.local/share/bash-completion/completions/gedisim`.
+    Completions {
+        /// bash, zsh, fish, elvish or powershell.
+        shell: clap_complete::Shell,
+    },
     /// An Apache Ballista cluster that runs gedisim's SQL (built with `--features cluster`).
     #[cfg(feature = "cluster")]
     #[command(subcommand)]
     Cluster(cluster::ClusterCommand),
+    /// Measurements used by the benchmarks.
     #[command(subcommand, hide = true)]
     Bench(BenchCommand),
     /// The child process that reads one GEDI granule for the other commands (gedisim::ops::ingest_gedi::child).
@@ -115,6 +130,11 @@ pub enum BenchCommand {
 }
 
 pub fn run(cli: Cli) -> Result<()> {
+    log::init(cli.verbose, cli.quiet);
+    reporters::set_quiet(cli.quiet);
+    if let Some(n) = cli.threads {
+        gedisim::ops::threads::set(n.get())?;
+    }
     match cli.command {
         Command::Ingest(IngestCommand::Als(a)) => ingest::ingest_als(a),
         Command::Ingest(IngestCommand::Gedi(a)) => ingest::ingest_gedi(a),
@@ -131,6 +151,15 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Diagnose(a) => diagnose::diagnose(a),
         #[cfg(feature = "cluster")]
         Command::Cluster(c) => cluster::cluster(c),
+        Command::Completions { shell } => {
+            clap_complete::generate(
+                shell,
+                &mut <Cli as clap::CommandFactory>::command(),
+                "gedisim",
+                &mut std::io::stdout(),
+            );
+            Ok(())
+        }
         Command::Bench(BenchCommand::Decode { file }) => bench::bench_decode(file),
         Command::ReadGranule { request } => read_granule::read_granule(request),
     }

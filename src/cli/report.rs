@@ -1,6 +1,7 @@
 //! `gedisim report`.
 
 use std::path::PathBuf;
+use tracing::info;
 
 use super::reporters::Bars;
 use clap::Args;
@@ -30,15 +31,15 @@ pub fn report(a: ReportArgs) -> Result<()> {
     let opts = gedisim::ops::report::ReportOptions { out: a.out, diagnosis: a.diagnosis };
     let s = gedisim::ops::report::run_report(&ds, &opts, &engine, &Bars::new())?;
     for (name, rows) in &s.tables {
-        eprintln!("{name}: {rows} rows");
+        info!("{name}: {rows} rows");
     }
     for (name, missing) in &s.skipped {
-        eprintln!("{name}: skipped (no {} table)", missing.join(", "));
+        info!("{name}: skipped (no {} table)", missing.join(", "));
     }
     for note in &s.figure_notes {
-        eprintln!("figure not drawn: {note}");
+        info!("figure not drawn: {note}");
     }
-    eprintln!(
+    info!(
         "{} tables, {} figures (PNG + SVG), {} GeoParquet files → {}",
         s.tables.len(),
         s.figures.len() / 2,

@@ -2,10 +2,12 @@
 //! [`Progress`] trait; process statistics for `--stats`; and the writer lock every writing
 //! command takes ([`writer`]).
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 use std::time::Duration;
+use tracing::{debug, info};
 
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use gedisim::ops::progress::{Progress, Step};
 
@@ -19,8 +21,37 @@ impl Bars {
     }
 }
 
+/// `-q`: no bars.
+static QUIET: AtomicBool = AtomicBool::new(false);
+
+pub fn set_quiet(quiet: bool) {
+    QUIET.store(quiet, Ordering::Relaxed);
+}
+
+/// The bar's look: with its total and eta once the total is known, else the count alone (never
+/// `127/0 shots … eta 0s`).
+fn bar_style(step: Step, total: u64) -> ProgressStyle {
+    ProgressStyle::with_template(&bar_template(step, total)).expect("valid template").progress_chars("=> ")
+}
+
+fn bar_template(step: Step, total: u64) -> String {
+    if total > 0 {
+        format!(
+            "{{prefix:>11}} {{elapsed_precise}} [{{bar:40}}] {{human_pos}}/{{human_len}} {} ({{per_sec}}, eta {{eta}})",
+            step.unit()
+        )
+    } else {
+        format!("{{prefix:>11}} {{elapsed_precise}} {{spinner}} {{human_pos}} {} so far ({{per_sec}})", step.unit())
+    }
+}
+
 impl Progress for Bars {
     fn start(&self, step: Step, total: u64) {
+        debug!(
+            "{}: started{}",
+            step.label(),
+            if total > 0 { format!(" ({total} {})", step.unit()) } else { "".into() }
+        );
         let bar = if step.unit().is_empty() {
             let b = ProgressBar::new_spinner();
             b.set_message(step.label());
@@ -28,25 +59,23 @@ impl Progress for Bars {
             b
         } else {
             let b = ProgressBar::new(total);
-            b.set_style(
-                ProgressStyle::with_template(&format!(
-                    "{{prefix:>11}} {{elapsed_precise}} [{{bar:40}}] {{human_pos}}/{{human_len}} {} ({{per_sec}}, \
-                        eta {{eta}})",
-                    step.unit()
-                ))
-                .expect("valid template")
-                .progress_chars("=> "),
-            );
+            b.set_style(bar_style(step, total));
             b.set_prefix(step.label());
             b
         };
+        if QUIET.load(Ordering::Relaxed) {
+            bar.set_draw_target(ProgressDrawTarget::hidden());
+        }
         if let Some((_, old)) = self.0.lock().expect("progress lock").replace((step, bar)) {
             old.finish_and_clear();
         }
     }
 
     fn set_total(&self, total: u64) {
-        if let Some((_, b)) = self.0.lock().expect("progress lock").as_ref() {
+        if let Some((step, b)) = self.0.lock().expect("progress lock").as_ref() {
+            if !step.unit().is_empty() {
+                b.set_style(bar_style(*step, total));
+            }
             b.set_length(total);
         }
     }
@@ -59,12 +88,14 @@ impl Progress for Bars {
 
     fn note(&self, text: &str) {
         if let Some((step, b)) = self.0.lock().expect("progress lock").as_ref() {
+            debug!("{}: {text}", step.label());
             b.set_message(format!("{}: {text}", step.label()));
         }
     }
 
     fn finish(&self) {
-        if let Some((_, b)) = self.0.lock().expect("progress lock").take() {
+        if let Some((step, b)) = self.0.lock().expect("progress lock").take() {
+            debug!("{}: done in {:.1} s", step.label(), b.elapsed().as_secs_f64());
             b.finish_and_clear();
         }
     }
@@ -102,7 +133,7 @@ pub fn writer(root: &std::path::Path) -> gedisim::Result<gedisim::dataset::Datas
     let (ds, cleanup) = gedisim::dataset::Dataset::writer(root)?;
     let (tmp, orphans) = (cleanup.temporaries.len(), cleanup.orphan_points.len());
     if tmp + orphans > 0 {
-        eprintln!(
+        info!(
             "{}: removed what an interrupted writer left: {tmp} temporary file(s), \
              {orphans} als/ file(s) without a tiles/ row",
             root.display()
@@ -114,7 +145,7 @@ pub fn writer(root: &std::path::Path) -> gedisim::Result<gedisim::dataset::Datas
 /// What was fetched from each remote input (`https://…`, `s3://…`) that was read (stderr).
 pub fn print_fetched(inputs: &[std::path::PathBuf]) {
     for (input, f) in gedisim::ops::ingest_als::remote_reads(inputs) {
-        eprintln!(
+        info!(
             "{}: fetched {} of {} bytes ({:.1} %) in {} range requests",
             input.display(),
             f.bytes,
@@ -122,5 +153,22 @@ pub fn print_fetched(inputs: &[std::path::PathBuf]) {
             100.0 * f.bytes as f64 / f.size.max(1) as f64,
             f.requests
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bar_without_its_total_shows_no_total_and_no_eta() {
+        let unknown = bar_template(Step::DiagnoseSimulate, 0);
+        assert!(!unknown.contains("human_len") && !unknown.contains("eta"), "{unknown}");
+        let known = bar_template(Step::DiagnoseSimulate, 129);
+        assert!(known.contains("{human_pos}/{human_len} shots") && known.contains("eta"), "{known}");
+        // Both are valid indicatif templates.
+        for t in [0, 129] {
+            ProgressStyle::with_template(&bar_template(Step::IngestAls, t)).unwrap();
+        }
     }
 }

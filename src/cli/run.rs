@@ -1,6 +1,7 @@
 //! `gedisim run`, and the printing of what a run did (shared with `demo` and `diagnose`).
 
 use std::path::{Path, PathBuf};
+use tracing::{info, warn};
 
 use clap::Args;
 
@@ -53,8 +54,8 @@ pub struct RunArgs {
     #[command(flatten)]
     chain: ChainArgs,
     /// Dataset directory (created if needed).
-    #[arg(long)]
-    out: PathBuf,
+    #[arg(long, alias = "out")]
+    dataset: PathBuf,
     /// Keep shots at most this many days before the start or after the end of the ALS acquisition
     /// of their footprint (not applied where the tiles carry no date).
     #[arg(long, allow_hyphen_values = true, default_value_t = gedisim::kernels::study::select::DEFAULT_MAX_DAYS_APART)]
@@ -76,11 +77,14 @@ pub struct RunArgs {
     /// granule's blocks to simulate; every node must see the dataset at the same path.
     #[arg(long, value_name = "df://HOST:PORT")]
     cluster: Option<String>,
+    /// Print what the run did as one JSON object on stdout (instead of the filter table).
+    #[arg(long)]
+    json: bool,
 }
 
 pub fn run_command(a: RunArgs) -> Result<()> {
     use gedisim::ops::collocate::CollocateOptions;
-    let base = a.chain.run_options(a.als, a.l1b, a.l2a, &a.out);
+    let base = a.chain.run_options(a.als, a.l1b, a.l2a, &a.dataset);
     let opts = RunOptions {
         collocate: CollocateOptions {
             level: collocate_level(a.level),
@@ -95,8 +99,60 @@ pub fn run_command(a: RunArgs) -> Result<()> {
     };
     let _writer = super::reporters::writer(&opts.out)?;
     let report = gedisim::ops::run::run_study(&opts, &Bars::new())?;
-    print_run(&report);
+    if a.json {
+        print_ingest_and_collocation(&report);
+        println!("{}", run_json(&report));
+    } else {
+        print_run(&report);
+    }
     Ok(())
+}
+
+/// What a run did, for scripts (`run --json`; keys in docs/schemas.md, "run --json").
+pub fn run_json(r: &gedisim::ops::run::RunReport) -> serde_json::Value {
+    use gedisim::ops::ingest_als::TileOutcome;
+    use gedisim::ops::ingest_gedi::GranuleOutcome;
+    let t = &r.totals;
+    let shots_ingested: usize =
+        r.ingested.iter().map(|g| if let GranuleOutcome::Ingested { shots, .. } = g { *shots } else { 0 }).sum();
+    let points: u64 =
+        r.tiles.iter().map(|t| if let TileOutcome::Ingested { points, .. } = t { *points } else { 0 }).sum();
+    let new_tiles = r.tiles.iter().filter(|t| matches!(t, TileOutcome::Ingested { .. })).count();
+    let new_granules = r.ingested.iter().filter(|g| matches!(g, GranuleOutcome::Ingested { .. })).count();
+    let (ok, skipped) = r.granules.iter().filter_map(|g| g.simulated).fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    let filters: Vec<serde_json::Value> = gedisim::kernels::study::select::Filter::ALL
+        .iter()
+        .map(
+            |&f| serde_json::json!({"filter": f.name(), "rule": f.describe(&r.rules), "rows_removed": t.removed_by(f)}),
+        )
+        .collect();
+    serde_json::json!({
+        "dataset": r.dataset,
+        "results": r.dataset.join("results"),
+        "nothing_new": r.nothing_new(),
+        "als": {
+            "tiles_ingested": new_tiles,
+            "points_ingested": points,
+            "tiles_already_ingested": r.tiles.len() - new_tiles
+        },
+        "gedi": {
+            "granules_ingested": new_granules,
+            "shots_ingested": shots_ingested,
+            "granules_already_ingested": r.ingested.len() - new_granules
+        },
+        "collocation": r.collocation.as_ref().map(|c| serde_json::json!({
+            "granules": r.collocated.len(), "shots_read": c.shots, "segments": c.segments,
+            "short_runs": c.short_runs.len(), "table": c.table
+        })),
+        "simulation": {"shots_simulated": ok, "shots_skipped_by_simulator": skipped},
+        "granules": {"in_dataset": r.granules.len(), "results_written": r.granules_processed()},
+        "rows": {
+            "candidates": t.candidates, "kept": t.kept, "shots": t.shots, "shots_kept": t.shots_kept,
+            "acquisition_window_not_applied": t.window_unknown
+        },
+        "filters": filters,
+        "warnings": r.warnings,
+    })
 }
 
 /// What the ingest and collocation of a run did (stderr).
@@ -109,7 +165,7 @@ pub fn print_ingest_and_collocation(r: &gedisim::ops::run::RunReport) {
             .iter()
             .filter_map(|g| if let GranuleOutcome::Ingested { shots, .. } = g { Some(*shots) } else { None })
             .collect();
-        eprintln!(
+        info!(
             "GEDI: {} granules ingested ({} shots), {} already ingested",
             new.len(),
             new.iter().sum::<usize>(),
@@ -122,7 +178,7 @@ pub fn print_ingest_and_collocation(r: &gedisim::ops::run::RunReport) {
             .iter()
             .filter_map(|t| if let TileOutcome::Ingested { points, .. } = t { Some(*points) } else { None })
             .collect();
-        eprintln!(
+        info!(
             "ALS: {} tiles ingested ({} points), {} already ingested",
             new.len(),
             new.iter().sum::<u64>(),
@@ -135,7 +191,7 @@ pub fn print_ingest_and_collocation(r: &gedisim::ops::run::RunReport) {
             .collect();
         if !windows.is_empty() {
             let sum = |f: fn(&&gedisim::ops::ingest_als::WindowRead) -> u64| windows.iter().map(f).sum::<u64>();
-            eprintln!(
+            info!(
                 "     {} COPC tiles read only around the shots: {} new cells of {} m; {} of {} points decoded",
                 windows.len(),
                 sum(|w| w.cells_new as u64),
@@ -146,20 +202,20 @@ pub fn print_ingest_and_collocation(r: &gedisim::ops::run::RunReport) {
         }
     }
     for w in &r.warnings {
-        eprintln!("warning: {w}");
+        warn!("{w}");
     }
     if let Some(s) = &r.strata {
         let mut counts: Vec<_> = s.counts.iter().collect();
         counts.sort();
         let counts: Vec<String> = counts.iter().map(|(k, v)| format!("{k} {v}")).collect();
-        eprintln!("strata: {} shots ({})", s.rows, counts.join(", "));
+        info!("strata: {} shots ({})", s.rows, counts.join(", "));
     }
     match &r.collocation {
         Some(c) => {
             let skipped: Vec<String> = c.skipped.iter().map(|(k, v)| format!("{k} {v}")).collect();
             let skipped =
                 if skipped.is_empty() { String::new() } else { format!("; shots not used: {}", skipped.join(", ")) };
-            eprintln!(
+            info!(
                 "collocation: {} granules, {} shots read, {} segments solved, {} runs too short{skipped} → {}",
                 r.collocated.len(),
                 c.shots,
@@ -168,7 +224,7 @@ pub fn print_ingest_and_collocation(r: &gedisim::ops::run::RunReport) {
                 c.table.display()
             );
         }
-        None => eprintln!("collocation: every granule already collocated"),
+        None => info!("collocation: every granule already collocated"),
     }
     super::reporters::print_fetched(&r.als_inputs);
 }
@@ -181,22 +237,22 @@ pub fn print_run(r: &gedisim::ops::run::RunReport) {
     if simulated.is_empty() {
         let covered: usize = r.granules.iter().map(|g| g.covered).sum();
         if covered == 0 {
-            eprintln!("simulation: no shot footprint is covered by the ALS, nothing simulated");
+            info!("simulation: no shot footprint is covered by the ALS, nothing simulated");
         } else {
-            eprintln!("simulation: up to date, nothing simulated ({covered} covered shots)");
+            info!("simulation: up to date, nothing simulated ({covered} covered shots)");
         }
     } else {
         let (ok, skipped) = simulated.iter().filter_map(|g| g.simulated).fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-        eprintln!(
+        info!(
             "simulation: {} shots of {} granules ({ok} simulated, {skipped} skipped by the simulator)",
             ok + skipped,
             simulated.len()
         );
     }
     let written = r.granules_processed();
-    eprintln!("results: {written} granules written, {} up to date", r.granules.len() - written);
+    info!("results: {written} granules written, {} up to date", r.granules.len() - written);
     if r.nothing_new() {
-        eprintln!("nothing new since the last run: no ingest, collocation or simulation; results unchanged");
+        info!("nothing new since the last run: no ingest, collocation or simulation; results unchanged");
     }
     let t = &r.totals;
     println!(

@@ -1,6 +1,7 @@
 //! `gedisim scenario`.
 
 use std::path::PathBuf;
+use tracing::info;
 
 use clap::Args;
 
@@ -68,7 +69,7 @@ pub fn scenario(a: ScenarioArgs) -> Result<()> {
         force: a.force,
     };
     let r = gedisim::ops::scenario::make_scenario(&opts)?;
-    eprintln!(
+    info!(
         "scenario {}: {} tiles, {} granules, {} tracks, {} shots ({} dropped) → {}",
         a.effect,
         r.tiles,

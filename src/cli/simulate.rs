@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 use std::time::Instant;
+use tracing::info;
 
 use clap::Args;
 
@@ -138,14 +139,9 @@ pub fn simulate(a: SimulateArgs) -> Result<()> {
     };
     let start = Instant::now();
     let r = gedisim::ops::simulate::simulate(&opts, &Bars::new())?;
-    eprintln!(
-        "{} footprints simulated, {} skipped (see the status column) → {}",
-        r.simulated,
-        r.skipped,
-        r.out.display()
-    );
+    info!("{} footprints simulated, {} skipped (see the status column) → {}", r.simulated, r.skipped, r.out.display());
     if let Some(c) = &r.copc {
-        eprintln!("COPC: {c}, {} points within the footprints' read radius", c.points_kept);
+        info!("COPC: {c}, {} points within the footprints' read radius", c.points_kept);
     }
     super::reporters::print_fetched(&als_input);
     if a.stats {

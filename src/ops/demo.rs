@@ -140,6 +140,7 @@ pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoRepor
         &diagnosis_dir,
         &[],
         &crate::kernels::sim::PulseModel::Recorded(Default::default()),
+        false,
         progress,
     )?;
     let report_opts = crate::ops::report::ReportOptions { out: None, diagnosis: Some(diagnosis_dir) };

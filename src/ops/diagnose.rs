@@ -382,13 +382,50 @@ fn simulate_cases(
     Ok(cases)
 }
 
-/// What `diagnose` wrote.
+/// What `diagnose` wrote (or found already written for the same inputs).
 #[derive(Debug, Clone)]
 pub struct DiagnosisOutput {
-    pub diagnosis: Diagnosis,
     pub json: DiagnosisJson,
     pub files: Vec<PathBuf>,
-    pub cases: CaseReport,
+    /// The inputs were those of the diagnosis already in the folder: nothing was recomputed.
+    pub reused: bool,
+}
+
+/// The key of a diagnosis's inputs (a hex SHA-256): this binary (size, modification time),
+/// the effects and pulse asked for, and every file of the tables it reads (name, size,
+/// modification time; dataset files are written once under new names). Stored in
+/// diagnosis.json: a re-run on the same inputs reuses the diagnosis.
+fn inputs_key(ds: &Dataset, names: &[&str], pulse: &PulseModel) -> Result<String> {
+    use sha2::{Digest, Sha256};
+    let mut h = Sha256::new();
+    let stamp = |h: &mut Sha256, path: &Path| -> Result<()> {
+        let m = std::fs::metadata(path).map_err(|e| Error::file(path, e))?;
+        let mtime = m.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).unwrap_or_default();
+        h.update(format!("{}\0{}\0{}\0", path.display(), m.len(), mtime.as_nanos()));
+        Ok(())
+    };
+    h.update(format!("gedisim {}\0{}\0{pulse:?}\0", env!("CARGO_PKG_VERSION"), names.join(",")));
+    if let Ok(exe) = std::env::current_exe() {
+        stamp(&mut h, &exe)?;
+    }
+    if let PulseModel::File(p) = pulse {
+        stamp(&mut h, p)?;
+    }
+    for table in [tables::SHOTS, tables::OFFSETS, tables::ALS, tables::TILES, tables::STRATA] {
+        for f in ds.visible_files(table).unwrap_or_default() {
+            stamp(&mut h, &f)?;
+        }
+    }
+    Ok(hex::encode(h.finalize()))
+}
+
+/// The diagnosis in `out` when it was made from inputs of key `key` and all its files are there.
+fn reusable(out: &Path, key: &str) -> Option<DiagnosisOutput> {
+    let text = std::fs::read_to_string(out.join("diagnosis.json")).ok()?;
+    let json: DiagnosisJson = serde_json::from_str(&text).ok()?;
+    let files: Vec<PathBuf> = json.files.iter().map(|f| out.join(f)).collect();
+    (json.inputs_key.as_deref() == Some(key) && !files.is_empty() && files.iter().all(|f| f.is_file()))
+        .then_some(DiagnosisOutput { json, files, reused: true })
 }
 
 /// Collocation of a dataset the diagnosis makes: per beam (the baseline's horizontal collocation),
@@ -474,6 +511,7 @@ pub fn diagnose(
     out: &Path,
     effects: &[String],
     pulse: &PulseModel,
+    force: bool,
     progress: &dyn Progress,
 ) -> Result<DiagnoseReport> {
     let (root, chain) = match input {
@@ -492,18 +530,20 @@ pub fn diagnose(
     } else {
         Some(crate::ops::collocate::collocate(&ds, &diagnosis_collocation(pulse), progress)?)
     };
-    let output = diagnose_dataset(&ds, out, effects, pulse, progress)?;
+    let output = diagnose_dataset(&ds, out, effects, pulse, force, progress)?;
     Ok(DiagnoseReport { chain, collocated, output })
 }
 
 /// Diagnose the dataset into `out`: its cases read and simulated, then each effect fitted and
-/// scored as one [`Step::DiagnoseFit`] (each effect a note).
+/// scored as one [`Step::DiagnoseFit`] (each effect a note) — unless `out` holds the diagnosis
+/// of the same inputs ([`inputs_key`]) and `force` is false, which is then returned as it is.
 /// `effects`: the effects tried (names of `diagnose::fit::FITTED_EFFECTS`; empty = all).
 pub fn diagnose_dataset(
     ds: &Dataset,
     out: &Path,
     effects: &[String],
     pulse: &PulseModel,
+    force: bool,
     progress: &dyn Progress,
 ) -> Result<DiagnosisOutput> {
     let names: Vec<&str> = if effects.is_empty() {
@@ -521,6 +561,10 @@ pub fn diagnose_dataset(
             })
             .collect::<Result<_>>()?
     };
+    let key = inputs_key(ds, &names, pulse)?;
+    if let Some(done) = reusable(out, &key).filter(|_| !force) {
+        return Ok(done);
+    }
     let (cases, report) = read_cases(ds, pulse, progress)?;
     if cases.len() < 4 {
         return Err(Error::file(
@@ -532,15 +576,21 @@ pub fn diagnose_dataset(
     let d = diagnose::diagnose(cases, &names, &|step| progress.note(step));
     progress.finish();
     std::fs::create_dir_all(out).map_err(|e| Error::file(out, e))?;
-    let json =
-        DiagnosisJson { summary: summary_lines(&d), ..DiagnosisJson::of(&d, report.shots_read, &report.dropped) };
     let mut files = write_tables(&d, out)?;
     files.extend(write_figures(&d, out)?);
+    let names = files.iter().filter_map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned())).collect();
+    let json = DiagnosisJson {
+        summary: summary_lines(&d),
+        inputs_key: Some(key),
+        files: names,
+        ..DiagnosisJson::of(&d, report.shots_read, &report.dropped)
+    };
+    // diagnosis.json last: a diagnosis interrupted before it is never reused.
     let path = out.join("diagnosis.json");
     let text = serde_json::to_string_pretty(&json).map_err(|e| Error::file(&path, e))?;
     crate::dataset::write_atomic(&path, text.as_bytes())?;
     files.push(path);
-    Ok(DiagnosisOutput { diagnosis: d, json, files, cases: report })
+    Ok(DiagnosisOutput { json, files, reused: false })
 }
 
 /// "reason (n), …"

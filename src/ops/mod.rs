@@ -18,3 +18,4 @@ pub mod run;
 pub mod scenario;
 pub mod simulate;
 pub mod sql;
+pub mod threads;

@@ -69,9 +69,22 @@ pub enum Engine {
     Cluster(String),
 }
 
+/// Worker threads of the SQL engine (`--threads`); unset: one per core.
+static THREADS: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+
+/// Cap the query runtime's worker threads and each session's partitions at `n` (once per process,
+/// before the first query; `crate::ops::threads::set`).
+pub fn set_threads(n: usize) {
+    let _ = THREADS.set(n.max(1));
+}
+
 /// The runtime a command's queries run on.
 pub fn runtime() -> Result<tokio::runtime::Runtime> {
-    tokio::runtime::Runtime::new().map_err(|e| Error::Usage(format!("cannot start the query runtime: {e}")))
+    let mut b = tokio::runtime::Builder::new_multi_thread();
+    if let Some(&n) = THREADS.get() {
+        b.worker_threads(n);
+    }
+    b.enable_all().build().map_err(|e| Error::Usage(format!("cannot start the query runtime: {e}")))
 }
 
 /// A session with every table folder of `dataset` registered under its folder name (read-only)
@@ -172,7 +185,10 @@ pub async fn session_at_url(url: &Url, limits: &SessionLimits, engine: &Engine) 
 /// A session under `limits` whose plans run on `engine`, reading object stores through
 /// [`crate::io::store::Stores`]; no table or function registered.
 fn new_session(limits: &SessionLimits, engine: &Engine) -> Result<SessionContext> {
-    let config = SessionConfig::new().with_information_schema(true);
+    let mut config = SessionConfig::new().with_information_schema(true);
+    if let Some(&n) = THREADS.get() {
+        config = config.with_target_partitions(n);
+    }
     let runtime = RuntimeEnvBuilder::new()
         .with_memory_limit(limits.memory_limit, 1.0)
         .with_object_store_registry(Arc::new(crate::io::store::Stores::default()))

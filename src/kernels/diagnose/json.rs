@@ -23,6 +23,12 @@ pub struct DiagnosisJson {
     /// The verdict in a few lines, as `gedisim diagnose` prints it.
     #[serde(default)]
     pub summary: Vec<String>,
+    /// Key of the inputs (`ops::diagnose`): a re-run on the same inputs reuses this diagnosis.
+    #[serde(default)]
+    pub inputs_key: Option<String>,
+    /// The tables and figures written beside this file.
+    #[serde(default)]
+    pub files: Vec<String>,
     pub baseline: Baseline,
     /// The nominal chain's held-out gap (every effect's "before").
     pub nominal_chain: Gap,
@@ -312,6 +318,8 @@ impl DiagnosisJson {
         DiagnosisJson {
             signs: Signs::default(),
             summary: Vec::new(),
+            inputs_key: None,
+            files: Vec::new(),
             baseline: Baseline {
                 description: "study baseline: real RH of the selected algorithm as stored vs noise-free simulated RH \
                               (count, 15 ns, σf 5.5 m) from the ALS ground, per-beam collocated, nominal geoid"
