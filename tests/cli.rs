@@ -96,3 +96,105 @@ fn ingest_als_takes_its_tiles_like_every_command_and_a_dataset_by_name() {
     let (ok, _, err) = gedisim(&["ingest", "als", "--dataset", a.to_str().unwrap()]);
     assert!(!ok && err.contains("--als"), "no tiles given: {err}");
 }
+
+/// (footprint_id, weighting) → (x, y, wave) of a `simulate` output.
+fn simulated(path: &std::path::Path) -> std::collections::BTreeMap<(String, String), (f64, f64, Vec<f32>)> {
+    use arrow::array::{Array, AsArray};
+    use arrow::datatypes::{Float32Type, Float64Type};
+    let file = std::fs::File::open(path).unwrap();
+    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap().build().unwrap();
+    let mut out = std::collections::BTreeMap::new();
+    for b in reader {
+        let b = b.unwrap();
+        let s = |n: &str| b.column_by_name(n).unwrap().as_string::<i32>().clone();
+        let f = |n: &str| b.column_by_name(n).unwrap().as_primitive::<Float64Type>().clone();
+        let (id, w, x, y, rh) = (s("footprint_id"), s("weighting"), f("x"), f("y"), b.column_by_name("wave").unwrap());
+        let rh = rh.as_list::<i32>();
+        for i in 0..b.num_rows() {
+            let r = if rh.is_null(i) { vec![] } else { rh.value(i).as_primitive::<Float32Type>().values().to_vec() };
+            out.insert((id.value(i).to_string(), w.value(i).to_string()), (x.value(i), y.value(i), r));
+        }
+    }
+    out
+}
+
+#[test]
+fn footprints_as_users_have_them_lon_lat_or_another_crs() {
+    use gedisim::kernels::geo::projection::Projector;
+    let tmp = tempfile::tempdir().unwrap();
+    let tile = data("als/lidarforfuel_2_bas_lig.laz");
+    let plots = [("p1", 368_515.0, 6_807_440.0), ("p2", 368_545.0, 6_807_475.0)];
+    let (l93, l2e) = (Projector::new(2154).unwrap(), Projector::new(27572).unwrap());
+    let lonlat: Vec<(f64, f64)> = plots.iter().map(|p| l93.unproject(p.1, p.2).unwrap()).collect();
+    let write = |name: &str, text: String| {
+        let f = tmp.path().join(name);
+        std::fs::write(&f, text).unwrap();
+        f
+    };
+    // The tiles' CRS; WGS84 degrees as a spreadsheet exports them; Lambert II étendu (EPSG:27572).
+    let xy = write(
+        "xy.csv",
+        plots.iter().map(|p| format!("{},{},{}\n", p.0, p.1, p.2)).fold("id,x,y\n".into(), |a, l| a + &l),
+    );
+    let deg = write(
+        "deg.csv",
+        plots.iter().zip(&lonlat).fold("\u{feff}plot_id;Latitude;Longitude\n".to_string(), |a, (p, (lon, lat))| {
+            a + &format!("\"{}\";{lat:.12};{lon:.12}\n", p.0)
+        }),
+    );
+    let ntf = write(
+        "ntf.csv",
+        plots.iter().zip(&lonlat).fold("plot\teasting\tnorthing\n".to_string(), |a, (p, (lon, lat))| {
+            let (x, y) = l2e.project(*lon, *lat).unwrap();
+            a + &format!("{}\t{x:.6}\t{y:.6}\n", p.0)
+        }),
+    );
+    let run = |csv: &std::path::Path, extra: &[&str]| {
+        let out = tmp.path().join(format!("{}.parquet", csv.file_stem().unwrap().to_string_lossy()));
+        let mut args = vec![
+            "simulate",
+            "--als",
+            tile.to_str().unwrap(),
+            "--footprints",
+            csv.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let (ok, _, err) = gedisim(&args);
+        (ok, err, out)
+    };
+    let (ok, err, out) = run(&xy, &[]);
+    assert!(ok, "{err}");
+    assert!(err.contains("taken in the ALS CRS EPSG:2154") && err.contains("--crs"), "said, not silent: {err}");
+    let want = simulated(&out);
+    assert_eq!(want.len(), 6);
+    for (csv, extra, said) in
+        [(&deg, &[][..], "lon, lat (WGS84) projected"), (&ntf, &["--crs", "EPSG:27572"][..], "EPSG:27572 reprojected")]
+    {
+        let (ok, err, out) = run(csv, extra);
+        assert!(ok && err.contains(said), "{err}");
+        let got = simulated(&out);
+        assert_eq!(got.keys().collect::<Vec<_>>(), want.keys().collect::<Vec<_>>());
+        for (k, (x, y, wave)) in &got {
+            let (wx, wy, want_wave) = &want[k];
+            assert!((x - wx).abs() < 1e-3 && (y - wy).abs() < 1e-3, "{k:?}: ({x}, {y}) vs ({wx}, {wy})");
+            // The same waveform: positions equal to a micrometre weigh the points alike.
+            assert_eq!(wave.len(), want_wave.len(), "{k:?}");
+            let peak = want_wave.iter().fold(0f32, |m, v| m.max(*v));
+            let worst = wave.iter().zip(want_wave).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+            assert!(worst <= 1e-4 * peak, "{k:?}: waveforms differ by {worst} (peak {peak})");
+        }
+    }
+    // A CRS that cannot be right is one line, never a guess.
+    for (csv, extra, needle) in [
+        (&deg, &["--crs", "2154"][..], "lon, lat columns are WGS84 degrees"),
+        (&xy, &["--crs", "4326"][..], "not a projected CRS"),
+        (&xy, &["--crs", "999999"][..], "not in the EPSG database"),
+    ] {
+        let (ok, err, _) = run(csv, extra);
+        assert!(!ok && err.trim().lines().count() == 1 && err.contains(needle), "{extra:?}: {err}");
+    }
+    let (ok, err, _) = run(&xy, &["--crs", "lambert"]);
+    assert!(!ok && err.contains("`lambert` is not an EPSG code"), "{err}");
+}

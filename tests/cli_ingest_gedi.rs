@@ -26,8 +26,17 @@ fn ingest_gedi_writes_shots_once_and_sql_reads_them() {
     assert!(ok, "{err}");
     assert!(err.contains("301 shots"), "{err}");
     assert!(err.contains("warning:") && err.contains("BEAM0011"), "the unpaired L2A shot is reported: {err}");
+    // No CRS named by --epsg or by tiles: the default is said, never silent.
+    assert!(err.contains("warning: shots projected to EPSG:2154") && err.contains("--epsg"), "{err}");
     let (ok, _, err) = gedisim(&args);
     assert!(ok && err.contains("already ingested"), "{err}");
+    assert!(!err.contains("shots projected to"), "the dataset has its CRS now: {err}");
+    let named = tmp.path().join("named");
+    let mut with_epsg = args.to_vec();
+    with_epsg[7] = named.to_str().unwrap();
+    with_epsg.extend(["--epsg", "2154"]);
+    let (ok, _, err) = gedisim(&with_epsg);
+    assert!(ok && !err.contains("shots projected to"), "{err}");
     assert_eq!(files_with_suffix(&ds.join("shots"), ".parquet").len(), 1);
     let q = "select count(*) as n, count(rx_waveform) as with_l1b, count(rh) as with_l2a, min(shot_number) as first \
         from shots";

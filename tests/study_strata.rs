@@ -247,10 +247,24 @@ fn csv_strata_and_its_errors() {
     assert_eq!((got[0].0, got[0].1.as_str(), got[0].2.as_str()), (42, "mixed", "csv:types.csv"));
     assert_eq!((got[1].0, got[1].1.as_str()), (19640513500108370, "broadleaf"));
     assert_eq!((got[2].0, got[2].1.as_str()), (19640513500108371, "coniferous"));
+    // The same as a spreadsheet exports it: byte-order mark, `;`, quotes, other column names.
+    std::fs::write(
+        &csv,
+        concat!(
+            "\u{feff}\"Forest\";\"Shot_ID\";note\n",
+            "\"coniferous\";19640513500108371;\"a; b\"\nBroadleaf;19640513500108370;\n"
+        ),
+    )
+    .unwrap();
+    ingest_strata(&ds, &csv, &NoProgress).unwrap();
+    let got = read_strata(&ds);
+    assert_eq!(got.len(), 2);
+    assert_eq!((got[0].0, got[0].1.as_str()), (19640513500108370, "broadleaf"));
+    assert_eq!((got[1].0, got[1].1.as_str()), (19640513500108371, "coniferous"));
 
     let cases: [(&str, &[&str]); 5] = [
-        ("shot_number,type\n1,mixed\n", &["forest_type", "missing column"]),
-        ("forest_type\nmixed\n", &["shot_number", "missing column"]),
+        ("shot_number,kind\n1,mixed\n", &["no `forest_type`", "column"]),
+        ("forest_type\nmixed\n", &["no `shot_number`", "column"]),
         ("shot_number,forest_type\n1,pine\n", &["line 2: forest_type", "pine"]),
         ("shot_number,forest_type\n1.5e3,mixed\n", &["line 2: shot_number"]),
         ("shot_number,forest_type\n1,mixed\n1,other\n", &["line 3: shot_number", "twice"]),

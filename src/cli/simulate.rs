@@ -17,10 +17,15 @@ pub struct SimulateArgs {
     /// is decoded only around the footprints, a file no footprint reaches is not read.
     #[arg(long, num_args = 1.., requires_all = ["footprints", "out"], conflicts_with = "dataset")]
     als: Vec<PathBuf>,
-    /// CSV with a header naming id, x, y (direct mode; in dataset mode, footprints to simulate
-    /// instead of the ingested shots, e.g. inventory plots).
+    /// CSV of footprints: an id (id, plot_id, …) and x, y or lon, lat columns; `,` `;` or tab
+    /// separated (direct mode; in dataset mode, footprints to simulate instead of the ingested
+    /// shots, e.g. inventory plots).
     #[arg(long)]
     footprints: Option<PathBuf>,
+    /// EPSG code of the footprints' x, y (e.g. 2154 or EPSG:2154), reprojected to the ALS CRS when
+    /// it differs (default: the ALS CRS, said on stderr). lon, lat columns are WGS84 degrees.
+    #[arg(long, value_name = "EPSG", value_parser = parse_epsg)]
+    crs: Option<u32>,
     /// Output Parquet file (direct mode; dataset mode with --footprints, default
     /// <dataset>/sim/<CSV name>.parquet).
     #[arg(long)]
@@ -136,9 +141,13 @@ pub fn simulate(a: SimulateArgs) -> Result<()> {
         pulse_before: a.pulse_before,
         pulse: a.pulse.model("gaussian", a.psigma),
         engine: a.cluster.map(gedisim::ops::simulate::Engine::Cluster).unwrap_or_default(),
+        footprints_crs: a.crs,
     };
     let start = Instant::now();
     let r = gedisim::ops::simulate::simulate(&opts, &Bars::new())?;
+    if let Some(p) = &r.placement {
+        info!("{p}");
+    }
     info!("{} footprints simulated, {} skipped (see the status column) → {}", r.simulated, r.skipped, r.out.display());
     if let Some(c) = &r.copc {
         info!("COPC: {c}, {} points within the footprints' read radius", c.points_kept);
@@ -155,4 +164,11 @@ pub fn simulate(a: SimulateArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// `2154` or `EPSG:2154`.
+fn parse_epsg(s: &str) -> std::result::Result<u32, String> {
+    let code = s.trim();
+    let code = code.strip_prefix("EPSG:").or_else(|| code.strip_prefix("epsg:")).unwrap_or(code);
+    code.parse().map_err(|_| format!("`{s}` is not an EPSG code (e.g. 2154 or EPSG:2154)"))
 }

@@ -22,48 +22,32 @@ use crate::kernels::study::classes::{self, ShotPosition, Stratum, UNKNOWN};
 /// The CRS a land-cover raster must be in.
 pub const LANDCOVER_EPSG: u16 = 3035;
 
-/// `shot_number, forest_type` rows of a CSV with a header naming both columns (any order, other
-/// columns ignored). Errors name the file, the line and the field.
+/// `shot_number, forest_type` rows of a CSV with a header naming both (any order, other columns
+/// ignored; also `shot`/`shot_id` and `forest`; separators, quotes, BOM as `io::csv_table`).
+/// Errors name the file, the line and the field.
 pub fn read_strata_csv(path: &Path) -> Result<Vec<Stratum>> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
-    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
-    let (_, header) =
-        lines.next().ok_or_else(|| Error::file(path, "empty file (expected a header `shot_number,forest_type`)"))?;
-    let names: Vec<String> = header.split(',').map(|h| h.trim().trim_matches('"').to_ascii_lowercase()).collect();
-    let col = |name: &str| {
-        names
-            .iter()
-            .position(|n| n == name)
-            .ok_or_else(|| Error::field(path, name, format!("missing column (header: `{}`)", header.trim())))
-    };
-    let (i_shot, i_type) = (col("shot_number")?, col("forest_type")?);
+    let t = crate::io::csv_table::CsvTable::read(path, "shot_number,forest_type")?;
+    let (i_shot, i_type) = (t.require(&["shot_number", "shot", "shot_id"])?, t.require(&["forest_type", "forest"])?);
     let mut seen = std::collections::HashSet::new();
     let mut out = Vec::new();
-    for (i, line) in lines {
-        let fields: Vec<&str> = line.split(',').map(|f| f.trim().trim_matches('"')).collect();
-        let at = |k: usize, name: &str| {
-            fields.get(k).copied().ok_or_else(|| Error::field(path, format!("line {}: {name}", i + 1), "missing value"))
-        };
-        let shot_text = at(i_shot, "shot_number")?;
+    for row in t.rows() {
+        let line = row.0;
+        let shot_text = t.field(row, i_shot, "shot_number")?;
         let shot_number: u64 = shot_text.parse().map_err(|_| {
-            Error::field(
-                path,
-                format!("line {}: shot_number", i + 1),
-                format!("`{shot_text}` is not an unsigned integer"),
-            )
+            Error::field(path, format!("line {line}: shot_number"), format!("`{shot_text}` is not an unsigned integer"))
         })?;
-        let type_text = at(i_type, "forest_type")?;
+        let type_text = t.field(row, i_type, "forest_type")?;
         let forest_type = classes::parse_forest_type(type_text).ok_or_else(|| {
             Error::field(
                 path,
-                format!("line {}: forest_type", i + 1),
+                format!("line {line}: forest_type"),
                 format!("`{type_text}` is not one of {}", classes::FOREST_TYPES.join(", ")),
             )
         })?;
         if !seen.insert(shot_number) {
             return Err(Error::field(
                 path,
-                format!("line {}: shot_number", i + 1),
+                format!("line {line}: shot_number"),
                 format!("shot {shot_number} appears twice"),
             ));
         }

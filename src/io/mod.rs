@@ -1,8 +1,9 @@
-//! I/O adapters: foreign formats (LAS/LAZ, GEDI HDF5, footprint CSV) read into kernel types and
+//! I/O adapters: foreign formats (LAS/LAZ, GEDI HDF5, user CSV) read into kernel types and
 //! written from them, from local files or remote objects (`source`). No sequencing of steps (that
 //! is `ops`), no Parquet tables (that is `dataset`).
 
 pub mod copc;
+pub mod csv_table;
 pub mod footprints;
 pub mod gedi;
 pub mod granule;

@@ -16,7 +16,9 @@ use crate::dataset::sim::{sim_batch, sim_metadata, sim_schema};
 use crate::dataset::{self, tables, AtomicParquet, Dataset};
 use crate::error::{Error, Result};
 use crate::io::copc::{Attributes, CopcRead, CopcTile};
+use crate::io::footprints::{Coordinates, FootprintTable};
 use crate::kernels::geo::cells::Cells;
+use crate::kernels::geo::projection::Projector;
 use crate::kernels::sim::{
     self, AlsPoints, DensityCount, Footprint, Profile, PulseModel, PulseTiming, SimConfig, Weighting,
 };
@@ -52,6 +54,8 @@ pub struct SimulateOptions {
     pub pulse: PulseModel,
     /// Dataset mode: where the simulation runs (here, or as one plan on a cluster).
     pub engine: Engine,
+    /// EPSG code of a footprint CSV's x, y (`--crs`; lon, lat columns are EPSG:4326 by name).
+    pub footprints_crs: Option<u32>,
 }
 
 /// What `gedisim simulate` did.
@@ -60,6 +64,8 @@ pub struct SimulateReport {
     pub simulated: usize,
     pub skipped: usize,
     pub out: PathBuf,
+    /// How a footprint CSV's positions were put in the ALS CRS ([`place_footprints`]).
+    pub placement: Option<String>,
     /// Direct mode from COPC tiles: what their reads decoded, summed.
     pub copc: Option<CopcRead>,
 }
@@ -68,6 +74,8 @@ pub struct SimulateReport {
 /// a COPC tile, its octree. Files that record a CRS must record the same.
 pub struct AlsInputs {
     files: Vec<(PathBuf, Option<CopcTile>, crate::io::las::TileHeader)>,
+    /// The CRS the files record (all the same), if any does.
+    epsg: Option<u32>,
 }
 
 impl AlsInputs {
@@ -94,7 +102,7 @@ impl AlsInputs {
             }
             files.push((f.clone(), tile, header));
         }
-        Ok(AlsInputs { files })
+        Ok(AlsInputs { files, epsg: crs.map(|c| c.0) })
     }
 
     /// Whether every file is a COPC tile (read in windows, so that footprints can be taken a tile
@@ -191,12 +199,72 @@ pub fn sim_config(opts: &SimulateOptions) -> Result<SimConfig> {
     Ok(cfg)
 }
 
+/// A footprint CSV's positions in the ALS CRS `als_epsg`, and one line saying how they were
+/// placed. lon, lat columns are WGS84 degrees and projected; x, y are in `crs` when given
+/// (reprojected when it differs), else taken in the ALS CRS — and the line says so. A position
+/// whose CRS cannot be known (lon, lat or `crs` over tiles that record no CRS) is an error.
+pub fn place_footprints(
+    table: &FootprintTable,
+    crs: Option<u32>,
+    als_epsg: Option<u32>,
+    csv: &Path,
+) -> Result<(Vec<Footprint>, String)> {
+    let n = table.rows.len();
+    let at = |rows: Vec<(String, f64, f64)>| rows.into_iter().map(|(id, x, y)| Footprint::at(id, x, y)).collect();
+    let reproject = |from: Option<u32>, to: u32| -> Result<Vec<Footprint>> {
+        let target = Projector::new(to)?;
+        let source = from.map(Projector::new).transpose()?;
+        let mut out = Vec::with_capacity(n);
+        for (id, a, b) in &table.rows {
+            let lonlat = match &source {
+                Some(s) => s.unproject(*a, *b),
+                None => Ok((*a, *b)),
+            };
+            let (x, y) =
+                lonlat.and_then(|(lon, lat)| target.project(lon, lat)).map_err(|e| Error::field(csv, id, e))?;
+            out.push(Footprint::at(id.clone(), x, y));
+        }
+        Ok(out)
+    };
+    let unknown = |what: &str| {
+        Error::field(csv, "CRS", format!("{what}, but the ALS tiles record no CRS: give x, y in the tiles' own frame"))
+    };
+    match (table.coordinates, crs, als_epsg) {
+        (Coordinates::LonLat, Some(c), _) if c != 4326 => {
+            Err(Error::field(csv, "CRS", format!("lon, lat columns are WGS84 degrees (EPSG:4326), not EPSG:{c}")))
+        }
+        (Coordinates::LonLat, _, Some(to)) => {
+            Ok((reproject(None, to)?, format!("{n} footprints: lon, lat (WGS84) projected to the ALS CRS EPSG:{to}")))
+        }
+        (Coordinates::LonLat, _, None) => Err(unknown("lon, lat (WGS84) positions")),
+        (Coordinates::Projected, Some(c), Some(to)) if c != to => Ok((
+            reproject(Some(c), to)?,
+            format!("{n} footprints: x, y in EPSG:{c} reprojected to the ALS CRS EPSG:{to}"),
+        )),
+        (Coordinates::Projected, Some(c), None) => Err(unknown(&format!("--crs {c}"))),
+        (Coordinates::Projected, Some(_), Some(to)) => {
+            Ok((at(table.rows.clone()), format!("{n} footprints: x, y in EPSG:{to}, the ALS CRS")))
+        }
+        (Coordinates::Projected, None, Some(to)) => Ok((
+            at(table.rows.clone()),
+            format!("{n} footprints: x, y taken in the ALS CRS EPSG:{to} (the CSV does not say; --crs to give theirs)"),
+        )),
+        (Coordinates::Projected, None, None) => Ok((
+            at(table.rows.clone()),
+            format!(
+                "{n} footprints: x, y taken in the ALS tiles' own frame (neither the CSV nor the tiles name a CRS)"
+            ),
+        )),
+    }
+}
+
 /// `gedisim simulate`: direct or dataset mode (see [`Source`]); dataset mode streams in blocks
 /// as one [`Step::Simulate`].
 pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<SimulateReport> {
     let cfg = sim_config(opts)?;
     let profile = opts.profile;
     let mut copc = None;
+    let mut placement = None;
     let ((simulated, skipped), out) = match &opts.source {
         Source::Dataset { dataset, footprints, out } => {
             let ds = Dataset::open(dataset)?;
@@ -208,7 +276,11 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
                         Some(out) => out.clone(),
                         None => ds.table_file(tables::SIM, stem)?,
                     };
-                    (crate::io::footprints::read_footprints_csv(csv)?.into_iter().map(|f| (f, None)).collect(), dest)
+                    let table = crate::io::footprints::read_footprints_csv(csv)?;
+                    let (placed, how) =
+                        place_footprints(&table, opts.footprints_crs, crate::dataset::dataset_epsg(&ds)?, csv)?;
+                    placement = Some(how);
+                    (placed.into_iter().map(|f| (f, None)).collect(), dest)
                 }
                 None if out.is_some() => return Err(Error::Usage("--out in dataset mode needs --footprints".into())),
                 None => (crate::dataset::shots::shot_footprints(&ds)?, ds.table_file(tables::SIM, "shots")?),
@@ -253,15 +325,17 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
             return Err(Error::Usage("--cluster: a cluster simulates from a dataset (--dataset)".into()))
         }
         Source::Direct { als, footprints, out, keep_all_classes } => {
-            let footprints = crate::io::footprints::read_footprints_csv(footprints)?;
+            let table = crate::io::footprints::read_footprints_csv(footprints)?;
             let inputs = AlsInputs::open(als)?;
+            let (footprints, how) = place_footprints(&table, opts.footprints_crs, inputs.epsg, footprints)?;
+            placement = Some(how);
             let drop_classes = profile == Profile::Default && !keep_all_classes;
             let (counts, read) = simulate_direct(&inputs, &footprints, &cfg, profile, drop_classes, out, progress)?;
             copc = read;
             (counts, out.clone())
         }
     };
-    Ok(SimulateReport { simulated, skipped, out, copc })
+    Ok(SimulateReport { simulated, skipped, out, placement, copc })
 }
 
 /// Give every shot footprint its recorded pulse and every other footprint (no shot, or a shot

@@ -1,8 +1,6 @@
-//! Geographic (WGS84 longitude/latitude, degrees) to projected coordinates, in pure Rust (proj4rs).
-//!
-//! proj4rs has no EPSG database unless its `crs-definitions` feature pulls one in, so the
-//! projected systems gedisim needs are defined here by their PROJ strings (as published by
-//! EPSG/IGN). Adding a system is one arm in [`proj_string`].
+//! Geographic (WGS84 longitude/latitude, degrees) to projected coordinates and back, in pure Rust
+//! (proj4rs), for any projected CRS of the EPSG database (its PROJ strings from the
+//! `crs-definitions` crate).
 
 use proj4rs::adaptors::transform_xy;
 use proj4rs::Proj;
@@ -12,37 +10,16 @@ use crate::error::{Error, Result};
 /// WGS84 geographic coordinates, the CRS of every GEDI latitude/longitude.
 const WGS84: &str = "+proj=longlat +ellps=WGS84 +datum=WGS84 +no_defs";
 
-/// The PROJ string of a supported EPSG code, or `None`.
-///
-/// Supported: 2154 (RGF93 / Lambert-93), 3942–3950 (RGF93 / CC42–CC50), 3035 (ETRS89 / LAEA
-/// Europe), 3857 (Web Mercator), 25828–25838 (ETRS89 / UTM 28N–38N), 32601–32660 and
-/// 32701–32760 (WGS84 / UTM north and south). RGF93 and ETRS89 are taken as equal to WGS84
-/// (`towgs84=0`), as PROJ does without a grid: the difference is well below a GEDI footprint.
-pub fn proj_string(epsg: u32) -> Option<String> {
-    const GRS80: &str = "+ellps=GRS80 +towgs84=0,0,0,0,0,0,0 +units=m +no_defs";
-    let s = match epsg {
-        2154 => format!("+proj=lcc +lat_0=46.5 +lon_0=3 +lat_1=49 +lat_2=44 +x_0=700000 +y_0=6600000 {GRS80}"),
-        3942..=3950 => {
-            // Conic conformal zones CC42..CC50: latitude of origin = zone, standard parallels ±0.75°.
-            let zone = (epsg - 3900) as f64;
-            let y0 = 1_200_000.0 + (zone - 42.0) * 1_000_000.0;
-            format!(
-                "+proj=lcc +lat_0={zone} +lon_0=3 +lat_1={} +lat_2={} +x_0=1700000 +y_0={y0} {GRS80}",
-                zone - 0.75,
-                zone + 0.75
-            )
+/// The PROJ string of EPSG code `epsg` when it is a projected CRS, else why not.
+pub fn proj_string(epsg: u32) -> std::result::Result<&'static str, String> {
+    let def = u16::try_from(epsg).ok().and_then(crs_definitions::from_code);
+    match def.map(|d| d.proj4) {
+        None => Err(format!("EPSG:{epsg} is not in the EPSG database")),
+        Some(p) if p.contains("+proj=longlat") || p.contains("+proj=geocent") => {
+            Err(format!("EPSG:{epsg} is not a projected CRS (x, y in metres are needed)"))
         }
-        3035 => format!("+proj=laea +lat_0=52 +lon_0=10 +x_0=4321000 +y_0=3210000 {GRS80}"),
-        3857 => {
-            "+proj=merc +a=6378137 +b=6378137 +lat_ts=0 +lon_0=0 +x_0=0 +y_0=0 +k=1 +units=m +nadgrids=@null +no_defs"
-                .to_string()
-        }
-        25828..=25838 => format!("+proj=utm +zone={} {GRS80}", epsg - 25800),
-        32601..=32660 => format!("+proj=utm +zone={} +datum=WGS84 +units=m +no_defs", epsg - 32600),
-        32701..=32760 => format!("+proj=utm +zone={} +south +datum=WGS84 +units=m +no_defs", epsg - 32700),
-        _ => return None,
-    };
-    Some(s)
+        Some(p) => Ok(p),
+    }
 }
 
 /// Projects WGS84 longitude/latitude (degrees) into one projected CRS.
@@ -61,13 +38,8 @@ impl std::fmt::Debug for Projector {
 impl Projector {
     /// A projector from WGS84 degrees to `EPSG:epsg`; an unsupported code is a usage error.
     pub fn new(epsg: u32) -> Result<Self> {
-        let def = proj_string(epsg).ok_or_else(|| {
-            Error::Usage(format!(
-                "EPSG:{epsg} is not a supported projected CRS (supported: 2154, 3942-3950, 3035, 3857, 25828-25838, \
-                    32601-32660, 32701-32760)"
-            ))
-        })?;
-        let dst = Proj::from_proj_string(&def).map_err(|e| Error::Usage(format!("EPSG:{epsg}: {e}")))?;
+        let def = proj_string(epsg).map_err(Error::Usage)?;
+        let dst = Proj::from_proj_string(def).map_err(|e| Error::Usage(format!("EPSG:{epsg}: {e}")))?;
         let src = Proj::from_proj_string(WGS84).map_err(|e| Error::Usage(format!("WGS84: {e}")))?;
         Ok(Projector { epsg, src, dst })
     }
@@ -161,8 +133,23 @@ mod tests {
     }
 
     #[test]
+    fn any_projected_epsg_code_of_the_database() {
+        // NTF (Paris) / Lambert zone II étendu, Gauss-Boaga, NZTM: none was in gedisim's earlier list.
+        for (epsg, lon, lat) in [(27572, 2.3, 46.8), (3003, 12.5, 42.0), (2193, 174.8, -41.3)] {
+            let p = Projector::new(epsg).unwrap();
+            let (x, y) = p.project(lon, lat).unwrap();
+            let (lo, la) = p.unproject(x, y).unwrap();
+            assert!((lo - lon).abs() < 1e-7 && (la - lat).abs() < 1e-7, "EPSG:{epsg}: {lo} {la}");
+        }
+        // Lambert II étendu: Paris (Panthéon, 2.3458°E 48.8463°N) at ≈ (600 km, 2 428 km).
+        let (x, y) = Projector::new(27572).unwrap().project(2.3458, 48.8463).unwrap();
+        assert!((x - 600_000.0).abs() < 2_000.0 && (y - 2_428_000.0).abs() < 2_000.0, "{x} {y}");
+    }
+
+    #[test]
     fn unsupported_and_nan_are_errors() {
-        assert!(Projector::new(1234).is_err());
+        assert!(Projector::new(1234).unwrap_err().to_string().contains("not in the EPSG database"));
+        assert!(Projector::new(4326).unwrap_err().to_string().contains("not a projected CRS"));
         let p = Projector::new(2154).unwrap();
         assert!(p.project(f64::NAN, 46.0).is_err());
         assert!(p.project(3.0, 95.0).is_err());

@@ -647,7 +647,8 @@ pub enum GranuleOutcome {
 }
 
 /// `gedisim ingest gedi`: the granules of `l1b` and `l2a` (files, or folders expanded) into
-/// `dataset`, projected to `epsg` (`None`: the dataset's ALS CRS, else 2154), as one
+/// `dataset`, projected to `epsg` (`None`: the dataset's ALS CRS, else [`DEFAULT_EPSG`], said in a
+/// note), as one
 /// [`Step::IngestGedi`] counted in granules.
 pub fn ingest(
     dataset: &crate::dataset::Dataset,
@@ -663,6 +664,7 @@ pub fn ingest(
     if l1b.is_empty() && l2a.is_empty() {
         return Err(Error::Usage("--l1b/--l2a: no GEDI01_B or GEDI02_A .h5 file found in the inputs".into()));
     }
+    let (given, had_crs) = (epsg.is_some(), crate::dataset::dataset_epsg(dataset)?.is_some());
     let epsg = match (epsg, crate::dataset::dataset_epsg(dataset)?) {
         (Some(given), Some(ds)) if given != ds => {
             return Err(Error::field(
@@ -672,14 +674,25 @@ pub fn ingest(
             ))
         }
         (Some(e), _) | (None, Some(e)) => e,
-        (None, None) => 2154,
+        (None, None) => DEFAULT_EPSG,
     };
     let opts = GediOptions { epsg, geoid_offset, strict_join };
     progress.start(Step::IngestGedi, pair_granules(&l1b, &l2a)?.0.len() as u64);
     let r = ingest_into_dataset(dataset, &l1b, &l2a, &opts, progress);
     progress.finish();
-    r
+    let (outcomes, mut report) = r?;
+    if !given && !had_crs {
+        // Never a silent default: the shots took a CRS nobody named.
+        report.notes.push(format!(
+            "shots projected to EPSG:{DEFAULT_EPSG} (Lambert-93, LiDAR HD's): neither --epsg nor ALS tiles in the \
+             dataset name a CRS; the dataset's tiles must be in it too"
+        ));
+    }
+    Ok((outcomes, report))
 }
+
+/// The CRS of the shots' x, y when neither `--epsg` nor the dataset's tiles name one.
+pub const DEFAULT_EPSG: u32 = 2154;
 
 /// Ingest L1B/L2A files into `<dataset>/shots/` (one file per granule, `<granule_key>.parquet`)
 /// and `<dataset>/granules/`. A granule whose files have the same content hashes as at its last
