@@ -198,3 +198,65 @@ fn footprints_as_users_have_them_lon_lat_or_another_crs() {
     let (ok, err, _) = run(&xy, &["--crs", "lambert"]);
     assert!(!ok && err.contains("`lambert` is not an EPSG code"), "{err}");
 }
+
+/// `gedisim` with `input` on stdin: (success, stdout, stderr).
+fn gedisim_with_stdin(args: &[&str], input: &str) -> (bool, String, String) {
+    use std::io::Write;
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gedisim"))
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child.stdin.take().unwrap().write_all(input.as_bytes()).unwrap();
+    let out = child.wait_with_output().unwrap();
+    (out.status.success(), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+}
+
+#[test]
+fn sql_like_duckdb_statements_stdin_interactive_and_rh_by_name() {
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = report_dataset(&tmp.path().join("ds"));
+    let d = ds.root().to_str().unwrap();
+    // Several statements, results in order.
+    let (ok, out, err) = gedisim(&["sql", "--dataset", d, "select 1 as first; select 2 as second"]);
+    assert!(ok, "{err}");
+    let (a, b) = (out.find("first").unwrap(), out.find("second").unwrap());
+    assert!(a < b, "{out}");
+    // RH by its percentile: rh(rh_sim, 98) is the list's element 99 (SQL lists count from 1).
+    let q = "select count(*) as n, sum(case when rh(rh_sim, 98) = rh_sim[99] and rh(rh_aligned, 0) = rh_aligned[1] \
+             then 1 else 0 end) as same from results";
+    let (ok, out, err) = gedisim(&["sql", "--dataset", d, "--format", "csv", q]);
+    assert!(ok, "{err}");
+    let row: Vec<&str> = out.lines().nth(1).unwrap().split(',').collect();
+    assert_eq!(row[0], row[1], "{out}");
+    assert!(row[0].parse::<u64>().unwrap() > 0);
+    let (ok, _, err) = gedisim(&["sql", "--dataset", d, "select rh(rh_sim, 101) from results"]);
+    assert!(!ok && err.trim().lines().count() == 1 && err.contains("0…100"), "{err}");
+    // From stdin: `-`, or nothing with a pipe.
+    for args in
+        [&["sql", "--dataset", d, "-"][..], &["sql", "--dataset", d][..], &["sql", "--dataset", d, "-f", "-"][..]]
+    {
+        let (ok, out, err) = gedisim_with_stdin(args, "select 40 + 2 as answer;\n");
+        assert!(ok && out.contains("42"), "{args:?}: {err}");
+    }
+    // --out takes one result.
+    let csv = tmp.path().join("two.csv");
+    let (ok, _, err) =
+        gedisim(&["sql", "--dataset", d, "--out", csv.to_str().unwrap(), "select 1 as a; select 2 as b"]);
+    assert!(!ok && err.contains("2 statements give results") && !csv.exists(), "{err}");
+    // Interactive: a failing statement is reported and the session goes on; a statement spans lines.
+    let input = "select 1 as a;\nselect nope from results;\nselect\n  3 as c;\n\\q\nselect 4 as never;\n";
+    let (ok, out, err) = gedisim_with_stdin(&["sql", "--dataset", d, "-i"], input);
+    assert!(ok, "{err}");
+    assert!(out.contains("| a |") && out.contains("| c |") && !out.contains("never"), "{out}");
+    assert!(err.contains("error: SQL") && err.contains("nope"), "{err}");
+    // The functions document themselves: --help and information_schema.
+    let (ok, out, _) = gedisim(&["sql", "--help"]);
+    assert!(ok && out.contains("rh(rh_list, k)") && out.contains("gedi_l2a("), "{out}");
+    let q = "select description from information_schema.routines where routine_name = 'rh'";
+    let (ok, out, err) = gedisim(&["sql", "--dataset", d, q]);
+    assert!(ok && out.contains("RH k (m) of an RH0"), "{out}{err}");
+}

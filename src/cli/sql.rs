@@ -7,16 +7,22 @@ use clap::Args;
 use gedisim::{Error, Result};
 
 #[derive(Args)]
+#[command(after_long_help = gedisim::ops::sql::functions_help())]
 pub struct SqlArgs {
     /// Dataset directory, or its URL (`s3://bucket/prefix` with the AWS_* environment, `https://…` on a
     /// WebDAV server): its tables as listed now; `gedi_simulate` needs a directory.
     #[arg(long)]
     dataset: PathBuf,
-    /// The SQL statement (or use -f).
+    /// SQL statements, separated by `;` (or -f; `-` or nothing with a pipe: read stdin; nothing at
+    /// a terminal: the interactive mode).
     query: Option<String>,
-    /// File holding the SQL statement.
+    /// File holding SQL statements (`-`: stdin).
     #[arg(short = 'f', long = "file")]
     file: Option<PathBuf>,
+    /// Interactive mode: statements ending with `;` run as they are typed, each result printed;
+    /// `\q` or end of input quits.
+    #[arg(short = 'i', long, conflicts_with_all = ["query", "file", "out"])]
+    interactive: bool,
     /// Write the result to this file (.csv, .json or .parquet) instead of printing it.
     #[arg(long)]
     out: Option<PathBuf>,
@@ -65,10 +71,21 @@ fn parse_size(s: &str) -> std::result::Result<usize, String> {
 }
 
 pub fn sql(a: SqlArgs) -> Result<()> {
+    use std::io::{IsTerminal, Read};
+    let stdin = || -> Result<String> {
+        let mut text = String::new();
+        std::io::stdin().read_to_string(&mut text).map_err(|e| Error::file("stdin", e))?;
+        Ok(text)
+    };
+    let interactive = a.interactive || (a.query.is_none() && a.file.is_none() && std::io::stdin().is_terminal());
     let query = match (a.query, a.file) {
+        _ if interactive => String::new(),
+        (Some(q), None) if q == "-" => stdin()?,
         (Some(q), None) => q,
+        (None, Some(f)) if f.as_os_str() == "-" => stdin()?,
         (None, Some(f)) => std::fs::read_to_string(&f).map_err(|e| Error::file(&f, e))?,
-        _ => return Err(Error::Usage("give either a SQL statement or -f <file>".into())),
+        (None, None) => stdin()?,
+        (Some(_), Some(_)) => return Err(Error::Usage("give either SQL statements or -f <file>, not both".into())),
     };
     let mut limits = gedisim::ops::sql::SessionLimits { allow_writes: a.allow_writes, ..Default::default() };
     if let Some(bytes) = a.memory_limit {
@@ -82,8 +99,49 @@ pub fn sql(a: SqlArgs) -> Result<()> {
         FormatArg::Json => SqlFormat::File(ResultFormat::Json),
         FormatArg::Parquet => SqlFormat::File(ResultFormat::Parquet),
     });
-    if let Some(table) = gedisim::ops::sql::sql(&a.dataset, &query, a.out.as_deref(), format, &limits, &engine)? {
-        println!("{table}");
+    if interactive {
+        let format = gedisim::ops::sql::result_format(None, format)?;
+        let session = gedisim::ops::sql::SqlSession::open(&a.dataset, &limits, &engine)?;
+        return repl(&session, format);
+    }
+    gedisim::ops::sql::sql(&a.dataset, &query, a.out.as_deref(), format, &limits, &engine, &mut |text| {
+        println!("{text}")
+    })
+}
+
+/// The interactive mode: lines gathered until one ends with `;`, then run; errors printed and
+/// the session goes on; `\q`, `quit`, `exit` or the end of input ends it.
+fn repl(session: &gedisim::ops::sql::SqlSession, format: gedisim::ops::sql::SqlFormat) -> Result<()> {
+    use std::io::{BufRead, Write};
+    eprintln!("gedisim sql: statements end with `;`, `\\q` quits; tables: SHOW TABLES; functions: gedisim sql --help");
+    let mut print = |batches: gedisim::ops::sql::StatementResult| -> Result<()> {
+        println!("{}", gedisim::ops::sql::render(&batches, format)?);
+        Ok(())
+    };
+    let mut buffer = String::new();
+    let prompt = |more: bool| {
+        eprint!("{}", if more { "     -> " } else { "gedisim> " });
+        let _ = std::io::stderr().flush();
+    };
+    prompt(false);
+    for line in std::io::stdin().lock().lines() {
+        let line = line.map_err(|e| Error::file("stdin", e))?;
+        let trimmed = line.trim();
+        if buffer.is_empty() && matches!(trimmed, "\\q" | "quit" | "exit" | "quit;" | "exit;") {
+            return Ok(());
+        }
+        buffer.push_str(&line);
+        buffer.push('\n');
+        if trimmed.ends_with(';') {
+            if let Err(e) = session.run(&buffer, &mut print) {
+                eprintln!("error: {}", gedisim::error::one_line(&e.to_string()));
+            }
+            buffer.clear();
+        }
+        prompt(!buffer.trim().is_empty());
+    }
+    if !buffer.trim().is_empty() {
+        session.run(&buffer, &mut print)?;
     }
     Ok(())
 }

@@ -10,6 +10,7 @@ pub mod link_margin_twin;
 pub mod noise_twin;
 pub mod partitions;
 pub mod rh;
+pub mod rh_at;
 pub mod simulate;
 pub mod twin;
 
@@ -265,11 +266,12 @@ pub fn statement_options(limits: &SessionLimits) -> SQLOptions {
 pub const DOC_SECTION: DocSection =
     DocSection { include: true, label: "gedisim", description: Some("GEDI waveform functions") };
 
-/// gedisim's scalar functions, one file each: `gedi_rh` ([`rh`]), `gedi_l2a` ([`l2a`]),
-/// `gedi_noise_twin` ([`noise_twin`]), `gedi_link_margin_twin` ([`link_margin_twin`]).
+/// gedisim's scalar functions, one file each: `gedi_rh` ([`rh`]), `rh` ([`rh_at`]), `gedi_l2a`
+/// ([`l2a`]), `gedi_noise_twin` ([`noise_twin`]), `gedi_link_margin_twin` ([`link_margin_twin`]).
 pub fn scalar_functions() -> Vec<ScalarUDF> {
     vec![
         ScalarUDF::new_from_impl(rh::GediRh::new()),
+        ScalarUDF::new_from_impl(rh_at::RhAt::new()),
         ScalarUDF::new_from_impl(l2a::GediL2a::new()),
         ScalarUDF::new_from_impl(twin::GediTwin::new(&noise_twin::NOISE_TWIN)),
         ScalarUDF::new_from_impl(twin::GediTwin::new(&link_margin_twin::LINK_MARGIN_TWIN)),
