@@ -67,6 +67,10 @@ fn quiet_verbose_and_threads() {
             _ => assert_eq!(a, b),
         }
     }
+    // The SQL engine's partitions follow --threads.
+    let show = "SHOW datafusion.execution.target_partitions";
+    let (ok, out, err) = gedisim(&["--threads", "3", "sql", "--dataset", d, "--format", "csv", show]);
+    assert!(ok && out.trim().ends_with(",3"), "{out}{err}");
     let (ok, _, err) = gedisim(&["report", "--dataset", d, "--threads", "0"]);
     assert!(!ok && err.contains("--threads"), "{err}");
 }
@@ -189,7 +193,9 @@ fn footprints_as_users_have_them_lon_lat_or_another_crs() {
     // A CRS that cannot be right is one line, never a guess.
     for (csv, extra, needle) in [
         (&deg, &["--crs", "2154"][..], "lon, lat columns are WGS84 degrees"),
-        (&xy, &["--crs", "4326"][..], "not a projected CRS"),
+        // x, y said to be WGS84 degrees: these metres are out of range.
+        (&xy, &["--crs", "4326"][..], "footprint `p1`: coordinate out of range"),
+        (&xy, &["--crs", "4269"][..], "not a projected CRS"),
         (&xy, &["--crs", "999999"][..], "not in the EPSG database"),
     ] {
         let (ok, err, _) = run(csv, extra);
@@ -259,4 +265,42 @@ fn sql_like_duckdb_statements_stdin_interactive_and_rh_by_name() {
     let q = "select description from information_schema.routines where routine_name = 'rh'";
     let (ok, out, err) = gedisim(&["sql", "--dataset", d, q]);
     assert!(ok && out.contains("RH k (m) of an RH0"), "{out}{err}");
+}
+
+#[test]
+fn demo_inputs_come_from_the_binary_not_the_source_tree() {
+    // An empty working directory and a cache of its own: the tiles and the L1B the scenario needs
+    // are written there from the binary, byte for byte the bundled files.
+    let tmp = tempfile::tempdir().unwrap();
+    let (work, cache) = (tmp.path().join("empty"), tmp.path().join("cache"));
+    std::fs::create_dir_all(&work).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_gedisim"))
+        .args(["scenario", "--effect", "none", "--passes", "1", "--out", "world"])
+        .current_dir(&work)
+        .env("GEDISIM_CACHE", &cache)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let bundled = cache.join(format!("bundled-{}", env!("CARGO_PKG_VERSION")));
+    for (dir, name) in [
+        ("als", "lidarforfuel_1_42.laz"),
+        ("als", "lidarforfuel_2_bas_lig.laz"),
+        ("als", "pdal-ign-plugin_mnx_input_crop_2.laz"),
+        ("gedi", "GEDI01_B_2019108080338_O01964_T05337_02_003_01_sub.h5"),
+    ] {
+        let written = std::fs::read(bundled.join(dir).join(name)).unwrap();
+        assert!(written == std::fs::read(data(&format!("{dir}/{name}"))).unwrap(), "{name} differs");
+    }
+    assert!(work.join("world/truth.json").is_file() && work.join("world/als").is_dir());
+    // A corrupted cached file is rewritten, not trusted.
+    let tile = bundled.join("als/lidarforfuel_2_bas_lig.laz");
+    std::fs::write(&tile, b"not a tile").unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_gedisim"))
+        .args(["scenario", "--effect", "none", "--passes", "1", "--out", "world2"])
+        .current_dir(&work)
+        .env("GEDISIM_CACHE", &cache)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(std::fs::read(&tile).unwrap() == std::fs::read(data("als/lidarforfuel_2_bas_lig.laz")).unwrap());
 }

@@ -149,6 +149,25 @@ fn kernels_do_no_io() {
 }
 
 #[test]
+fn the_binary_does_not_read_the_source_tree() {
+    // An installed binary has no source tree: only tests may find files through the build-time
+    // manifest folder (the demo's inputs are embedded, `io::bundled`).
+    let mut files = Vec::new();
+    rust_files(&src(), &mut files);
+    let mut wrong = Vec::new();
+    for f in files {
+        let text = std::fs::read_to_string(&f).unwrap();
+        let shipped = text.split("#[cfg(test)]").next().unwrap_or_default();
+        for (n, line) in code_of(shipped).lines().enumerate() {
+            if line.contains("CARGO_MANIFEST_DIR") {
+                wrong.push(format!("{}:{}: {}", f.display(), n + 1, line.trim()));
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "paths of the source tree in shipped code:\n{}", wrong.join("\n"));
+}
+
+#[test]
 fn no_module_imports_one_of_its_importers() {
     let g = edges();
     // A module reaches its importer when a path leads back to it.

@@ -22,7 +22,7 @@ pub struct ScenarioArgs {
     /// Seed of every random draw (same seed, same granules).
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// LAS/LAZ files or folders (default: the bundled tests/data/als tiles).
+    /// LAS/LAZ files or folders (default: the three bundled LiDAR HD tiles, embedded in the binary).
     #[arg(long, num_args = 1..)]
     als: Vec<PathBuf>,
     /// Output folder: als/, gedi/, truth.json.

@@ -77,7 +77,11 @@ pub fn sql(a: SqlArgs) -> Result<()> {
         std::io::stdin().read_to_string(&mut text).map_err(|e| Error::file("stdin", e))?;
         Ok(text)
     };
-    let interactive = a.interactive || (a.query.is_none() && a.file.is_none() && std::io::stdin().is_terminal());
+    let at_terminal = a.query.is_none() && a.file.is_none() && std::io::stdin().is_terminal();
+    if at_terminal && a.out.is_some() {
+        return Err(Error::Usage("--out: give the SQL statements (or -f <file>) whose result it writes".into()));
+    }
+    let interactive = a.interactive || at_terminal;
     let query = match (a.query, a.file) {
         _ if interactive => String::new(),
         (Some(q), None) if q == "-" => stdin()?,
@@ -113,7 +117,9 @@ pub fn sql(a: SqlArgs) -> Result<()> {
 /// the session goes on; `\q`, `quit`, `exit` or the end of input ends it.
 fn repl(session: &gedisim::ops::sql::SqlSession, format: gedisim::ops::sql::SqlFormat) -> Result<()> {
     use std::io::{BufRead, Write};
-    eprintln!("gedisim sql: statements end with `;`, `\\q` quits; tables: SHOW TABLES; functions: gedisim sql --help");
+    tracing::info!(
+        "gedisim sql: statements end with `;`, `\\q` quits; tables: SHOW TABLES; functions: gedisim sql --help"
+    );
     let mut print = |batches: gedisim::ops::sql::StatementResult| -> Result<()> {
         println!("{}", gedisim::ops::sql::render(&batches, format)?);
         Ok(())

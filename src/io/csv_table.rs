@@ -33,8 +33,9 @@ impl CsvTable {
         let bytes = std::fs::read(path).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
         let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&bytes);
         let text = std::str::from_utf8(bytes).map_err(|e| Error::file(path, format!("not UTF-8 text: {e}")))?;
+        let delimiter = sniff_delimiter(text);
         let mut reader = csv::ReaderBuilder::new()
-            .delimiter(sniff_delimiter(text))
+            .delimiter(delimiter)
             .comment(Some(b'#'))
             .trim(csv::Trim::All)
             .flexible(true)
@@ -57,7 +58,7 @@ impl CsvTable {
         Ok(CsvTable {
             path: path.to_path_buf(),
             names: headers.iter().map(|h| h.to_ascii_lowercase()).collect(),
-            header: headers.iter().collect::<Vec<_>>().join(","),
+            header: headers.iter().collect::<Vec<_>>().join(&char::from(delimiter).to_string()),
             rows,
         })
     }
@@ -104,6 +105,11 @@ impl CsvTable {
 
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// The header as written (names joined by the file's separator).
+    pub fn header(&self) -> &str {
+        &self.header
     }
 }
 

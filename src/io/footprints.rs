@@ -9,8 +9,8 @@ use crate::io::csv_table::CsvTable;
 
 /// Names the identifier column may have.
 pub const ID_COLUMNS: [&str; 7] = ["id", "footprint_id", "plot_id", "plot", "shot_number", "name", "site"];
-const X_COLUMNS: [&str; 3] = ["x", "easting", "e"];
-const Y_COLUMNS: [&str; 3] = ["y", "northing", "n"];
+const X_COLUMNS: [&str; 2] = ["x", "easting"];
+const Y_COLUMNS: [&str; 2] = ["y", "northing"];
 const LON_COLUMNS: [&str; 4] = ["lon", "longitude", "long", "lng"];
 const LAT_COLUMNS: [&str; 2] = ["lat", "latitude"];
 
@@ -40,7 +40,11 @@ pub fn read_footprints_csv(path: &Path) -> Result<FootprintTable> {
         _ => match (t.column(&LON_COLUMNS), t.column(&LAT_COLUMNS)) {
             (Some(lon), Some(lat)) => (Coordinates::LonLat, lon, lat, ["lon", "lat"]),
             _ => {
-                return Err(Error::field(path, "x", "no `x`, `y` (or `lon`, `lat`) columns in the header"));
+                return Err(Error::field(
+                    path,
+                    "x",
+                    format!("no `x`, `y` (or easting, northing; lon, lat) columns in the header `{}`", t.header()),
+                ));
             }
         },
     };

@@ -2,6 +2,7 @@
 //! written from them, from local files or remote objects (`source`). No sequencing of steps (that
 //! is `ops`), no Parquet tables (that is `dataset`).
 
+pub mod bundled;
 pub mod copc;
 pub mod csv_table;
 pub mod footprints;

@@ -1,8 +1,8 @@
-//! `gedisim demo`: the study end to end on the bundled LiDAR HD tiles (`tests/data/als`) with GEDI
-//! granules generated for them by the scenario generator: `scenario` → `run` → `report`, then the
-//! headline tables. `<out>/world/` holds the world (tiles, granules, truth.json), `<out>/dataset/`
-//! the dataset and `<out>/dataset/report/` the report. Re-running with the same effect and seed
-//! reuses the world, and `run` finds nothing new.
+//! `gedisim demo`: the study end to end on the bundled LiDAR HD tiles (embedded in the binary,
+//! `io::bundled`) with GEDI granules generated for them by the scenario generator: `scenario` →
+//! `run` → `diagnose` → `report`, then the headline tables. `<out>/world/` holds the world (tiles,
+//! granules, truth.json), `<out>/dataset/` the dataset and `<out>/dataset/report/` the report.
+//! Re-running with the same effect and seed reuses the world, and `run` finds nothing new.
 
 use std::path::{Path, PathBuf};
 

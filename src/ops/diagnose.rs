@@ -391,10 +391,12 @@ pub struct DiagnosisOutput {
     pub reused: bool,
 }
 
-/// The key of a diagnosis's inputs (a hex SHA-256): this binary (size, modification time),
-/// the effects and pulse asked for, and every file of the tables it reads (name, size,
-/// modification time; dataset files are written once under new names). Stored in
-/// diagnosis.json: a re-run on the same inputs reuses the diagnosis.
+/// The key of a diagnosis's inputs (a hex SHA-256 over these facts): this binary's path, size and
+/// modification time, the effects and pulse asked for (and a pulse file's size and time), and
+/// the path, size and modification time of every file of the tables it reads (gedisim writes a
+/// changed table file anew, with a new time). Stored in diagnosis.json: a re-run on the same
+/// inputs reuses the diagnosis. A file rewritten with the same size within the file system's
+/// time resolution would go unseen: `--force` recomputes.
 fn inputs_key(ds: &Dataset, names: &[&str], pulse: &PulseModel) -> Result<String> {
     use sha2::{Digest, Sha256};
     let mut h = Sha256::new();
@@ -423,9 +425,10 @@ fn inputs_key(ds: &Dataset, names: &[&str], pulse: &PulseModel) -> Result<String
 fn reusable(out: &Path, key: &str) -> Option<DiagnosisOutput> {
     let text = std::fs::read_to_string(out.join("diagnosis.json")).ok()?;
     let json: DiagnosisJson = serde_json::from_str(&text).ok()?;
-    let files: Vec<PathBuf> = json.files.iter().map(|f| out.join(f)).collect();
-    (json.inputs_key.as_deref() == Some(key) && !files.is_empty() && files.iter().all(|f| f.is_file()))
-        .then_some(DiagnosisOutput { json, files, reused: true })
+    let mut files: Vec<PathBuf> = json.files.iter().map(|f| out.join(f)).collect();
+    let complete = !files.is_empty() && files.iter().all(|f| f.is_file());
+    files.push(out.join("diagnosis.json"));
+    (json.inputs_key.as_deref() == Some(key) && complete).then_some(DiagnosisOutput { json, files, reused: true })
 }
 
 /// Collocation of a dataset the diagnosis makes: per beam (the baseline's horizontal collocation),
@@ -576,17 +579,23 @@ pub fn diagnose_dataset(
     let d = diagnose::diagnose(cases, &names, &|step| progress.note(step));
     progress.finish();
     std::fs::create_dir_all(out).map_err(|e| Error::file(out, e))?;
+    // The old diagnosis.json goes first: tables half rewritten by an interrupted run are never
+    // taken for those of the earlier key.
+    let path = out.join("diagnosis.json");
+    if path.exists() {
+        std::fs::remove_file(&path).map_err(|e| Error::file(&path, e))?;
+    }
     let mut files = write_tables(&d, out)?;
     files.extend(write_figures(&d, out)?);
     let names = files.iter().filter_map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned())).collect();
     let json = DiagnosisJson {
         summary: summary_lines(&d),
+        dataset: Some(ds.root().canonicalize().unwrap_or_else(|_| ds.root().to_path_buf()).display().to_string()),
         inputs_key: Some(key),
         files: names,
         ..DiagnosisJson::of(&d, report.shots_read, &report.dropped)
     };
     // diagnosis.json last: a diagnosis interrupted before it is never reused.
-    let path = out.join("diagnosis.json");
     let text = serde_json::to_string_pretty(&json).map_err(|e| Error::file(&path, e))?;
     crate::dataset::write_atomic(&path, text.as_bytes())?;
     files.push(path);
@@ -867,4 +876,41 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
         }
     }
     lines
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_inputs_key_follows_effects_pulse_and_every_table_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let ds = Dataset::create(&dir.path().join("ds")).unwrap();
+        let shots = ds.table_file(tables::SHOTS, "g1").unwrap();
+        std::fs::write(&shots, b"first").unwrap();
+        let pulse = PulseModel::Recorded(Default::default());
+        let key = |names: &[&str], pulse: &PulseModel| inputs_key(&ds, names, pulse).unwrap();
+        let k0 = key(&["datum"], &pulse);
+        assert_eq!(k0, key(&["datum"], &pulse), "the same inputs, the same key");
+        assert_ne!(k0, key(&["datum", "pulse"], &pulse), "other effects");
+        assert_ne!(k0, key(&["datum"], &PulseModel::Gaussian(None)), "another pulse");
+        // A new file in a table the diagnosis reads.
+        let strata = ds.table_file(tables::STRATA, "strata").unwrap();
+        std::fs::write(&strata, b"s").unwrap();
+        let k1 = key(&["datum"], &pulse);
+        assert_ne!(k0, k1);
+        // A shots file rewritten: another size, or the same size at another time.
+        std::fs::write(&shots, b"second!").unwrap();
+        let k2 = key(&["datum"], &pulse);
+        assert_ne!(k1, k2);
+        std::fs::write(&shots, b"third!!").unwrap();
+        let later = std::time::SystemTime::now() + std::time::Duration::from_secs(5);
+        std::fs::File::options().write(true).open(&shots).unwrap().set_modified(later).unwrap();
+        assert_ne!(k2, key(&["datum"], &pulse));
+        // A file of a table it does not read (the report's) changes nothing.
+        let k3 = key(&["datum"], &pulse);
+        std::fs::create_dir_all(ds.root().join("report")).unwrap();
+        std::fs::write(ds.root().join("report/msd.parquet"), b"r").unwrap();
+        assert_eq!(k3, key(&["datum"], &pulse));
+    }
 }

@@ -103,21 +103,22 @@ fn read_tile(path: &Path, default_epsg: u32) -> Result<Tile> {
     })
 }
 
-/// The three real LiDAR HD tiles bundled with the source (`tests/data/als`), the default of
-/// `scenario` and the tiles of `demo`.
-pub fn bundled_tiles() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/als")
+/// The three real LiDAR HD tiles bundled with gedisim (`io::bundled`), the default of `scenario`
+/// and the tiles of `demo`.
+pub fn bundled_tiles() -> Result<PathBuf> {
+    crate::io::bundled::tiles()
 }
 
-/// The real L1B bundled with the source (`tests/data/gedi`): its transmit records are the
-/// library from which every scenario shot draws its pulse.
-pub fn bundled_l1b() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/gedi")
+/// The real L1B bundled with gedisim (`io::bundled`): its transmit records are the library from
+/// which every scenario shot draws its pulse.
+pub fn bundled_l1b() -> Result<PathBuf> {
+    crate::io::bundled::l1b()
 }
 
 /// The transmit records of the bundled L1B, by beam type (`[coverage, full power]`).
 fn pulse_library() -> Result<[Vec<Vec<f32>>; 2]> {
-    let files = crate::ops::ingest_gedi::expand_granule_inputs(&[bundled_l1b()], "GEDI01_B")?;
+    let l1b = bundled_l1b()?;
+    let files = crate::ops::ingest_gedi::expand_granule_inputs(std::slice::from_ref(&l1b), "GEDI01_B")?;
     let mut lib: [Vec<Vec<f32>>; 2] = [Vec::new(), Vec::new()];
     for f in &files {
         for (full_power, tx) in crate::io::gedi::read_transmit_records(f)? {
@@ -125,7 +126,7 @@ fn pulse_library() -> Result<[Vec<Vec<f32>>; 2]> {
         }
     }
     if lib.iter().any(Vec::is_empty) {
-        return Err(Error::file(bundled_l1b(), "no transmit records of both beam types for the pulse library"));
+        return Err(Error::file(&l1b, "no transmit records of both beam types for the pulse library"));
     }
     Ok(lib)
 }
@@ -134,7 +135,7 @@ fn pulse_library() -> Result<[Vec<Vec<f32>>; 2]> {
 pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
     let effects =
         EffectSet::parse(&opts.effect_spec, opts.magnitude, &opts.params).map_err(|e| Error::Usage(e.to_string()))?;
-    let inputs = if opts.tiles.is_empty() { vec![bundled_tiles()] } else { opts.tiles.clone() };
+    let inputs = if opts.tiles.is_empty() { vec![bundled_tiles()?] } else { opts.tiles.clone() };
     let tile_files = crate::ops::ingest_als::expand_inputs(&inputs)?;
     if tile_files.is_empty() {
         return Err(Error::Usage("--als: no LAS/LAZ file".into()));

@@ -200,7 +200,7 @@ pub fn sim_config(opts: &SimulateOptions) -> Result<SimConfig> {
 }
 
 /// A footprint CSV's positions in the ALS CRS `als_epsg`, and one line saying how they were
-/// placed. lon, lat columns are WGS84 degrees and projected; x, y are in `crs` when given
+/// placed. lon, lat columns (or x, y with `crs` 4326) are WGS84 degrees and projected; x, y are in `crs` when given
 /// (reprojected when it differs), else taken in the ALS CRS — and the line says so. A position
 /// whose CRS cannot be known (lon, lat or `crs` over tiles that record no CRS) is an error.
 pub fn place_footprints(
@@ -212,16 +212,17 @@ pub fn place_footprints(
     let n = table.rows.len();
     let at = |rows: Vec<(String, f64, f64)>| rows.into_iter().map(|(id, x, y)| Footprint::at(id, x, y)).collect();
     let reproject = |from: Option<u32>, to: u32| -> Result<Vec<Footprint>> {
-        let target = Projector::new(to)?;
-        let source = from.map(Projector::new).transpose()?;
+        let target = Projector::new(to).map_err(|e| Error::field(csv, "CRS", format!("the ALS tiles' CRS: {e}")))?;
+        let source = from.map(Projector::new).transpose().map_err(|e| Error::field(csv, "--crs", e))?;
         let mut out = Vec::with_capacity(n);
         for (id, a, b) in &table.rows {
             let lonlat = match &source {
                 Some(s) => s.unproject(*a, *b),
                 None => Ok((*a, *b)),
             };
-            let (x, y) =
-                lonlat.and_then(|(lon, lat)| target.project(lon, lat)).map_err(|e| Error::field(csv, id, e))?;
+            let (x, y) = lonlat
+                .and_then(|(lon, lat)| target.project(lon, lat))
+                .map_err(|e| Error::field(csv, format!("footprint `{id}`"), e))?;
             out.push(Footprint::at(id.clone(), x, y));
         }
         Ok(out)
@@ -229,7 +230,9 @@ pub fn place_footprints(
     let unknown = |what: &str| {
         Error::field(csv, "CRS", format!("{what}, but the ALS tiles record no CRS: give x, y in the tiles' own frame"))
     };
-    match (table.coordinates, crs, als_epsg) {
+    // x, y said to be WGS84 degrees (--crs 4326) are lon, lat.
+    let coordinates = if crs == Some(4326) { Coordinates::LonLat } else { table.coordinates };
+    match (coordinates, crs, als_epsg) {
         (Coordinates::LonLat, Some(c), _) if c != 4326 => {
             Err(Error::field(csv, "CRS", format!("lon, lat columns are WGS84 degrees (EPSG:4326), not EPSG:{c}")))
         }

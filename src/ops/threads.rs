@@ -1,6 +1,8 @@
-//! `--threads N`: one cap on this process's worker threads — rayon's global pool (simulation,
+//! `--threads N`: a cap on this process's compute threads — rayon's global pool (simulation,
 //! ingest and its granule readers, collocation, diagnosis) and the SQL engine's (tokio workers,
-//! DataFusion's target partitions). Set once, before any work starts.
+//! DataFusion's target partitions). Not capped: the few threads that wait on remote reads
+//! (`io::source`) and a cluster executor's (`gedisim cluster executor --concurrency`). Set once,
+//! before any work starts.
 
 use crate::error::{Error, Result};
 

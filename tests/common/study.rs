@@ -147,8 +147,6 @@ fn gauss(z: f64, mu: f64, s: f64) -> f64 {
     (-(z - mu) * (z - mu) / (2.0 * s * s)).exp()
 }
 
-/// Minimal `shots` and `sim` tables for the first `n` shots: positions around (5°E, 45°N), a real
-/// waveform (ground + canopy Gaussians over noise 200 counts) and three simulated ones.
 /// A `tiles` table of two 1 km tiles under the shots of [`write_shots_and_sim`] (only the columns
 /// the report's `tile_extents` reads).
 #[allow(dead_code)]
@@ -179,6 +177,9 @@ pub fn write_tiles(ds: &Dataset) {
     write_parquet(&ds.table_file("tiles", "t").unwrap(), schema, &[b], &Default::default()).unwrap();
 }
 
+/// Minimal `shots` and `sim` tables for the first `n` shots: positions around (5°E, 45°N), x, y in
+/// two areas 300 km apart, a real waveform (ground + canopy Gaussians over noise 200 counts) and
+/// three simulated ones.
 pub fn write_shots_and_sim(ds: &Dataset, n: usize) {
     let list = || ListBuilder::new(Float32Builder::new());
     let (mut rx, mut sim_wave) = (list(), list());

@@ -23,6 +23,9 @@ pub struct DiagnosisJson {
     /// The verdict in a few lines, as `gedisim diagnose` prints it.
     #[serde(default)]
     pub summary: Vec<String>,
+    /// The dataset diagnosed (its folder).
+    #[serde(default)]
+    pub dataset: Option<String>,
     /// Key of the inputs (`ops::diagnose`): a re-run on the same inputs reuses this diagnosis.
     #[serde(default)]
     pub inputs_key: Option<String>,
@@ -318,6 +321,7 @@ impl DiagnosisJson {
         DiagnosisJson {
             signs: Signs::default(),
             summary: Vec::new(),
+            dataset: None,
             inputs_key: None,
             files: Vec::new(),
             baseline: Baseline {

@@ -15,8 +15,9 @@ pub fn proj_string(epsg: u32) -> std::result::Result<&'static str, String> {
     let def = u16::try_from(epsg).ok().and_then(crs_definitions::from_code);
     match def.map(|d| d.proj4) {
         None => Err(format!("EPSG:{epsg} is not in the EPSG database")),
+        Some("") => Err(format!("EPSG:{epsg} has no PROJ definition in the EPSG database")),
         Some(p) if p.contains("+proj=longlat") || p.contains("+proj=geocent") => {
-            Err(format!("EPSG:{epsg} is not a projected CRS (x, y in metres are needed)"))
+            Err(format!("EPSG:{epsg} is not a projected CRS"))
         }
         Some(p) => Ok(p),
     }

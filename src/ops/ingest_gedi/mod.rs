@@ -664,8 +664,9 @@ pub fn ingest(
     if l1b.is_empty() && l2a.is_empty() {
         return Err(Error::Usage("--l1b/--l2a: no GEDI01_B or GEDI02_A .h5 file found in the inputs".into()));
     }
-    let (given, had_crs) = (epsg.is_some(), crate::dataset::dataset_epsg(dataset)?.is_some());
-    let epsg = match (epsg, crate::dataset::dataset_epsg(dataset)?) {
+    let existing = crate::dataset::dataset_epsg(dataset)?;
+    let (given, had_crs) = (epsg.is_some(), existing.is_some());
+    let epsg = match (epsg, existing) {
         (Some(given), Some(ds)) if given != ds => {
             return Err(Error::field(
                 dataset.root(),

@@ -47,6 +47,8 @@ pub struct ShotMap {
     pub epsg: Option<u32>,
     /// Symmetric colour range (m), shared by the panels: [`colour_limit`].
     pub limit: f64,
+    /// Areas not drawn (beyond [`MAX_AREAS`], those with fewest shots).
+    pub left_out: usize,
 }
 
 /// One panel of the map.
@@ -65,8 +67,9 @@ pub const AREA_GAP_M: f64 = 5_000.0;
 pub const MAX_AREAS: usize = 6;
 
 /// Group `tiles` into areas (single linkage: a tile within [`AREA_GAP_M`] of a tile of an area
-/// joins it) and put each shot in the area whose extent, grown by [`AREA_GAP_M`], holds it; a shot
-/// near no tile gets an area of its own. Areas sorted by number of shots, most first.
+/// joins it) and put each shot in the area whose extent, grown by [`AREA_GAP_M`], holds it; the
+/// shots near no tile (all of them without a `tiles` table) make one more area. Areas sorted by
+/// number of shots, most first.
 pub fn areas(tiles: &[[f64; 4]], shots: &[(f64, f64, f64)]) -> Vec<MapArea> {
     let gap = |a: &[f64; 4], b: &[f64; 4]| {
         let dx = (a[0] - b[2]).max(b[0] - a[2]).max(0.0);
@@ -105,15 +108,17 @@ pub fn areas(tiles: &[[f64; 4]], shots: &[(f64, f64, f64)]) -> Vec<MapArea> {
         })
     };
     let extents: Vec<[f64; 4]> = out.iter().map(extent).collect();
+    let mut off_tiles = MapArea { tiles: Vec::new(), shots: Vec::new() };
     for &(x, y, b) in shots {
         let near = |e: &[f64; 4]| {
             x >= e[0] - AREA_GAP_M && x <= e[2] + AREA_GAP_M && y >= e[1] - AREA_GAP_M && y <= e[3] + AREA_GAP_M
         };
         match extents.iter().position(near) {
             Some(k) => out[k].shots.push((x, y, b)),
-            None => out.push(MapArea { tiles: Vec::new(), shots: vec![(x, y, b)] }),
+            None => off_tiles.shots.push((x, y, b)),
         }
     }
+    out.push(off_tiles);
     out.retain(|a| !a.shots.is_empty());
     out.sort_by_key(|a| std::cmp::Reverse(a.shots.len()));
     out
@@ -191,11 +196,8 @@ pub fn add_figures(ran: &[TableOutput], fd: &mut FigureData) -> Result<()> {
         let limit = colour_limit(&map_shots);
         let all = areas(&tiles, &map_shots);
         let left_out = all.len().saturating_sub(MAX_AREAS);
-        if left_out > 0 {
-            fd.notes.push(format!("shot_map: {left_out} area(s) with fewer shots not drawn (at most {MAX_AREAS})"));
-        }
         let areas = all.into_iter().take(MAX_AREAS).collect();
-        fd.drawable.push(("shot_map", AnyFigure::Map(ShotMap { areas, epsg, limit })));
+        fd.drawable.push(("shot_map", AnyFigure::Map(ShotMap { areas, epsg, limit, left_out })));
     }
     Ok(())
 }
@@ -216,7 +218,11 @@ impl ShotMap {
              other ({}).",
             AREA_GAP_M / 1000.0,
             self.epsg.map_or("the dataset's projected CRS".to_string(), |e| format!("EPSG:{e}"))
-        )
+        ) + &if self.left_out > 0 {
+            format!(" {} more area(s) with fewer shots are not drawn.", self.left_out)
+        } else {
+            String::new()
+        }
     }
 }
 
@@ -413,6 +419,8 @@ mod tests {
         assert_eq!(a.len(), 3, "{a:?}");
         assert_eq!((a[0].tiles.len(), a[0].shots.len()), (3, 2));
         assert!(a[1..].iter().any(|a| a.tiles.len() == 1 && a.shots == [(400_500.0, 500.0, 0.3)]));
-        assert!(a[1..].iter().any(|a| a.tiles.is_empty() && a.shots.len() == 1), "a shot near no tile: own area");
+        assert!(a[1..].iter().any(|a| a.tiles.is_empty() && a.shots.len() == 1), "shots near no tile: one area");
+        // Without tiles every shot is in that one area.
+        assert_eq!(areas(&[], &shots).len(), 1);
     }
 }

@@ -24,12 +24,16 @@ const FIGURES: [(&str, &str); 2] = [
     ),
 ];
 
-/// The section's HTML, from the diagnosis folder `dir`.
-pub fn section(dir: &Path) -> Result<String> {
+/// The section's HTML, from the diagnosis folder `dir` of the dataset at `dataset`.
+pub fn section(dir: &Path, dataset: &Path) -> Result<String> {
     let path = dir.join("diagnosis.json");
     let text = std::fs::read_to_string(&path).map_err(|e| Error::file(&path, format!("cannot read: {e}")))?;
     let d: DiagnosisJson = serde_json::from_str(&text)
         .map_err(|e| Error::file(&path, format!("not a diagnosis.json of this gedisim version: {e}")))?;
+    let here = dataset.canonicalize().unwrap_or_else(|_| dataset.to_path_buf()).display().to_string();
+    if let Some(other) = d.dataset.as_ref().filter(|d| **d != here) {
+        return Err(Error::field(&path, "dataset", format!("a diagnosis of {other}, not of this dataset ({here})")));
+    }
     let mut s = String::from("<h2 id=\"diagnosis\">Diagnosis</h2>\n");
     let _ = writeln!(
         s,

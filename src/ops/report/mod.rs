@@ -249,7 +249,7 @@ fn report(ds: &Dataset, opts: &ReportOptions, engine: &Engine, on_step: &dyn Fn(
         None => ds.root().join(tables::REPORT),
     };
     // Read before anything is written: a bad folder fails in one line and leaves no report.
-    let diagnosis = opts.diagnosis.as_deref().map(diagnosis::section).transpose()?;
+    let diagnosis = opts.diagnosis.as_deref().map(|d| diagnosis::section(d, ds.root())).transpose()?;
     std::fs::create_dir_all(&dir).map_err(|e| Error::file(&dir, format!("cannot create report directory: {e}")))?;
     let rt = crate::sql::runtime()?;
     let outcomes = rt.block_on(run_queries(ds, engine, &|name| on_step(&format!("query {name}"))))?;
