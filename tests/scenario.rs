@@ -30,8 +30,19 @@ fn truth(out: &Path) -> serde_json::Value {
 fn ingest(world: &Path, ds: &Path) -> usize {
     let gedi = world.join("gedi");
     let g = gedi.to_str().unwrap();
-    let (ok, _, err) =
-        gedisim(&["ingest", "gedi", "--l1b", g, "--l2a", g, "--out", ds.to_str().unwrap(), "--strict-join"]);
+    let (ok, _, err) = gedisim(&[
+        "ingest",
+        "gedi",
+        "--l1b",
+        g,
+        "--l2a",
+        g,
+        "--out",
+        ds.to_str().unwrap(),
+        "--strict-join",
+        "--epsg",
+        "2154",
+    ]);
     assert!(ok, "{err}");
     assert!(!err.contains("warning"), "{err}");
     let shots = err.lines().filter_map(|l| l.split(": ").nth(1)?.strip_suffix(" shots")?.parse::<usize>().ok()).sum();
