@@ -5,7 +5,7 @@ mod common;
 #[path = "common/study.rs"]
 mod study;
 
-use common::{data, gedisim};
+use common::{data, gedisim, gedisim_in, gedisim_with_stdin};
 use gedisim::dataset::Dataset;
 
 /// A dataset with results, shots and tiles (the report's inputs).
@@ -205,22 +205,6 @@ fn footprints_as_users_have_them_lon_lat_or_another_crs() {
     assert!(!ok && err.contains("`lambert` is not an EPSG code"), "{err}");
 }
 
-/// `gedisim` with `input` on stdin: (success, stdout, stderr).
-fn gedisim_with_stdin(args: &[&str], input: &str) -> (bool, String, String) {
-    use std::io::Write;
-    use std::process::{Command, Stdio};
-    let mut child = Command::new(env!("CARGO_BIN_EXE_gedisim"))
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    child.stdin.take().unwrap().write_all(input.as_bytes()).unwrap();
-    let out = child.wait_with_output().unwrap();
-    (out.status.success(), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
-}
-
 #[test]
 fn sql_like_duckdb_statements_stdin_interactive_and_rh_by_name() {
     let tmp = tempfile::tempdir().unwrap();
@@ -274,13 +258,12 @@ fn demo_inputs_come_from_the_binary_not_the_source_tree() {
     let tmp = tempfile::tempdir().unwrap();
     let (work, cache) = (tmp.path().join("empty"), tmp.path().join("cache"));
     std::fs::create_dir_all(&work).unwrap();
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_gedisim"))
-        .args(["scenario", "--effect", "none", "--passes", "1", "--out", "world"])
-        .current_dir(&work)
-        .env("GEDISIM_CACHE", &cache)
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let scenario = |out: &str| {
+        let args = ["scenario", "--effect", "none", "--passes", "1", "--out", out];
+        let (ok, _, err) = gedisim_in(&work, &[("GEDISIM_CACHE", &cache)], &args);
+        assert!(ok, "{err}");
+    };
+    scenario("world");
     let bundled = cache.join(format!("bundled-{}", env!("CARGO_PKG_VERSION")));
     for (dir, name) in [
         ("als", "lidarforfuel_1_42.laz"),
@@ -295,12 +278,6 @@ fn demo_inputs_come_from_the_binary_not_the_source_tree() {
     // A corrupted cached file is rewritten, not trusted.
     let tile = bundled.join("als/lidarforfuel_2_bas_lig.laz");
     std::fs::write(&tile, b"not a tile").unwrap();
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_gedisim"))
-        .args(["scenario", "--effect", "none", "--passes", "1", "--out", "world2"])
-        .current_dir(&work)
-        .env("GEDISIM_CACHE", &cache)
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    scenario("world2");
     assert!(std::fs::read(&tile).unwrap() == std::fs::read(data("als/lidarforfuel_2_bas_lig.laz")).unwrap());
 }

@@ -63,8 +63,8 @@ pub fn diagnose(a: DiagnoseArgs) -> Result<()> {
     }
     let out = &r.output;
     let shots = &out.json.shots;
-    let dropped: Vec<String> = shots.dropped.iter().map(|d| format!("{} ({})", d.reason, d.n)).collect();
-    let dropped = if dropped.is_empty() { "none dropped".to_string() } else { dropped.join(", ") };
+    let dropped: Vec<(&str, usize)> = shots.dropped.iter().map(|d| (d.reason.as_str(), d.n)).collect();
+    let dropped = gedisim::ops::diagnose::dropped_text(&dropped);
     info!("shots: {} read, {} used; dropped: {dropped}", shots.read, shots.used);
     if out.reused {
         info!(

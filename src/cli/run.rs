@@ -108,18 +108,50 @@ pub fn run_command(a: RunArgs) -> Result<()> {
     Ok(())
 }
 
-/// What a run did, for scripts (`run --json`; keys in docs/schemas.md, "run --json").
+/// What a run ingested and simulated, counted once for the text and JSON summaries.
+struct Counts {
+    granules_new: usize,
+    granules_already: usize,
+    shots_ingested: usize,
+    tiles_new: usize,
+    tiles_already: usize,
+    points_ingested: u64,
+    /// (simulated, skipped by the simulator) and the granules simulated.
+    simulated: (usize, usize),
+    granules_simulated: usize,
+}
+
+impl Counts {
+    fn of(r: &gedisim::ops::run::RunReport) -> Counts {
+        use gedisim::ops::ingest_als::TileOutcome;
+        use gedisim::ops::ingest_gedi::GranuleOutcome;
+        let shots: Vec<usize> = r
+            .ingested
+            .iter()
+            .filter_map(|g| if let GranuleOutcome::Ingested { shots, .. } = g { Some(*shots) } else { None })
+            .collect();
+        let points: Vec<u64> = r
+            .tiles
+            .iter()
+            .filter_map(|t| if let TileOutcome::Ingested { points, .. } = t { Some(*points) } else { None })
+            .collect();
+        let simulated: Vec<(usize, usize)> = r.granules.iter().filter_map(|g| g.simulated).collect();
+        Counts {
+            granules_new: shots.len(),
+            granules_already: r.ingested.len() - shots.len(),
+            shots_ingested: shots.iter().sum(),
+            tiles_new: points.len(),
+            tiles_already: r.tiles.len() - points.len(),
+            points_ingested: points.iter().sum(),
+            simulated: simulated.iter().fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1)),
+            granules_simulated: simulated.len(),
+        }
+    }
+}
+
+/// What a run did, for scripts (`run --json`).
 pub fn run_json(r: &gedisim::ops::run::RunReport) -> serde_json::Value {
-    use gedisim::ops::ingest_als::TileOutcome;
-    use gedisim::ops::ingest_gedi::GranuleOutcome;
-    let t = &r.totals;
-    let shots_ingested: usize =
-        r.ingested.iter().map(|g| if let GranuleOutcome::Ingested { shots, .. } = g { *shots } else { 0 }).sum();
-    let points: u64 =
-        r.tiles.iter().map(|t| if let TileOutcome::Ingested { points, .. } = t { *points } else { 0 }).sum();
-    let new_tiles = r.tiles.iter().filter(|t| matches!(t, TileOutcome::Ingested { .. })).count();
-    let new_granules = r.ingested.iter().filter(|g| matches!(g, GranuleOutcome::Ingested { .. })).count();
-    let (ok, skipped) = r.granules.iter().filter_map(|g| g.simulated).fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    let (t, c) = (&r.totals, Counts::of(r));
     let filters: Vec<serde_json::Value> = gedisim::kernels::study::select::Filter::ALL
         .iter()
         .map(
@@ -131,20 +163,20 @@ pub fn run_json(r: &gedisim::ops::run::RunReport) -> serde_json::Value {
         "results": r.dataset.join("results"),
         "nothing_new": r.nothing_new(),
         "als": {
-            "tiles_ingested": new_tiles,
-            "points_ingested": points,
-            "tiles_already_ingested": r.tiles.len() - new_tiles
+            "tiles_ingested": c.tiles_new,
+            "points_ingested": c.points_ingested,
+            "tiles_already_ingested": c.tiles_already
         },
         "gedi": {
-            "granules_ingested": new_granules,
-            "shots_ingested": shots_ingested,
-            "granules_already_ingested": r.ingested.len() - new_granules
+            "granules_ingested": c.granules_new,
+            "shots_ingested": c.shots_ingested,
+            "granules_already_ingested": c.granules_already
         },
         "collocation": r.collocation.as_ref().map(|c| serde_json::json!({
             "granules": r.collocated.len(), "shots_read": c.shots, "segments": c.segments,
             "short_runs": c.short_runs.len(), "table": c.table
         })),
-        "simulation": {"shots_simulated": ok, "shots_skipped_by_simulator": skipped},
+        "simulation": {"shots_simulated": c.simulated.0, "shots_skipped_by_simulator": c.simulated.1},
         "granules": {"in_dataset": r.granules.len(), "results_written": r.granules_processed()},
         "rows": {
             "candidates": t.candidates, "kept": t.kept, "shots": t.shots, "shots_kept": t.shots_kept,
@@ -158,31 +190,17 @@ pub fn run_json(r: &gedisim::ops::run::RunReport) -> serde_json::Value {
 /// What the ingest and collocation of a run did (stderr).
 pub fn print_ingest_and_collocation(r: &gedisim::ops::run::RunReport) {
     use gedisim::ops::ingest_als::TileOutcome;
-    use gedisim::ops::ingest_gedi::GranuleOutcome;
+    let c = Counts::of(r);
     if !r.ingested.is_empty() {
-        let new: Vec<usize> = r
-            .ingested
-            .iter()
-            .filter_map(|g| if let GranuleOutcome::Ingested { shots, .. } = g { Some(*shots) } else { None })
-            .collect();
         info!(
             "GEDI: {} granules ingested ({} shots), {} already ingested",
-            new.len(),
-            new.iter().sum::<usize>(),
-            r.ingested.len() - new.len()
+            c.granules_new, c.shots_ingested, c.granules_already
         );
     }
     if !r.tiles.is_empty() {
-        let new: Vec<u64> = r
-            .tiles
-            .iter()
-            .filter_map(|t| if let TileOutcome::Ingested { points, .. } = t { Some(*points) } else { None })
-            .collect();
         info!(
             "ALS: {} tiles ingested ({} points), {} already ingested",
-            new.len(),
-            new.iter().sum::<u64>(),
-            r.tiles.len() - new.len()
+            c.tiles_new, c.points_ingested, c.tiles_already
         );
         let windows: Vec<_> = r
             .tiles
@@ -233,8 +251,8 @@ pub fn print_ingest_and_collocation(r: &gedisim::ops::run::RunReport) {
 pub fn print_run(r: &gedisim::ops::run::RunReport) {
     use gedisim::kernels::study::select::Filter;
     print_ingest_and_collocation(r);
-    let simulated: Vec<&gedisim::ops::run::GranuleRun> = r.granules.iter().filter(|g| g.simulated.is_some()).collect();
-    if simulated.is_empty() {
+    let c = Counts::of(r);
+    if c.granules_simulated == 0 {
         let covered: usize = r.granules.iter().map(|g| g.covered).sum();
         if covered == 0 {
             info!("simulation: no shot footprint is covered by the ALS, nothing simulated");
@@ -242,11 +260,11 @@ pub fn print_run(r: &gedisim::ops::run::RunReport) {
             info!("simulation: up to date, nothing simulated ({covered} covered shots)");
         }
     } else {
-        let (ok, skipped) = simulated.iter().filter_map(|g| g.simulated).fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        let (ok, skipped) = c.simulated;
         info!(
             "simulation: {} shots of {} granules ({ok} simulated, {skipped} skipped by the simulator)",
             ok + skipped,
-            simulated.len()
+            c.granules_simulated
         );
     }
     let written = r.granules_processed();

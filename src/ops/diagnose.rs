@@ -572,7 +572,11 @@ pub fn diagnose_dataset(
     if cases.len() < 4 {
         return Err(Error::file(
             ds.root().join(tables::SHOTS),
-            format!("only {} usable shot(s) for the diagnosis (need ≥ 4): {}", cases.len(), dropped_text(&report)),
+            format!(
+                "only {} usable shot(s) for the diagnosis (need ≥ 4): {}",
+                cases.len(),
+                dropped_text(&report.dropped)
+            ),
         ));
     }
     progress.start(Step::DiagnoseFit, 0);
@@ -602,12 +606,12 @@ pub fn diagnose_dataset(
     Ok(DiagnosisOutput { json, files, reused: false })
 }
 
-/// "reason (n), …"
-pub fn dropped_text(r: &CaseReport) -> String {
-    if r.dropped.is_empty() {
+/// "reason (n), …" of (reason, count) pairs.
+pub fn dropped_text<S: AsRef<str>>(dropped: &[(S, usize)]) -> String {
+    if dropped.is_empty() {
         return "none dropped".into();
     }
-    r.dropped.iter().map(|(k, n)| format!("{k} ({n})")).collect::<Vec<_>>().join(", ")
+    dropped.iter().map(|(k, n)| format!("{} ({n})", k.as_ref())).collect::<Vec<_>>().join(", ")
 }
 
 fn batch(fields: Vec<(&str, Arc<dyn Array>)>) -> Result<RecordBatch> {

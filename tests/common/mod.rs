@@ -14,7 +14,36 @@ pub const TILES: [&str; 3] = ["lidarforfuel_1_42", "lidarforfuel_2_bas_lig", "pd
 
 /// Run the gedisim binary; returns (success, stdout, stderr).
 pub fn gedisim(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_gedisim")).args(args).output().expect("run gedisim");
+    outcome(Command::new(env!("CARGO_BIN_EXE_gedisim")).args(args).output().expect("run gedisim"))
+}
+
+/// Run the gedisim binary with `input` on stdin; returns (success, stdout, stderr).
+pub fn gedisim_with_stdin(args: &[&str], input: &str) -> (bool, String, String) {
+    use std::io::Write;
+    use std::process::Stdio;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gedisim"))
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run gedisim");
+    child.stdin.take().unwrap().write_all(input.as_bytes()).unwrap();
+    outcome(child.wait_with_output().expect("run gedisim"))
+}
+
+/// Run the gedisim binary in the working directory `dir` with the environment `env` added.
+pub fn gedisim_in(dir: &Path, env: &[(&str, &Path)], args: &[&str]) -> (bool, String, String) {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_gedisim"));
+    c.args(args).current_dir(dir);
+    for (k, v) in env {
+        c.env(k, v);
+    }
+    outcome(c.output().expect("run gedisim"))
+}
+
+/// (success, stdout, stderr) of a finished process.
+fn outcome(out: std::process::Output) -> (bool, String, String) {
     (
         out.status.success(),
         String::from_utf8_lossy(&out.stdout).into_owned(),
