@@ -237,11 +237,16 @@ fn sql_like_duckdb_statements_stdin_interactive_and_rh_by_name() {
     let (ok, _, err) =
         gedisim(&["sql", "--dataset", d, "--out", csv.to_str().unwrap(), "select 1 as a; select 2 as b"]);
     assert!(!ok && err.contains("2 statements give results") && !csv.exists(), "{err}");
-    // Interactive: a failing statement is reported and the session goes on; a statement spans lines.
-    let input = "select 1 as a;\nselect nope from results;\nselect\n  3 as c;\n\\q\nselect 4 as never;\n";
+    // Interactive: a failing statement is reported and the session goes on; a statement spans lines, also where a
+    // line ends with a `;` inside a string or a comment.
+    let input =
+        "select 1 as a;\nselect nope from results;\nselect\n  3 as c;\nselect 'x;\ny' as s -- not yet;\n, 5 as \
+                 five;\n\\q\nselect 4 as never;\n";
     let (ok, out, err) = gedisim_with_stdin(&["sql", "--dataset", d, "-i"], input);
     assert!(ok, "{err}");
     assert!(out.contains("| a |") && out.contains("| c |") && !out.contains("never"), "{out}");
+    assert!(out.contains("| five |") && out.contains("x;"), "{out}");
+    assert_eq!(err.matches("error: SQL").count(), 1, "{err}");
     assert!(err.contains("error: SQL") && err.contains("nope"), "{err}");
     // The functions document themselves: --help and information_schema.
     let (ok, out, _) = gedisim(&["sql", "--help"]);

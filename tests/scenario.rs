@@ -272,3 +272,39 @@ fn shots_carry_real_transmit_pulses_and_plots_get_their_mean() {
     ]);
     assert!(!ok && err.contains("--pulse recorded") && err.trim().lines().count() == 1, "{err}");
 }
+
+#[test]
+fn a_tile_without_a_crs_is_said_to_be_taken_as_lambert_93() {
+    // The small tile with its CRS records removed (LAS, uncompressed).
+    let tmp = tempfile::tempdir().unwrap();
+    let mut reader = las::Reader::from_path(data(TILE)).unwrap();
+    let mut builder = las::Builder::from(reader.header().clone());
+    builder.vlrs.retain(|v| v.user_id != "LASF_Projection" && v.user_id != "laszip encoded");
+    builder.evlrs.retain(|v| v.user_id != "LASF_Projection");
+    builder.point_format.is_compressed = false;
+    let tile = tmp.path().join("no_crs.las");
+    let mut writer = las::Writer::from_path(&tile, builder.into_header().unwrap()).unwrap();
+    for p in reader.read_all().unwrap().points() {
+        writer.write_point(p.unwrap()).unwrap();
+    }
+    writer.close().unwrap();
+    drop(writer);
+    let run = |out: &str, extra: &[&str]| {
+        let out = tmp.path().join(out);
+        let mut args = vec!["scenario", "--effect", "none", "--passes", "1", "--als", tile.to_str().unwrap()];
+        args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+        args.extend_from_slice(extra);
+        let (ok, _, err) = gedisim(&args);
+        assert!(ok, "{err}");
+        err
+    };
+    let err = run("default", &[]);
+    let said: Vec<&str> = err.lines().filter(|l| l.starts_with("warning:")).collect();
+    assert_eq!(said.len(), 1, "{err}");
+    assert!(said[0].contains("no_crs.las") && said[0].contains("EPSG:2154") && said[0].contains("--epsg"), "{err}");
+    let err = run("named", &["--epsg", "2154"]);
+    assert!(!err.contains("warning"), "{err}");
+    // The real tile carries its CRS: nothing to say.
+    let err = scenario(&tmp.path().join("real"), &["--effect", "none", "--passes", "1"]);
+    assert!(!err.contains("warning"), "{err}");
+}

@@ -46,7 +46,7 @@ use sql::SqlArgs;
 pub struct Cli {
     #[command(subcommand)]
     command: Command,
-    /// Say more on stderr (-v: details, -vv: every library's too). `RUST_LOG` overrides.
+    /// Say more on stderr (-v: details, -vv: every library's too). `RUST_LOG` adds to this, per target.
     #[arg(short, long, global = true, action = clap::ArgAction::Count)]
     verbose: u8,
     /// Say only warnings and errors on stderr, without progress bars (results still go to stdout).

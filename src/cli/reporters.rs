@@ -3,11 +3,11 @@
 //! command takes ([`writer`]).
 
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Mutex;
+use std::sync::{LazyLock, Mutex};
 use std::time::Duration;
 use tracing::{debug, info};
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use indicatif::{HumanCount, MultiProgress, ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
 
 use gedisim::ops::progress::{Progress, Step};
 
@@ -21,6 +21,14 @@ impl Bars {
     }
 }
 
+/// Where every bar is drawn: the log (`super::log`) writes its lines through it, above the bars.
+static DRAWN: LazyLock<MultiProgress> = LazyLock::new(MultiProgress::new);
+
+/// Run `write` with the bars hidden, then draw them again below what it wrote.
+pub fn above_bars(write: impl FnOnce()) {
+    DRAWN.suspend(write)
+}
+
 /// `-q`: no bars.
 static QUIET: AtomicBool = AtomicBool::new(false);
 
@@ -31,17 +39,22 @@ pub fn set_quiet(quiet: bool) {
 /// The bar's look: with its total and eta once the total is known, else the count alone (never
 /// `127/0 shots … eta 0s`).
 fn bar_style(step: Step, total: u64) -> ProgressStyle {
-    ProgressStyle::with_template(&bar_template(step, total)).expect("valid template").progress_chars("=> ")
+    ProgressStyle::with_template(&bar_template(step, total))
+        .expect("valid template")
+        .with_key("rate", |s: &ProgressState, w: &mut dyn std::fmt::Write| {
+            let _ = write!(w, "{}/s", HumanCount(s.per_sec() as u64));
+        })
+        .progress_chars("=> ")
 }
 
 fn bar_template(step: Step, total: u64) -> String {
     if total > 0 {
         format!(
-            "{{prefix:>11}} {{elapsed_precise}} [{{bar:40}}] {{human_pos}}/{{human_len}} {} ({{per_sec}}, eta {{eta}})",
+            "{{prefix:>11}} {{elapsed_precise}} [{{bar:40}}] {{human_pos}}/{{human_len}} {} ({{rate}}, eta {{eta}})",
             step.unit()
         )
     } else {
-        format!("{{prefix:>11}} {{elapsed_precise}} {{spinner}} {{human_pos}} {} so far ({{per_sec}})", step.unit())
+        format!("{{prefix:>11}} {{elapsed_precise}} {{spinner}} {{human_pos}} {} so far ({{rate}})", step.unit())
     }
 }
 
@@ -63,11 +76,16 @@ impl Progress for Bars {
             b.set_prefix(step.label());
             b
         };
-        if QUIET.load(Ordering::Relaxed) {
-            bar.set_draw_target(ProgressDrawTarget::hidden());
-        }
+        let bar = match QUIET.load(Ordering::Relaxed) {
+            true => {
+                bar.set_draw_target(ProgressDrawTarget::hidden());
+                bar
+            }
+            false => DRAWN.add(bar),
+        };
         if let Some((_, old)) = self.0.lock().expect("progress lock").replace((step, bar)) {
             old.finish_and_clear();
+            DRAWN.remove(&old);
         }
     }
 
@@ -95,8 +113,9 @@ impl Progress for Bars {
 
     fn finish(&self) {
         if let Some((step, b)) = self.0.lock().expect("progress lock").take() {
-            debug!("{}: done in {:.1} s", step.label(), b.elapsed().as_secs_f64());
             b.finish_and_clear();
+            DRAWN.remove(&b);
+            debug!("{}: done in {:.1} s", step.label(), b.elapsed().as_secs_f64());
         }
     }
 }

@@ -1,7 +1,7 @@
 //! `gedisim scenario`.
 
 use std::path::PathBuf;
-use tracing::info;
+use tracing::{info, warn};
 
 use clap::Args;
 
@@ -37,9 +37,9 @@ pub struct ScenarioArgs {
     /// RMS per axis of the random horizontal offset of each track (m).
     #[arg(long, default_value_t = 3.0)]
     offset_sigma: f64,
-    /// CRS of tiles that carry none.
-    #[arg(long, default_value_t = 2154)]
-    epsg: u32,
+    /// CRS (EPSG code) of tiles that carry none [default: 2154, with a warning].
+    #[arg(long)]
+    epsg: Option<u32>,
     /// Replace a world already in --out.
     #[arg(long)]
     force: bool,
@@ -69,6 +69,7 @@ pub fn scenario(a: ScenarioArgs) -> Result<()> {
         force: a.force,
     };
     let r = gedisim::ops::scenario::make_scenario(&opts)?;
+    r.notes.iter().for_each(|n| warn!("{n}"));
     info!(
         "scenario {}: {} tiles, {} granules, {} tracks, {} shots ({} dropped) → {}",
         a.effect,

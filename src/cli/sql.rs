@@ -113,7 +113,8 @@ pub fn sql(a: SqlArgs) -> Result<()> {
     })
 }
 
-/// The interactive mode: lines gathered until one ends with `;`, then run; errors printed and
+/// The interactive mode: lines gathered until they end a statement with `;` (not one inside a string or
+/// comment), then run; errors printed and
 /// the session goes on; `\q`, `quit`, `exit` or the end of input ends it.
 fn repl(session: &gedisim::ops::sql::SqlSession, format: gedisim::ops::sql::SqlFormat) -> Result<()> {
     use std::io::{BufRead, Write};
@@ -138,7 +139,7 @@ fn repl(session: &gedisim::ops::sql::SqlSession, format: gedisim::ops::sql::SqlF
         }
         buffer.push_str(&line);
         buffer.push('\n');
-        if trimmed.ends_with(';') {
+        if gedisim::ops::sql::SqlSession::statement_complete(&buffer) {
             if let Err(e) = session.run(&buffer, &mut print) {
                 eprintln!("error: {}", gedisim::error::one_line(&e.to_string()));
             }

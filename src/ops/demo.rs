@@ -116,7 +116,7 @@ pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoRepor
             passes_per_tile: opts.passes,
             geoid_m: DEFAULT_GEOID_M,
             track_offset_sigma_m: 3.0,
-            default_epsg: 2154,
+            default_epsg: None,
             force: true,
         });
         progress.finish();

@@ -758,6 +758,20 @@ fn write_figures(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
+/// "shrink 62 % (95 % CI 40–80 %)", saying so when the estimate lies outside its interval: the resampled tracks
+/// then add a spread between tracks that the systematic gap of all tracks together does not have
+/// (docs/diagnosis.md, "How far").
+fn shrink_text(c: &crate::kernels::diagnose::rank::Comparison) -> String {
+    let [lo, hi] = c.ci95.map(|x| 100.0 * x);
+    let shrink = 100.0 * c.shrink;
+    let outside = if (lo..=hi).contains(&shrink) || !(lo <= hi) {
+        ""
+    } else {
+        ", the estimate outside its interval: the gap differs between tracks more than within them"
+    };
+    format!("shrink {shrink:.0} % (95 % CI {lo:.0}–{hi:.0} %{outside})")
+}
+
 /// The diagnosis in a few lines a scientist can read.
 pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
     let mut lines = Vec::new();
@@ -806,13 +820,10 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
     if let Some(c) = &d.recorded_pulse {
         lines.push(format!(
             "Known physics first: each shot's recorded transmit pulse instead of the study's 15 ns Gaussian takes the \
-             held-out gap {:.2} → {:.2} m (shrink {:.0} %, 95 % CI {:.0} to {:.0} %); the effects below are ranked on \
-             top of it.",
+             held-out gap {:.2} → {:.2} m ({}); the effects below are ranked on top of it.",
             c.before.mean_abs_bias,
             c.after.mean_abs_bias,
-            100.0 * c.shrink,
-            100.0 * c.ci95[0],
-            100.0 * c.ci95[1]
+            shrink_text(c)
         ));
     }
     // What a trial changed, in the unit it is judged in.
@@ -826,13 +837,10 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
         let best = d.ranking.effects.first();
         lines.push(match best {
             Some(t) => format!(
-                "Which: unexplained — the best candidate, {} ({}), shrink {:.0} % (95 % CI {:.0} to {:.0} %), is not \
-                 enough to name it{}.",
+                "Which: unexplained — the best candidate, {} ({}), {}, is not enough to name it{}.",
                 t.effect.name(),
                 gap(t),
-                100.0 * t.held_out.shrink,
-                100.0 * t.held_out.ci95[0],
-                100.0 * t.held_out.ci95[1],
+                shrink_text(&t.held_out),
                 if t.held_out.spread.is_some() {
                     format!(
                         " (or its per-shot offsets are under {} m)",
@@ -862,13 +870,11 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
                 (None, None) => String::new(),
             };
             lines.push(format!(
-                "{} {} ({}): {gap}, shrink {:.0} % (95 % CI {:.0}–{:.0} %){caveat}.",
+                "{} {} ({}): {gap}, {}{caveat}.",
                 if i == 0 { "Which:" } else { "  then" },
                 t.effect.name(),
                 params.join(", "),
-                100.0 * t.held_out.shrink,
-                100.0 * t.held_out.ci95[0],
-                100.0 * t.held_out.ci95[1]
+                shrink_text(&t.held_out)
             ));
             if i == 0 && !d.ranking.ambiguous_with.is_empty() {
                 lines.push(format!(

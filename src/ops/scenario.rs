@@ -27,6 +27,7 @@ use crate::kernels::scenario::truth::{
 use crate::kernels::sim::{self, Footprint, PulseReference};
 use crate::kernels::waveform::forward::L2aRunner;
 use crate::kernels::waveform::l2a::Noise;
+use crate::ops::ingest_gedi::DEFAULT_EPSG;
 
 /// Default nominal geoid height N (m): EGM2008/RAF20 N over metropolitan France spans about
 /// 44–55 m; 49 m is typical of the Massif Central and Alpine foothills.
@@ -51,8 +52,8 @@ pub struct ScenarioOptions {
     pub geoid_m: f64,
     /// RMS per axis of the per-track offsets (m).
     pub track_offset_sigma_m: f64,
-    /// CRS of tiles without one.
-    pub default_epsg: u32,
+    /// CRS of tiles without one (`None`: [`DEFAULT_EPSG`], said in [`ScenarioReport::notes`]).
+    pub default_epsg: Option<u32>,
     /// Replace an existing world in `out`.
     pub force: bool,
 }
@@ -66,6 +67,8 @@ pub struct ScenarioReport {
     pub shots: usize,
     pub dropped: usize,
     pub truth: PathBuf,
+    /// What the user should know (a tile taken to be in the default CRS).
+    pub notes: Vec<String>,
 }
 
 /// One tile as the world uses it.
@@ -77,7 +80,7 @@ struct Tile {
     acquired: Option<DateTime<Utc>>,
 }
 
-fn read_tile(path: &Path, default_epsg: u32) -> Result<Tile> {
+fn read_tile(path: &Path, default_epsg: Option<u32>, notes: &mut Vec<String>) -> Result<Tile> {
     let reader = TileReader::open(path)?;
     let h = reader.header().clone();
     let points = crate::ops::simulate::drop_ingest_classes(&reader.read_all()?);
@@ -98,7 +101,17 @@ fn read_tile(path: &Path, default_epsg: u32) -> Result<Tile> {
         path: path.to_path_buf(),
         points,
         extent: Extent { xmin, ymin, xmax, ymax },
-        epsg: h.epsg.unwrap_or(default_epsg),
+        epsg: match (h.epsg, default_epsg) {
+            (Some(e), _) | (None, Some(e)) => e,
+            (None, None) => {
+                notes.push(format!(
+                    "{}: no CRS in the header; taken as EPSG:{DEFAULT_EPSG} (Lambert-93, LiDAR HD's); --epsg names \
+                     another",
+                    path.display()
+                ));
+                DEFAULT_EPSG
+            }
+        },
         acquired,
     })
 }
@@ -157,7 +170,8 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
         return Err(Error::file(&opts.out, "already holds a world (truth.json or gedi/); use --force to replace it"));
     }
 
-    let tiles = tile_files.iter().map(|p| read_tile(p, opts.default_epsg)).collect::<Result<Vec<_>>>()?;
+    let mut notes = Vec::new();
+    let tiles = tile_files.iter().map(|p| read_tile(p, opts.default_epsg, &mut notes)).collect::<Result<Vec<_>>>()?;
     let physics = effects.physics(&Physics::nominal());
     // Keep 2σ_f of ALS around every true and reported footprint centre, plus a metre.
     let margin = 2.0 * f64::from(physics.sim.fsigma).max(NOMINAL_FSIGMA_M) + 1.0;
@@ -432,6 +446,7 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
         shots: truth.n_shots,
         dropped: truth.n_dropped,
         truth: truth_path,
+        notes,
     })
 }
 

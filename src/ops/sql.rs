@@ -95,6 +95,17 @@ impl SqlSession {
         Ok(SqlSession { runtime, ctx, ds, dataset: dataset.to_path_buf(), limits: *limits })
     }
 
+    /// Whether `sql` ends a statement: its last token, comments and whitespace aside, is a `;` outside any string,
+    /// quoted name or comment (`'a;` followed by more lines is not; nor is `-- done;`).
+    pub fn statement_complete(sql: &str) -> bool {
+        use datafusion::sql::sqlparser::tokenizer::{Token, Tokenizer};
+        let dialect = datafusion::sql::sqlparser::dialect::GenericDialect {};
+        match Tokenizer::new(&dialect, sql).tokenize() {
+            Ok(tokens) => tokens.iter().rev().find(|t| !matches!(t, Token::Whitespace(_))) == Some(&Token::SemiColon),
+            Err(_) => false, // an unterminated string or quoted name: the statement goes on
+        }
+    }
+
     /// Run every statement of `sql` (separated by `;`) in order, handing `on_result` the result of
     /// each that has result columns as soon as it is known. The first failing statement ends the
     /// run with its error (the results before it were handed over).
