@@ -113,7 +113,7 @@ mod tests {
         assert_eq!(directives(0, true, None), "warn,gedisim=warn");
         assert_eq!(directives(0, true, Some(" ")), "warn,gedisim=warn");
         assert_eq!(directives(0, true, Some("datafusion=debug")), "warn,gedisim=warn,datafusion=debug");
-        // Valid as one filter, and the later directive wins for its target.
+        // Valid as one filter (EnvFilter keeps the later of two directives for one target).
         EnvFilter::try_new(directives(1, false, Some("gedisim=trace"))).unwrap();
     }
 }
