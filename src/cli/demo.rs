@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 use std::time::Instant;
-use tracing::info;
+use tracing::{info, warn};
 
 use clap::Args;
 
@@ -41,14 +41,17 @@ pub fn demo(a: DemoArgs) -> Result<()> {
     };
     let d = gedisim::ops::demo::run_demo(&opts, &Bars::new())?;
     match &d.world {
-        Some(w) => info!(
-            "world: {} tiles, {} granules, {} shots, effect {} → {}",
-            w.tiles,
-            w.granules,
-            w.shots,
-            opts.effect,
-            d.world_dir.display()
-        ),
+        Some(w) => {
+            w.notes.iter().for_each(|n| warn!("{n}"));
+            info!(
+                "world: {} tiles, {} granules, {} shots, effect {} → {}",
+                w.tiles,
+                w.granules,
+                w.shots,
+                opts.effect,
+                d.world_dir.display()
+            )
+        }
         None => info!("world: reusing {} (effect {}, seed {})", d.world_dir.display(), opts.effect, opts.seed),
     }
     print_run(&d.run);

@@ -114,8 +114,7 @@ pub fn sql(a: SqlArgs) -> Result<()> {
 }
 
 /// The interactive mode: lines gathered until they end a statement with `;` (not one inside a string or
-/// comment), then run; errors printed and
-/// the session goes on; `\q`, `quit`, `exit` or the end of input ends it.
+/// comment), then run; errors printed and the session goes on; `\q`, `quit`, `exit` or the end of input ends it.
 fn repl(session: &gedisim::ops::sql::SqlSession, format: gedisim::ops::sql::SqlFormat) -> Result<()> {
     use std::io::{BufRead, Write};
     tracing::info!(
