@@ -758,12 +758,11 @@ fn write_figures(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
-/// "shrink 62 % (95 % CI 40–80 %)", saying so when the estimate lies outside its interval: the resampled tracks
-/// then add a spread between tracks that the systematic gap of all tracks together does not have
-/// (docs/diagnosis.md, "How far").
+/// "shrink 62 % (95 % CI 40–80 %)", saying so when the estimate lies outside its interval (as printed): the
+/// resampled tracks then add a spread between tracks that the systematic gap of all tracks together does not have
+/// (docs/diagnosis.md, "Which effect, and how far").
 fn shrink_text(c: &crate::kernels::diagnose::rank::Comparison) -> String {
-    let [lo, hi] = c.ci95.map(|x| 100.0 * x);
-    let shrink = 100.0 * c.shrink;
+    let [shrink, lo, hi] = [c.shrink, c.ci95[0], c.ci95[1]].map(|x| (100.0 * x).round());
     let outside = if (lo..=hi).contains(&shrink) || !(lo <= hi) {
         ""
     } else {
@@ -891,6 +890,25 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_shrink_outside_its_interval_is_said_so() {
+        let c = |shrink: f64, ci95: [f64; 2]| crate::kernels::diagnose::rank::Comparison {
+            before: Default::default(),
+            after: Default::default(),
+            shrink,
+            ci95,
+            gain_ci95: [0.0, 0.0],
+            shrink_mean_abs_bias: 0.0,
+            profile_chi2: [0.0, 0.0],
+            spread: None,
+        };
+        assert_eq!(shrink_text(&c(0.62, [0.40, 0.80])), "shrink 62 % (95 % CI 40–80 %)");
+        // As printed: 96.4 % with an interval ending at 96.3 % reads 96 within 42–96.
+        assert_eq!(shrink_text(&c(0.964, [0.42, 0.963])), "shrink 96 % (95 % CI 42–96 %)");
+        let outside = shrink_text(&c(0.97, [0.42, 0.96]));
+        assert!(outside.starts_with("shrink 97 % (95 % CI 42–96 %, the estimate outside its interval"), "{outside}");
+    }
 
     #[test]
     fn the_inputs_key_follows_effects_pulse_and_every_table_file() {
