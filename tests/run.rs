@@ -369,13 +369,27 @@ fn demo_runs_on_the_bundled_tiles_and_prints_the_headline_tables() {
         "GEDI ground in the ALS vertical datum through: geoid",
         "RH bias = simulated − GEDI RH",
         "Held-out gap, what the causes below are judged by (not comparable with the baseline)",
+        // The study's question first: the configuration chosen, every configuration's gap, and
+        // the ground bias of each L2A algorithm.
+        "Configuration first (weighting × pulse",
+        "every configuration (mean |RH bias| RH1–RH99, MSD, RH98 bias): count + Gaussian 15 ns",
+        "per L2A algorithm: a1 ",
     ] {
         assert!(stdout.contains(text), "{text}: {stdout}");
     }
     // The page: titled by the dataset, the paper's figures, the diagnosis inside.
     let page = std::fs::read_to_string(&html).unwrap();
     assert!(page.contains("<title>demo/dataset — gedisim study report</title>"), "title");
-    for text in ["alt=\"rh_scatter\"", "alt=\"shot_map\"", "<h2 id=\"diagnosis\">", "Verdict: ", "<th>bias (m)</th>"] {
+    for text in [
+        "alt=\"rh_scatter\"",
+        "alt=\"shot_map\"",
+        "<h2 id=\"diagnosis\">",
+        "Verdict: ",
+        "<th>bias (m)</th>",
+        "<h3>Configuration (weighting × pulse)</h3>",
+        " (chosen)</td>",
+        "<th>ground bias, GEDI − ALS (m)</th>",
+    ] {
         assert!(page.contains(text), "{text} missing from report.html");
     }
     assert!(page.contains("alt=\"bias_profile_before_after\"") && page.contains("alt=\"waveform_residual\""));

@@ -5,7 +5,10 @@ Each world folder holds `truth.json` (both generators write `effects: [{name, pa
 `datum_dz_m` and per-shot true/reported positions) and `als/` + `gedi/`. For each world the
 diagnosis is run with the whole chain into `<world>/diag` unless `diag/diagnosis.json` exists.
 It is then scored against the truth:
+- the simulator configuration chosen (weighting + pulse), which is never an effect;
 - which effect comes first (or `unexplained`), and whether the diagnosis calls it ambiguous;
+- whether per-shot geolocation was named anywhere on the ladder (spurious where none was planted),
+  and its ground test (β and interval);
 - the held-out shrink of the true effect (its own trial);
 - the error of its main parameter;
 - the collocation: for every segment, dz − datum_dz (vertical) and the distance between (dx, dy)
@@ -43,7 +46,10 @@ MAIN = {
 
 def generator(truth):
     g = str(truth.get("generator", truth.get("format", "")))
-    return "worldgen" if g.startswith("worldgen") else "gedisim"
+    for name in ("worldgen", "physgen"):
+        if g.startswith(name):
+            return name
+    return "gedisim"
 
 
 def true_offsets(truth):
@@ -76,8 +82,15 @@ def collocation_errors(world, truth):
     return rows
 
 
+def is_configuration(e):
+    """A weighting planted as another method at ρ 1 (every return weighing 1: `count`) is a simulator
+    configuration, which the diagnosis chooses first and never reports as an effect."""
+    p = e.get("params", {})
+    return e["name"] == "weighting" and p.get("method", "ratio") != "ratio" and p.get("rho_ground_over_veg", 1.0) == 1.0
+
+
 def score(world, truth, d):
-    planted = [e["name"] for e in truth["effects"] if e["name"] != "none"]
+    planted = [e["name"] for e in truth["effects"] if e["name"] != "none" and not is_configuration(e)]
     effects = d["effects"]
     first = None if d["unexplained"] else effects[0]["name"]
     named = [t["name"] for t in d["ladder"]] or ([first] if first else [])
@@ -85,25 +98,30 @@ def score(world, truth, d):
         "world": world.name,
         "generator": generator(truth),
         "truth": "+".join(planted) or "none",
+        "world_configuration": next((e["params"]["method"] for e in truth["effects"] if is_configuration(e)), None),
         "first": first or "unexplained",
         "ambiguous_with": d.get("ambiguous_with", []),
         "right_first": (first in planted) if planted else (first is None),
         "pair_both": all(p in named for p in planted) if len(planted) == 2 else None,
+        "configuration": (d.get("configuration") or {}).get("chosen"),
+        "geolocation_named": "geolocation" in named,
+        "geolocation_planted": "geolocation" in planted,
     }
+    geo = next((t for t in effects if t["name"] == "geolocation"), None)
+    if geo and geo.get("ground_test"):
+        g = geo["ground_test"]
+        row["ground_test"] = (g.get("beta"), g.get("ci95"), g.get("rms_predicted_m"))
     if len(planted) == 1:
         name = planted[0]
         trial = next((t for t in effects if t["name"] == name), None)
         if trial:
             row["shrink"] = trial["held_out"]["shrink"]
             key, nominal = MAIN[name]
-            want = next(e for e in truth["effects"] if e["name"] == name)["params"].get(key)
+            want = next(e for e in truth["effects"] if e["name"] == name and not is_configuration(e))["params"].get(key)
             got = trial["params"].get(key)
             if isinstance(want, (int, float)) and isinstance(got, (int, float)) and want != nominal:
                 row["param_rel_err"] = abs(got - want) / abs(want - nominal)
                 row["param"] = (got, want)
-    kp = d.get("known_physics") or []
-    if kp:
-        row["recorded_pulse_shrink"] = kp[0]["held_out"]["shrink"]
     row["collocation"] = collocation_errors(world, truth)
     return row
 
@@ -132,14 +150,18 @@ def main():
                 print(f"{w.name}: diagnose failed: {r.stderr.strip().splitlines()[-1:]}", file=sys.stderr)
                 continue
             (w / "diag" / "summary.txt").write_text(r.stdout)  # the summary as a scientist reads it
+            (w / "diag" / "seconds.txt").write_text(f"{time.time() - t0:.1f}\n")
             print(f"{w.name}: diagnosed in {time.time() - t0:.0f} s", file=sys.stderr)
         row = score(w, truth, json.loads(diag.read_text()))
+        seconds = w / "diag" / "seconds.txt"
+        row["seconds"] = float(seconds.read_text()) if seconds.exists() else None
         rows.append(row)
         col = row["collocation"]
         print(f"{row['world']:<28} {row['generator']:<8} truth {row['truth']:<26} first {row['first']:<18}"
               f"{' ambiguous ' + ','.join(row['ambiguous_with']) if row['ambiguous_with'] else ''}"
               f" shrink {row.get('shrink', float('nan')):.2f} param_err {row.get('param_rel_err', float('nan')):.2f}"
-              f" recorded_pulse_shrink {row.get('recorded_pulse_shrink', float('nan')):.2f}"
+              f" config {row['configuration']}"
+              f"{' GEOLOCATION named' if row['geolocation_named'] else ''}"
               f" segments {len(col)} median dz err {median([c[0] for c in col]):+.3f} m")
     for g in sorted({r["generator"] for r in rows}):
         rs = [r for r in rows if r["generator"] == g]
@@ -162,6 +184,14 @@ def main():
                       f"parameter error {errs}")
         if ctl:
             print(f"  controls unexplained {sum(r['right_first'] for r in ctl)}/{len(ctl)}")
+        nogeo = [r for r in rs if not r["geolocation_planted"]]
+        if nogeo:
+            print(f"  per-shot geolocation named in {sum(r['geolocation_named'] for r in nogeo)}/{len(nogeo)} "
+                  f"worlds without it")
+        configs = {}
+        for r in rs:
+            configs[r["configuration"]] = configs.get(r["configuration"], 0) + 1
+        print(f"  configurations chosen: {configs}")
         if pairs:
             print(f"  pairs both named {sum(bool(r['pair_both']) for r in pairs)}/{len(pairs)}")
         for label, sel in [("all segments", col), ("segments of ≥ 20 shots", [c for c in col if c[2] >= 20])]:

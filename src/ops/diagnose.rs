@@ -674,6 +674,40 @@ fn write_tables(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
             ("residual", floats(r.residual.iter().copied())),
         ])?,
     )?);
+    let c = &d.configuration;
+    let t = &c.trials;
+    files.extend(crate::ops::report::write_named_table(
+        out,
+        "configurations",
+        &batch(vec![
+            ("configuration", texts(t.iter().map(|t| t.config.label()))),
+            ("weighting", texts(t.iter().map(|t| t.config.weighting.name()))),
+            (
+                "chosen",
+                Arc::new(arrow::array::BooleanArray::from(t.iter().map(|t| t.config == c.chosen).collect::<Vec<_>>())),
+            ),
+            ("mean_abs_bias_rh1_99", floats(t.iter().map(|t| t.metrics.mean_abs_bias))),
+            ("systematic_gap", floats(t.iter().map(|t| t.metrics.systematic))),
+            ("msd", floats(t.iter().map(|t| t.metrics.msd))),
+            ("rh98_bias", floats(t.iter().map(|t| t.metrics.bias_rh[97]))),
+            ("rh50_bias", floats(t.iter().map(|t| t.metrics.bias_rh[49]))),
+            ("ground_bias_m", floats(t.iter().map(|t| t.metrics.ground_bias))),
+            ("waveform_chi2", floats(t.iter().map(|t| t.waveform_chi2))),
+            ("waveform_chi2_profiled", floats(t.iter().map(|t| t.waveform_chi2_profiled))),
+        ])?,
+    )?);
+    let g = &c.ground;
+    files.extend(crate::ops::report::write_named_table(
+        out,
+        "ground_by_algorithm",
+        &batch(vec![
+            ("algorithm", floats(g.iter().map(|g| f64::from(g.algorithm)))),
+            ("n_shots", floats(g.iter().map(|g| g.n as f64))),
+            ("ground_bias_m", floats(g.iter().map(|g| g.bias_m))),
+            ("ci95_lo", floats(g.iter().map(|g| g.ci95[0]))),
+            ("ci95_hi", floats(g.iter().map(|g| g.ci95[1]))),
+        ])?,
+    )?);
     for (name, trials) in [("effects", &d.ranking.effects), ("ladder", &d.ranking.ladder)] {
         files.extend(crate::ops::report::write_named_table(
             out,
@@ -682,6 +716,7 @@ fn write_tables(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
                 ("step", floats((0..trials.len()).map(|i| i as f64 + 1.0))),
                 ("effect", texts(trials.iter().map(|t| t.effect.name()))),
                 ("params", texts(trials.iter().map(|t| serde_json::to_string(&params(&t.effect)).unwrap_or_default()))),
+                ("frame", texts(trials.iter().map(|t| t.held_out.frame.name()))),
                 ("mean_abs_bias_before", floats(trials.iter().map(|t| t.held_out.before.mean_abs_bias))),
                 ("mean_abs_bias_after", floats(trials.iter().map(|t| t.held_out.after.mean_abs_bias))),
                 ("shrink", floats(trials.iter().map(|t| t.held_out.shrink))),
@@ -707,11 +742,13 @@ fn write_figures(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
     let profile = |label: &str, b: &[f64; N_PCT]| {
         (label.to_string(), (0..N_PCT).map(|k| ((k + 1) as f64, b[k])).collect::<Vec<_>>())
     };
-    let mut rh =
-        vec![profile("baseline (noise-free)", &d.where_.overall.bias_rh), profile("nominal chain", &d.nominal.bias_rh)];
+    let mut rh = vec![
+        profile("baseline (noise-free)", &d.where_.overall.bias_rh),
+        profile("chosen configuration", &d.nominal.bias_rh),
+    ];
     let mut als = vec![
         profile("baseline (noise-free)", &d.where_.overall.bias_als),
-        profile("nominal chain", &d.nominal.bias_als),
+        profile("chosen configuration", &d.nominal.bias_als),
     ];
     let mut names = Vec::new();
     for t in &d.ranking.ladder {
@@ -771,6 +808,71 @@ fn shrink_text(c: &crate::kernels::diagnose::rank::Comparison) -> String {
     format!("shrink {shrink:.0} % (95 % CI {lo:.0}–{hi:.0} %{outside})")
 }
 
+/// The configuration stage in a few lines: the choice and how far it takes the study's gap, every
+/// configuration's gap, the ground bias per algorithm.
+fn configuration_lines(c: &crate::kernels::diagnose::configuration::ConfigurationChoice) -> Vec<String> {
+    let h = &c.held_out;
+    let folds = if c.fold_chosen.iter().all(|k| *k == c.chosen) {
+        String::new()
+    } else {
+        format!(" (the calibration folds chose {} and {})", c.fold_chosen[0].label(), c.fold_chosen[1].label())
+    };
+    let rows: Vec<String> = c
+        .trials
+        .iter()
+        .map(|t| {
+            format!(
+                "{} {:.2} m, MSD {:.2} m², RH98 {:+.2} m",
+                t.config.label(),
+                t.metrics.mean_abs_bias,
+                t.metrics.msd,
+                t.metrics.bias_rh[97]
+            )
+        })
+        .collect();
+    let grounds: Vec<String> = c
+        .ground
+        .iter()
+        .filter(|g| g.n > 0)
+        .map(|g| format!("a{} {:+.2} m ({:+.2} to {:+.2})", g.algorithm, g.bias_m, g.ci95[0], g.ci95[1]))
+        .collect();
+    let mut lines = vec![
+        format!(
+            "Configuration first (weighting × pulse, chosen on calibration tracks by the waveforms at the best \
+             ground/vegetation ratio, scored on held-out ones): {}{folds}; from the study's count + Gaussian 15 ns the held-out gap goes {:.2} → {:.2} m \
+             ({}). A configuration is never reported as an effect: the causes below are ranked on top of it.",
+            c.chosen.label(),
+            h.before.mean_abs_bias,
+            h.after.mean_abs_bias,
+            shrink_text(h)
+        ),
+        format!("  every configuration (mean |RH bias| RH1–RH99, MSD, RH98 bias): {}.", rows.join("; ")),
+    ];
+    if let Some(best) = c.least_biased_algorithm() {
+        lines.push(format!(
+            "  ground bias (GEDI − ALS, 95 % CI) per L2A algorithm: {}; least biased: a{}.",
+            grounds.join(", "),
+            best.algorithm
+        ));
+    }
+    lines
+}
+
+/// "its ground test failed: β 0.05 (95 % CI −0.3 to 0.4) …" (docs/diagnosis.md, "Geolocation").
+fn ground_test_text(g: &crate::kernels::diagnose::geolocation::GroundTest) -> String {
+    format!(
+        "its ground test failed: the ground elevations GEDI reports follow the positions the canopy asks for with \
+         slope β {:.2} (95 % CI {:.2} to {:.2}, needs ≥ {}; {} shots, predicted changes {:.2} m RMS), so the \
+         re-placement mends the model rather than the positions",
+        g.beta,
+        g.ci95[0],
+        g.ci95[1],
+        crate::kernels::diagnose::geolocation::MIN_BETA_LOWER,
+        g.n_shots,
+        g.rms_predicted_m
+    )
+}
+
 /// The diagnosis in a few lines a scientist can read.
 pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
     let mut lines = Vec::new();
@@ -810,21 +912,14 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
         );
     }
     lines.push(place + ".");
+    lines.extend(configuration_lines(&d.configuration));
     lines.push(
         "Held-out gap, what the causes below are judged by (not comparable with the baseline): mean |RH bias| over \
-         RH1–RH99, averaged over heights above each side's own ground and above the ALS ground, of the full chain \
-         (noise twin, L2A a1–a6) on tracks left out of each fit."
+         RH1–RH99 of the full chain (noise twin, L2A a1–a6) on tracks left out of each fit, each effect where it \
+         acts: a datum above the ALS ground (ALS frame), a ground detection and the noise above GEDI's own ground \
+         (RH frame), the others in both."
             .into(),
     );
-    if let Some(c) = &d.recorded_pulse {
-        lines.push(format!(
-            "Known physics first: each shot's recorded transmit pulse instead of the study's 15 ns Gaussian takes the \
-             held-out gap {:.2} → {:.2} m ({}); the effects below are ranked on top of it.",
-            c.before.mean_abs_bias,
-            c.after.mean_abs_bias,
-            shrink_text(c)
-        ));
-    }
     // What a trial changed, in the unit it is judged in.
     let gap = |t: &crate::kernels::diagnose::rank::Trial| match &t.held_out.spread {
         Some(s) => format!("held-out MSD above the noise floor {:.2} → {:.2} m²", s.excess()[0], s.excess()[1]),
@@ -840,13 +935,13 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
                 t.effect.name(),
                 gap(t),
                 shrink_text(&t.held_out),
-                if t.held_out.spread.is_some() {
-                    format!(
+                match &t.ground_test {
+                    Some(g) if !g.passes() => format!(" ({})", ground_test_text(g)),
+                    Some(_) => format!(
                         " (or its per-shot offsets are under {} m)",
                         crate::kernels::diagnose::rank::MIN_SHOT_SIGMA_M
-                    )
-                } else {
-                    String::new()
+                    ),
+                    None => String::new(),
                 }
             ),
             None => "Which: unexplained — no effect could be fitted.".into(),
@@ -894,6 +989,7 @@ mod tests {
     #[test]
     fn a_shrink_outside_its_interval_is_said_so() {
         let c = |shrink: f64, ci95: [f64; 2]| crate::kernels::diagnose::rank::Comparison {
+            frame: crate::kernels::diagnose::gap::Frame::Both,
             before: Default::default(),
             after: Default::default(),
             shrink,

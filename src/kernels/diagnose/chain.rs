@@ -1,14 +1,14 @@
-//! The forward model of one hypothesis: the nominal GEDI chain (ALS waveform → pulse → noise twin
-//! → L2A a1–a6) with a set of effects switched on, and the same effects undone on the real side.
+//! The forward model of one hypothesis: the GEDI chain (ALS waveform → pulse → noise twin → L2A
+//! a1–a6) in a simulator configuration ([`Configuration`]: weighting and transmit pulse) with a set
+//! of effects switched on, and the same effects undone on the real side.
 //!
-//! The nominal chain is what a scientist would simulate with the study's settings *and* process
-//! like GEDI: frac weighting (`NOMINAL_WEIGHTING`), the shot's recorded transmit pulse (or the
-//! 15 ns Gaussian), σ_f 5.5 m, noise at the level of the median real GEDI
-//! shot of the beam type with the shots' own spread (`case::set_nominal_noise`), the shot's own
-//! energy and record window, our L2A. A
-//! world without any unmodelled effect then differs from it only by noise, so a control is
-//! `unexplained`; every effect is a departure from it, through the hooks of the effect registry
-//! (`scenario::effects`) shared with the world generator.
+//! Every configuration is simulated as a scientist would *and* processed like GEDI: σ_f 5.5 m,
+//! noise at the level of the median real GEDI shot of the beam type with the shots' own spread
+//! (`case::set_nominal_noise`), the shot's own energy and record window, our L2A. The
+//! configuration that reproduces the real waveforms best is chosen first
+//! (`super::configuration`); a world without any unmodelled effect then differs from it only by
+//! noise, so a control is `unexplained`; every effect is a departure from it, through the hooks
+//! of the effect registry (`scenario::effects`) shared with the world generator.
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -18,7 +18,7 @@ use rayon::prelude::*;
 use super::case::{RealAlgorithm, ShotCase, Site, FSIGMA_GRID, SITE_STEP_M};
 use crate::kernels::gedi::{N_ALGORITHMS, RH_LEN};
 use crate::kernels::scenario::effects::{
-    Effect, GeoLevel, WaveParts, NOMINAL_FSIGMA_M, NOMINAL_PULSE_SIGMA_M, NOMINAL_WEIGHTING,
+    Effect, GeoLevel, WaveParts, WeightMethod, NOMINAL_FSIGMA_M, NOMINAL_PULSE_SIGMA_M, NOMINAL_WEIGHTING,
 };
 use crate::kernels::scenario::EffectSet;
 use crate::kernels::sim::pulse::gaussian_blur;
@@ -27,34 +27,75 @@ use crate::kernels::waveform::forward::{forward, signal_span, L2aRunner, RecordW
 use crate::kernels::waveform::l2a::Noise;
 use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
 
-/// A hypothesis: the effects added to the nominal chain (empty = the nominal chain), and where
-/// it places the shots of short collocation segments ([`reposition`]).
+/// The transmit pulse a configuration simulates with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum PulseChoice {
+    /// The study's Gaussian of 15 ns FWHM.
+    Gaussian,
+    /// Each shot's recorded transmit pulse (L1B `txwaveform`, docs/pulse.md); shots without one
+    /// use the Gaussian.
+    #[default]
+    Recorded,
+}
+
+/// The simulator configuration a hypothesis starts from — the study's own question (docs/diagnosis.md,
+/// "Configuration first"): the return weighting and the transmit pulse. A configuration is chosen
+/// before any effect is ranked, and is never reported as an unmodelled effect.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Configuration {
+    pub weighting: Weighting,
+    pub pulse: PulseChoice,
+}
+
+impl Default for Configuration {
+    /// The nominal chain's: `frac` (`NOMINAL_WEIGHTING`) and each shot's recorded pulse.
+    fn default() -> Self {
+        Configuration { weighting: NOMINAL_WEIGHTING, pulse: PulseChoice::Recorded }
+    }
+}
+
+impl Configuration {
+    /// The study's baseline: `count` weighting and the 15 ns Gaussian.
+    pub fn study() -> Configuration {
+        Configuration { weighting: Weighting::Count, pulse: PulseChoice::Gaussian }
+    }
+
+    /// e.g. `int + recorded pulse`.
+    pub fn label(&self) -> String {
+        let pulse = match self.pulse {
+            PulseChoice::Gaussian => "Gaussian 15 ns",
+            PulseChoice::Recorded => "recorded pulse",
+        };
+        format!("{} + {pulse}", self.weighting.name())
+    }
+}
+
+/// A hypothesis: a configuration, the effects added to it (none = the configuration alone), and
+/// where it places the shots of short collocation segments ([`reposition`]).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Model {
+    pub config: Configuration,
     pub effects: Vec<Effect>,
-    /// Simulate with the study's 15 ns Gaussian pulse instead of each shot's recorded transmit
-    /// pulse (`RealShot::pulse`; shots without one always use the Gaussian).
-    pub gaussian_pulse: bool,
     /// Site index (`SimShot::sites`) of a shot, by shot number; absent = the collocated position.
     pub placement: Arc<HashMap<u64, usize>>,
 }
 
 impl Model {
+    /// The configuration `config` without effects, at the collocated positions.
+    pub fn configured(config: Configuration) -> Model {
+        Model { config, ..Model::default() }
+    }
+
     /// This model with `e` added (same placement).
     pub fn with(&self, e: Effect) -> Model {
         let mut effects = self.effects.clone();
         effects.push(e);
-        Model { effects, placement: self.placement.clone(), gaussian_pulse: self.gaussian_pulse }
+        Model { effects, ..self.clone() }
     }
 
     /// These effects with the placement of `other`.
     pub fn placed_as(&self, other: &Model) -> Model {
-        Model { effects: self.effects.clone(), placement: other.placement.clone(), gaussian_pulse: self.gaussian_pulse }
-    }
-
-    /// The nominal chain with the study's Gaussian pulse instead of the recorded ones.
-    pub fn gaussian() -> Model {
-        Model { gaussian_pulse: true, ..Model::default() }
+        Model { placement: other.placement.clone(), ..self.clone() }
     }
 
     /// The site at which this model simulates `case`.
@@ -95,22 +136,27 @@ impl Model {
     /// then the extra Gaussian, or one Gaussian of the nominal σ and the extra σ in quadrature.
     pub fn apply_pulse(&self, x: &[f64], pulse: Option<&Pulse>, dz: f64) -> Vec<f64> {
         let extra = self.extra_pulse_sigma();
-        match pulse.filter(|p| !self.gaussian_pulse && (f64::from(p.res) - dz).abs() < 1e-6) {
+        let recorded = self.config.pulse == PulseChoice::Recorded;
+        match pulse.filter(|p| recorded && (f64::from(p.res) - dz).abs() < 1e-6) {
             Some(p) => gaussian_blur(&p.convolve_same(x), extra, dz),
             None => gaussian_blur(x, NOMINAL_PULSE_SIGMA_M.hypot(extra), dz),
         }
     }
 
-    /// Weighting and ρg/ρv.
+    /// Weighting and ρg/ρv: the configuration's weighting, unless a `weighting` effect names
+    /// another method (`ratio` scales the configuration's own).
     pub fn weighting(&self) -> (Weighting, f64) {
         self.effects
             .iter()
             .rev()
             .find_map(|e| match *e {
+                Effect::Weighting { method: WeightMethod::Ratio, rho_ground_over_veg } => {
+                    Some((self.config.weighting, rho_ground_over_veg))
+                }
                 Effect::Weighting { method, rho_ground_over_veg } => Some((method.weighting(), rho_ground_over_veg)),
                 _ => None,
             })
-            .unwrap_or((NOMINAL_WEIGHTING, 1.0))
+            .unwrap_or((self.config.weighting, 1.0))
     }
 }
 
@@ -421,7 +467,6 @@ mod tests {
 
     use crate::kernels::diagnose::case::{site_grid, Parts, RealShot, SimShot, SimVariant, Strata};
     use crate::kernels::gedi::BeamType;
-    use crate::kernels::scenario::effects::WeightMethod;
 
     /// A site at `offset` (m from the collocated position) whose canopy layer's height depends on
     /// the position (unique on the site grid), over a ground at 100 m.
@@ -513,5 +558,10 @@ mod tests {
         assert_eq!(m.weighting(), (Weighting::Int, 0.5));
         assert_eq!(m.extra_pulse_sigma(), 0.0);
         assert_eq!(Model::default().weighting(), (NOMINAL_WEIGHTING, 1.0));
+        // A ratio scales the configuration's own weighting: count stays count.
+        let count = Model::configured(Configuration { weighting: Weighting::Count, pulse: PulseChoice::Gaussian });
+        let ratio = count.with(Effect::Weighting { method: WeightMethod::Ratio, rho_ground_over_veg: 0.6 });
+        assert_eq!(ratio.weighting(), (Weighting::Count, 0.6));
+        assert_eq!(count.weighting(), (Weighting::Count, 1.0));
     }
 }

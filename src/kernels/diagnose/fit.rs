@@ -11,7 +11,7 @@ use super::chain::{null_cases, predict, real_products, reposition, Model, Scratc
 use super::gap::GapSums;
 use super::profile::{self, ShotProfile};
 use crate::kernels::gedi::N_ALGORITHMS;
-use crate::kernels::scenario::effects::{Effect, GeoLevel, WeightMethod, NOMINAL_WEIGHTING};
+use crate::kernels::scenario::effects::{Effect, GeoLevel, WeightMethod};
 
 /// The effects the diagnosis fits: every effect of the registry, in its order.
 pub const FITTED_EFFECTS: [&str; 9] = crate::kernels::scenario::effects::EFFECT_NAMES;
@@ -244,18 +244,12 @@ fn fit_placed(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
             Some(Effect::Footprint { fsigma_m: x })
         }
         "weighting" => {
+            // ρ on the configuration's own weighting: a change of method is a configuration
+            // (`super::configuration`), chosen before any effect, never an effect.
             let grid: Vec<f64> = RHO_GRID.iter().map(|r: &f64| r.ln()).collect();
-            // ρ on the nominal weighting, and on each other method.
-            [WeightMethod::Ratio, WeightMethod::Count, WeightMethod::Frac, WeightMethod::Int]
-                .into_iter()
-                .filter(|&m| m == WeightMethod::Ratio || m.weighting() != NOMINAL_WEIGHTING)
-                .map(|method| {
-                    let (x, v) =
-                        minimise(&mut |lr| obj(Effect::Weighting { method, rho_ground_over_veg: lr.exp() }), &grid, 8);
-                    (Effect::Weighting { method, rho_ground_over_veg: x.exp() }, v)
-                })
-                .min_by(|a, b| a.1.total_cmp(&b.1))
-                .map(|(e, _)| e)
+            let method = WeightMethod::Ratio;
+            let (x, _) = minimise(&mut |lr| obj(Effect::Weighting { method, rho_ground_over_veg: lr.exp() }), &grid, 8);
+            Some(Effect::Weighting { method, rho_ground_over_veg: x.exp() })
         }
         "canopy_change" => two_parameter(&CANOPY_HEIGHTS, &CANOPY_FRACTIONS, &|h, f| {
             obj(Effect::CanopyChange { height_m: h, fraction: f })

@@ -136,7 +136,10 @@ impl GapSums {
                 let var = ((mo.syy[k] - 2.0 * mo.syp[k] + mo.spp[k]) / n - b * b).max(0.0);
                 (b * b - var / shots).max(0.0).sqrt()
             };
-            m.systematic += (excess(&self.rh, br) + excess(&self.als, ba)) / (2.0 * N_PCT as f64);
+            let (er, ea) = (excess(&self.rh, br), excess(&self.als, ba));
+            m.systematic_rh += er / N_PCT as f64;
+            m.systematic_als += ea / N_PCT as f64;
+            m.systematic += (er + ea) / (2.0 * N_PCT as f64);
             let (sr, sa) = (self.rh.split(k), self.als.split(k));
             m.sb += (sr.sb + sa.sb) / (2.0 * N_PCT as f64);
             m.sdsd += (sr.sdsd + sa.sdsd) / (2.0 * N_PCT as f64);
@@ -147,6 +150,47 @@ impl GapSums {
         m.ground_bias = self.ground[0] / n;
         m.ground_rmse = (self.ground[1] / n).sqrt();
         m
+    }
+}
+
+/// Where an effect is judged (docs/diagnosis.md, "Each effect judged where it acts"): a datum
+/// moves GEDI's ground and RH points together, which only the ALS frame sees; a ground detection
+/// moves GEDI's ground against its RH, which only the RH frame sees; the other effects act on
+/// the waveform and show in both.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Frame {
+    Both,
+    Rh,
+    Als,
+}
+
+impl Frame {
+    /// The frame an effect acts in.
+    pub fn of(effect: &str) -> Frame {
+        match effect {
+            "datum" => Frame::Als,
+            "ground_detection" | "noise" => Frame::Rh,
+            _ => Frame::Both,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Frame::Both => "both",
+            Frame::Rh => "rh",
+            Frame::Als => "als",
+        }
+    }
+}
+
+impl GapMetrics {
+    /// The systematic gap seen in `frame`.
+    pub fn systematic_in(&self, frame: Frame) -> f64 {
+        match frame {
+            Frame::Both => self.systematic,
+            Frame::Rh => self.systematic_rh,
+            Frame::Als => self.systematic_als,
+        }
     }
 }
 
@@ -162,6 +206,9 @@ pub struct GapMetrics {
     /// sampling noise, √max(0, bias² − se²), se² = var(real − sim)/shots. A gap made of noise
     /// alone is ≈ 0 here while its `mean_abs_bias` is not (E|b̂| ≈ 0.8·se when the bias is 0).
     pub systematic: f64,
+    /// The systematic gap of each frame alone (`systematic` is their mean).
+    pub systematic_rh: f64,
+    pub systematic_als: f64,
     /// MSD averaged over RH1..RH99 and the two frames (m²) = sb + sdsd + lcs.
     pub msd: f64,
     pub sb: f64,
@@ -183,6 +230,8 @@ impl Default for GapMetrics {
             mean_abs_bias_rh: 0.0,
             mean_abs_bias_als: 0.0,
             systematic: 0.0,
+            systematic_rh: 0.0,
+            systematic_als: 0.0,
             msd: f64::NAN,
             sb: 0.0,
             sdsd: 0.0,

@@ -6,7 +6,9 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use super::case::{RECOLLOCATE_SHIFT_M, RECOLLOCATE_STEP_M, SHORT_SEGMENT_SHOTS, SITE_HALF, SITE_STEP_M};
+use super::configuration::ConfigurationChoice;
 use super::gap::{GapMetrics, N_PCT};
+use super::geolocation::{GroundTest, MIN_BETA_LOWER};
 use super::rank::{Comparison, Trial, BOOTSTRAP, MIN_GAIN_M, MIN_SHRINK_LOWER};
 use super::Diagnosis;
 use crate::kernels::scenario::effects::{Effect, ParamValue};
@@ -33,7 +35,10 @@ pub struct DiagnosisJson {
     #[serde(default)]
     pub files: Vec<String>,
     pub baseline: Baseline,
-    /// The nominal chain's held-out gap (every effect's "before").
+    /// The study's question first: every simulator configuration's gap, the one chosen, and the
+    /// ground bias of each L2A algorithm under it.
+    pub configuration: ConfigurationJson,
+    /// The chosen configuration's held-out gap (every first effect's "before").
     pub nominal_chain: Gap,
     /// Every effect tried, best first.
     pub effects: Vec<TrialJson>,
@@ -43,8 +48,6 @@ pub struct DiagnosisJson {
     /// Effects that explain as well as the first within noise (paired bootstrap of the shrink
     /// difference): the first is then not a confident answer.
     pub ambiguous_with: Vec<String>,
-    /// Known physics modelled before any effect is ranked (the recorded transmit pulse).
-    pub known_physics: Vec<KnownPhysicsJson>,
     #[serde(rename = "where")]
     pub where_: WhereJson,
     pub shots: ShotsJson,
@@ -113,19 +116,79 @@ pub struct TrialJson {
     pub at_bound: Option<String>,
     /// The simpler effect the fitted one is equivalent to, if any.
     pub equivalent_to: Option<PlantedEffect>,
+    /// For `geolocation`: the ground test it must pass to be named.
+    #[serde(default)]
+    pub ground_test: Option<GroundTestJson>,
 }
 
-/// A step of known physics: the gap before (without it) and after (with it), held out.
+/// The configuration stage ([`ConfigurationChoice`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct KnownPhysicsJson {
-    pub name: String,
-    pub description: String,
+pub struct ConfigurationJson {
+    /// The configuration chosen on all tracks, e.g. `int + recorded pulse`.
+    pub chosen: String,
+    pub weighting: String,
+    /// `gaussian` (the study's 15 ns) or `recorded` (each shot's L1B transmit pulse).
+    pub pulse: String,
+    /// The configuration chosen on each fold's calibration set.
+    pub fold_chosen: Vec<String>,
+    /// The study's configuration (count + Gaussian 15 ns, before) against the cross-fitted
+    /// choice (after), on held-out tracks.
     pub held_out: HeldOut,
+    /// Every configuration's gap on every shot.
+    pub configurations: Vec<ConfigurationRowJson>,
+    /// GEDI ground − ALS ground of each algorithm under the chosen configuration.
+    pub ground_by_algorithm: Vec<AlgorithmGroundJson>,
+    /// The algorithm whose ground is least biased.
+    pub least_biased_algorithm: Option<u8>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ConfigurationRowJson {
+    pub configuration: String,
+    pub weighting: String,
+    pub pulse: String,
+    /// Mean over RH1..RH99 of the bias, simulated − GEDI (m), RH frame.
+    pub mean_bias_rh_frame: Option<f64>,
+    pub mean_abs_bias_rh1_99: Option<f64>,
+    pub systematic_gap: Option<f64>,
+    pub msd: Option<f64>,
+    pub rh98_bias: Option<f64>,
+    pub rh50_bias: Option<f64>,
+    pub ground_bias_m: Option<f64>,
+    /// Waveform-level gap against the study configuration's between-shot variance.
+    pub waveform_chi2: Option<f64>,
+    /// The same at the configuration's best ground/vegetation ratio: what the choice is made by.
+    pub waveform_chi2_profiled: Option<f64>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AlgorithmGroundJson {
+    pub algorithm: u8,
+    pub n_shots: usize,
+    pub bias_m: Option<f64>,
+    pub ci95: [Option<f64>; 2],
+}
+
+/// The ground test of per-shot geolocation ([`GroundTest`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GroundTestJson {
+    pub n_shots: usize,
+    pub n_moved: usize,
+    pub rms_predicted_m: Option<f64>,
+    pub beta: Option<f64>,
+    pub ci95: [Option<f64>; 2],
+    /// β's interval must start at this for per-shot geolocation to be named.
+    pub min_beta_lower: f64,
+    pub passes: bool,
 }
 
 /// The held-out comparison ([`Comparison`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct HeldOut {
+    /// The frame the systematic gap, shrink and intervals are measured in: `rh`, `als` or `both`
+    /// (their mean), where the effect acts (docs/diagnosis.md).
+    #[serde(default)]
+    pub frame: String,
     pub mean_abs_bias_rh1_99_before: Option<f64>,
     pub mean_abs_bias_rh1_99_after: Option<f64>,
     pub shrink: Option<f64>,
@@ -269,12 +332,13 @@ impl Gap {
 impl HeldOut {
     pub fn of(h: &Comparison) -> HeldOut {
         HeldOut {
+            frame: h.frame.name().to_string(),
             mean_abs_bias_rh1_99_before: finite(h.before.mean_abs_bias),
             mean_abs_bias_rh1_99_after: finite(h.after.mean_abs_bias),
             shrink: finite(h.shrink),
             ci95: [finite(h.ci95[0]), finite(h.ci95[1])],
-            systematic_gap_before: finite(h.before.systematic),
-            systematic_gap_after: finite(h.after.systematic),
+            systematic_gap_before: finite(h.before.systematic_in(h.frame)),
+            systematic_gap_after: finite(h.after.systematic_in(h.frame)),
             gain_m_ci95: [finite(h.gain_ci95[0]), finite(h.gain_ci95[1])],
             shrink_mean_abs_bias: finite(h.shrink_mean_abs_bias),
             msd_before: finite(h.before.msd),
@@ -307,6 +371,69 @@ impl TrialJson {
             fold_params: t.fold_effects.iter().map(|e| e.as_ref().map(params)).collect(),
             at_bound: t.at_bound(),
             equivalent_to: t.equivalent().as_ref().map(PlantedEffect::of),
+            ground_test: t.ground_test.as_ref().map(GroundTestJson::of),
+        }
+    }
+}
+
+impl GroundTestJson {
+    pub fn of(g: &GroundTest) -> GroundTestJson {
+        GroundTestJson {
+            n_shots: g.n_shots,
+            n_moved: g.n_moved,
+            rms_predicted_m: finite(g.rms_predicted_m),
+            beta: finite(g.beta),
+            ci95: [finite(g.ci95[0]), finite(g.ci95[1])],
+            min_beta_lower: MIN_BETA_LOWER,
+            passes: g.passes(),
+        }
+    }
+}
+
+impl ConfigurationJson {
+    pub fn of(c: &ConfigurationChoice) -> ConfigurationJson {
+        let pulse = |p| match p {
+            super::chain::PulseChoice::Gaussian => "gaussian",
+            super::chain::PulseChoice::Recorded => "recorded",
+        };
+        ConfigurationJson {
+            chosen: c.chosen.label(),
+            weighting: c.chosen.weighting.name().to_string(),
+            pulse: pulse(c.chosen.pulse).to_string(),
+            fold_chosen: c.fold_chosen.iter().map(|k| k.label()).collect(),
+            held_out: HeldOut::of(&c.held_out),
+            configurations: c
+                .trials
+                .iter()
+                .map(|t| {
+                    let m = &t.metrics;
+                    ConfigurationRowJson {
+                        configuration: t.config.label(),
+                        weighting: t.config.weighting.name().to_string(),
+                        pulse: pulse(t.config.pulse).to_string(),
+                        mean_bias_rh_frame: finite(m.bias_rh.iter().sum::<f64>() / N_PCT as f64),
+                        mean_abs_bias_rh1_99: finite(m.mean_abs_bias),
+                        systematic_gap: finite(m.systematic),
+                        msd: finite(m.msd),
+                        rh98_bias: finite(m.bias_rh[97]),
+                        rh50_bias: finite(m.bias_rh[49]),
+                        ground_bias_m: finite(m.ground_bias),
+                        waveform_chi2: finite(t.waveform_chi2),
+                        waveform_chi2_profiled: finite(t.waveform_chi2_profiled),
+                    }
+                })
+                .collect(),
+            ground_by_algorithm: c
+                .ground
+                .iter()
+                .map(|g| AlgorithmGroundJson {
+                    algorithm: g.algorithm,
+                    n_shots: g.n,
+                    bias_m: finite(g.bias_m),
+                    ci95: [finite(g.ci95[0]), finite(g.ci95[1])],
+                })
+                .collect(),
+            least_biased_algorithm: c.least_biased_algorithm().map(|g| g.algorithm),
         }
     }
 }
@@ -338,22 +465,12 @@ impl DiagnosisJson {
                 n_shots: d.n_shots,
                 n_tracks: d.n_tracks,
             },
+            configuration: ConfigurationJson::of(&d.configuration),
             nominal_chain: Gap::of(&d.nominal),
             effects: d.ranking.effects.iter().map(TrialJson::of).collect(),
             ladder: d.ranking.ladder.iter().map(TrialJson::of).collect(),
             unexplained: d.ranking.unexplained,
             ambiguous_with: d.ranking.ambiguous_with.clone(),
-            known_physics: d
-                .recorded_pulse
-                .iter()
-                .map(|c| KnownPhysicsJson {
-                    name: "recorded_pulse".into(),
-                    description: "the study's 15 ns Gaussian pulse (before) against each shot's recorded L1B transmit \
-                                  pulse (after), everything else nominal"
-                        .into(),
-                    held_out: HeldOut::of(c),
-                })
-                .collect(),
             where_: WhereJson {
                 percentiles: w
                     .percentiles

@@ -3,19 +3,26 @@
 //!
 //! - [`locate`]: **where** — the study's baseline gap by RH percentile, by stratum, and as the
 //!   waveform residual by height above the ALS ground.
-//! - [`chain`]: the forward model of a hypothesis — the nominal GEDI chain (ALS waveform, pulse,
-//!   noise twin, L2A a1–a6) with effects from the shared registry (`scenario::effects`), and the
-//!   hypothesis's placement of the shots of short collocation segments.
+//! - [`chain`]: the forward model of a hypothesis — a simulator configuration (weighting, pulse)
+//!   of the GEDI chain (ALS waveform, pulse, noise twin, L2A a1–a6) with effects from the shared
+//!   registry (`scenario::effects`), and the hypothesis's placement of the shots of short
+//!   collocation segments.
+//! - [`configuration`]: the study's question first — which configuration reproduces the real
+//!   waveforms, chosen on calibration tracks and scored on held-out ones, and the ground bias of
+//!   each L2A algorithm under it.
 //! - [`gap`]: the gap of a set of shots in the RH frame and the ALS frame, as additive sums.
 //! - [`profile`]: the waveform-level gap (mean normalised waveforms by height, as a χ²).
 //! - [`fit`]: each effect's parameters fitted to a calibration set.
 //! - [`rank`]: **which** and **how far** — cross-fitted on tracks, held-out shrink with bootstrap
 //!   intervals, the greedy ladder, `unexplained`.
+//! - [`geolocation`]: the ground test that per-shot geolocation must pass.
 
 pub mod case;
 pub mod chain;
+pub mod configuration;
 pub mod fit;
 pub mod gap;
+pub mod geolocation;
 pub mod json;
 pub mod locate;
 pub mod profile;
@@ -27,7 +34,10 @@ pub use case::ShotCase;
 #[derive(Debug, Clone)]
 pub struct Diagnosis {
     pub where_: locate::Where,
-    /// The nominal chain's held-out gap (what every effect's "before" is).
+    /// The configuration stage: every configuration's gap, the chosen one, the ground bias per
+    /// algorithm under it.
+    pub configuration: configuration::ConfigurationChoice,
+    /// The chosen configuration's held-out gap (what every first effect's "before" is).
     pub nominal: gap::GapMetrics,
     pub ranking: rank::Ranking,
     pub n_shots: usize,
@@ -36,10 +46,6 @@ pub struct Diagnosis {
     pub n_tracks: usize,
     /// (shot, algorithm) pairs left out as ground mismatches.
     pub mismatched: usize,
-    /// Known physics before any effect: the study's Gaussian pulse (before) against each shot's
-    /// recorded transmit pulse (after, the nominal chain), held out like an effect; `None` when
-    /// no shot has a recorded pulse.
-    pub recorded_pulse: Option<rank::Comparison>,
 }
 
 /// Diagnose `cases` with the effects `names` (normally [`fit::FITTED_EFFECTS`]); `on_step` hears
@@ -50,24 +56,20 @@ pub fn diagnose(mut cases: Vec<ShotCase>, names: &[&str], on_step: &dyn Fn(&str)
     let mismatched = flag_ground_mismatches(&mut cases);
     let cases = &cases;
     let folds = rank::Folds::new(cases);
-    let ranking = rank::rank(&folds, names, on_step);
+    let recorded = cases.iter().any(|c| c.real.pulse.is_some());
+    let configuration = configuration::choose(&folds, &configuration::candidates(recorded), on_step);
+    let ranking = rank::rank(&folds, &configuration, names, on_step);
     let nominal = fit::total(&ranking.nominal_gaps).metrics();
     let n_replaceable = cases.iter().filter(|c| c.sim.short_segment && c.sim.sites.len() > 1).count();
-    let recorded_pulse = cases.iter().any(|c| c.real.pulse.is_some()).then(|| {
-        on_step("known physics: recorded transmit pulse");
-        let gaussian = chain::Model::gaussian();
-        let before = folds.held_out(&[gaussian.clone(), gaussian]);
-        rank::compare(&folds, &before, &ranking.nominal_gaps, "recorded pulse")
-    });
     Diagnosis {
         where_,
+        configuration,
         nominal,
         ranking,
         n_shots: cases.len(),
         n_replaceable,
         n_tracks: folds.n_tracks,
         mismatched,
-        recorded_pulse,
     }
 }
 

@@ -14,8 +14,10 @@ use std::collections::BTreeMap;
 
 use super::case::ShotCase;
 use super::chain::{null_cases, reposition, Model};
+use super::configuration::ConfigurationChoice;
 use super::fit::{evaluate, fit, geolocation, ShotGap};
-use super::gap::{GapMetrics, GapSums};
+use super::gap::{Frame, GapMetrics, GapSums};
+use super::geolocation::{ground_test, GroundTest};
 use super::profile::ProfileSums;
 use crate::kernels::scenario::effects::{Effect, GeoLevel};
 use crate::kernels::scenario::rng::Stream;
@@ -66,7 +68,7 @@ impl<'a> Folds<'a> {
         }
     }
 
-    fn of(&self, f: usize) -> Vec<&'a ShotCase> {
+    pub(super) fn of(&self, f: usize) -> Vec<&'a ShotCase> {
         self.cases.iter().zip(&self.fold).filter(|(_, &g)| g == f).map(|(c, _)| *c).collect()
     }
 
@@ -100,7 +102,7 @@ impl<'a> Folds<'a> {
     }
 
     /// Track indices of `BOOTSTRAP` resamples (seeded by `label`: reproducible).
-    fn resamples(&self, label: &str) -> Vec<Vec<usize>> {
+    pub(super) fn resamples(&self, label: &str) -> Vec<Vec<usize>> {
         let n = self.n_tracks;
         if n < 2 {
             return Vec::new();
@@ -125,9 +127,11 @@ fn profile_sums(gaps: &[ShotGap]) -> ProfileSums {
 /// Held-out comparison of two gaps on the same shots.
 #[derive(Debug, Clone)]
 pub struct Comparison {
+    /// The frame the systematic gap, `shrink` and the intervals are measured in.
+    pub frame: Frame,
     pub before: GapMetrics,
     pub after: GapMetrics,
-    /// 1 − after/before of the systematic gap (`GapMetrics::systematic`).
+    /// 1 − after/before of the systematic gap in `frame` (`GapMetrics::systematic_in`).
     pub shrink: f64,
     /// 95 % bootstrap interval of the shrink (over tracks).
     pub ci95: [f64; 2],
@@ -194,34 +198,36 @@ impl Comparison {
     }
 }
 
-/// 1 − after/before of the systematic gap; 0 when there is no systematic gap before.
-fn shrink_of(before: &GapMetrics, after: &GapMetrics) -> f64 {
-    if before.systematic > 1e-9 && after.systematic.is_finite() {
-        1.0 - after.systematic / before.systematic
+/// 1 − after/before of the systematic gap in `frame`; 0 when there is no systematic gap before.
+fn shrink_of(before: &GapMetrics, after: &GapMetrics, frame: Frame) -> f64 {
+    let (b, a) = (before.systematic_in(frame), after.systematic_in(frame));
+    if b > 1e-9 && a.is_finite() {
+        1.0 - a / b
     } else {
         0.0
     }
 }
 
-/// Compare held-out gaps with a bootstrap over tracks (seeded: reproducible).
-pub fn compare(folds: &Folds, before: &[ShotGap], after: &[ShotGap], seed_label: &str) -> Comparison {
+/// Compare held-out gaps in `frame` with a bootstrap over tracks (seeded: reproducible).
+pub fn compare(folds: &Folds, before: &[ShotGap], after: &[ShotGap], seed_label: &str, frame: Frame) -> Comparison {
     let (tb, ta) = (folds.per_track(before), folds.per_track(after));
     let all: Vec<usize> = (0..folds.n_tracks).collect();
     let (b, a) = (sum_of(&tb, &all).metrics(), sum_of(&ta, &all).metrics());
-    let shrink = shrink_of(&b, &a);
+    let shrink = shrink_of(&b, &a, frame);
     let shrink_mean_abs_bias = 1.0 - a.mean_abs_bias / b.mean_abs_bias;
     let mut shrinks = Vec::with_capacity(BOOTSTRAP);
     let mut gains = Vec::with_capacity(BOOTSTRAP);
     for pick in folds.resamples(seed_label) {
         let (bb, aa) = (sum_of(&tb, &pick).metrics(), sum_of(&ta, &pick).metrics());
         if bb.n_pairs > 0 && aa.n_pairs > 0 {
-            shrinks.push(shrink_of(&bb, &aa));
-            gains.push(bb.systematic - aa.systematic);
+            shrinks.push(shrink_of(&bb, &aa, frame));
+            gains.push(bb.systematic_in(frame) - aa.systematic_in(frame));
         }
     }
     let profile_before = profile_sums(before);
     let profile_chi2 = [profile_before.chi2(), profile_sums(after).chi2_against(&profile_before)];
     Comparison {
+        frame,
         before: b,
         after: a,
         shrink,
@@ -278,7 +284,7 @@ fn compare_spread(folds: &Folds, state: &State, models: &[Model; 2], after: &[Sh
             gains.push(g);
         }
     }
-    let base = compare(folds, &state.gaps, after, "geolocation");
+    let base = compare(folds, &state.gaps, after, "geolocation", Frame::Both);
     Comparison { shrink, ci95: interval(shrinks), gain_ci95: interval(gains), spread: Some(spread), ..base }
 }
 
@@ -298,15 +304,16 @@ fn explained(trials: &[Trial]) -> bool {
     trials.iter().any(Trial::explains)
 }
 
-/// 95 % bootstrap interval (over tracks, paired) of shrink(a) − shrink(b), both against `before`.
-fn shrink_difference_ci(folds: &Folds, before: &[ShotGap], a: &[ShotGap], b: &[ShotGap]) -> [f64; 2] {
+/// 95 % bootstrap interval (over tracks, paired) of shrink(a) − shrink(b), both against `before`
+/// in `frame`.
+fn shrink_difference_ci(folds: &Folds, before: &[ShotGap], a: &[ShotGap], b: &[ShotGap], frame: Frame) -> [f64; 2] {
     let (tb, ta, tc) = (folds.per_track(before), folds.per_track(a), folds.per_track(b));
     let mut d = Vec::with_capacity(BOOTSTRAP);
     for pick in folds.resamples("ambiguity") {
         let bb = sum_of(&tb, &pick).metrics();
         let (aa, cc) = (sum_of(&ta, &pick).metrics(), sum_of(&tc, &pick).metrics());
         if bb.n_pairs > 0 && aa.n_pairs > 0 && cc.n_pairs > 0 {
-            d.push(shrink_of(&bb, &aa) - shrink_of(&bb, &cc));
+            d.push(shrink_of(&bb, &aa, frame) - shrink_of(&bb, &cc, frame));
         }
     }
     interval(d)
@@ -323,14 +330,15 @@ fn near_ties(folds: &Folds, before: &[ShotGap], trials: &[Trial]) -> Vec<String>
         .iter()
         .filter(|t| t.credible() && t.nameable() && t.held_out.spread.is_none())
         .filter(|t| {
-            let ci = shrink_difference_ci(folds, before, &first.gaps, &t.gaps);
+            // Both judged in the first's frame: the one its shrink was measured in.
+            let ci = shrink_difference_ci(folds, before, &first.gaps, &t.gaps, first.held_out.frame);
             ci[0] <= 0.0 && ci[1] >= 0.0
         })
         .map(|t| t.effect.name().to_string())
         .collect()
 }
 
-fn interval(mut v: Vec<f64>) -> [f64; 2] {
+pub(super) fn interval(mut v: Vec<f64>) -> [f64; 2] {
     if v.is_empty() {
         return [f64::NAN, f64::NAN];
     }
@@ -349,23 +357,29 @@ pub struct Trial {
     pub held_out: Comparison,
     /// Held-out gaps per shot with the effect.
     pub gaps: Vec<ShotGap>,
+    /// For `geolocation`: the held-out ground test ([`super::geolocation`]), evidence that a wrong
+    /// physics model cannot make.
+    pub ground_test: Option<GroundTest>,
 }
 
 impl Trial {
     /// A candidate the intervals support: shrink ≥ [`MIN_SHRINK_LOWER`] and a gain above 0 at
-    /// their lower ends. An effect judged on spread (`geolocation`) must also be resolved: its
-    /// per-shot offsets, fitted on each calibration fold, at least [`MIN_SHOT_SIGMA_M`].
+    /// their lower ends. An effect judged on spread (`geolocation`) must also be resolved — its
+    /// per-shot offsets, fitted on each calibration fold, at least [`MIN_SHOT_SIGMA_M`] — and
+    /// pass the ground test: the positions its canopy asks for explain the ground elevations.
     pub fn credible(&self) -> bool {
         let resolved = self.held_out.spread.is_none()
-            || self.fold_effects.iter().all(
+            || (self.fold_effects.iter().all(
                 |e| matches!(e, Some(Effect::Geolocation { shot_sigma_m, .. }) if *shot_sigma_m >= MIN_SHOT_SIGMA_M),
-            );
+            ) && self.ground_test.as_ref().is_some_and(GroundTest::passes));
         resolved && self.held_out.ci95[0] >= MIN_SHRINK_LOWER && self.held_out.gain_ci95[0] > 0.0
     }
 
-    /// The intervals admit a real gain: credible, and a gain ≥ [`MIN_GAIN_M`] at the lower end.
+    /// The intervals admit a real gain, and the fit can be named: credible, nameable (a fit on a
+    /// bound, or a simpler effect in disguise, is reported as such and never named) and a gain ≥
+    /// [`MIN_GAIN_M`] at the lower end.
     pub fn explains(&self) -> bool {
-        self.credible() && self.held_out.gain_ci95[0] >= MIN_GAIN_M
+        self.credible() && self.nameable() && self.held_out.gain_ci95[0] >= MIN_GAIN_M
     }
 
     /// The fitted parameter on a bound of its range ([`super::fit::at_bound`]), if any.
@@ -394,10 +408,13 @@ pub struct State {
 }
 
 impl State {
-    pub fn nominal(folds: &Folds) -> State {
-        let m = Model::default();
-        let gaps = folds.held_out(&[m.clone(), m.clone()]);
-        State { full: m.clone(), folds: [m.clone(), m], gaps }
+    /// The chosen configuration without effects: what the first effects are tried on.
+    pub fn configured(choice: &ConfigurationChoice) -> State {
+        State {
+            full: Model::configured(choice.chosen),
+            folds: choice.fold_chosen.map(Model::configured),
+            gaps: choice.gaps.clone(),
+        }
     }
 }
 
@@ -412,12 +429,12 @@ pub fn try_effect(folds: &Folds, state: &State, name: &str) -> Option<Trial> {
         None => state.folds[f].clone(),
     });
     let gaps = folds.held_out(&models);
-    let held_out = if name == "geolocation" {
-        compare_spread(folds, state, &models, &gaps)
+    let (held_out, ground_test) = if name == "geolocation" {
+        (compare_spread(folds, state, &models, &gaps), Some(ground_test(folds, &state.folds)))
     } else {
-        compare(folds, &state.gaps, &gaps, name)
+        (compare(folds, &state.gaps, &gaps, name, Frame::of(name)), None)
     };
-    Some(Trial { effect, fold_effects: fitted, held_out, gaps })
+    Some(Trial { effect, fold_effects: fitted, held_out, gaps, ground_test })
 }
 
 /// The ranking and the ladder.
@@ -432,13 +449,14 @@ pub struct Ranking {
     /// Effects that explain as well as the first within noise (`near_ties`): the diagnosis is
     /// then ambiguous between the first and these.
     pub ambiguous_with: Vec<String>,
-    /// Held-out gaps per shot of the nominal chain (every effect's "before").
+    /// Held-out gaps per shot of the chosen configuration (every first effect's "before").
     pub nominal_gaps: Vec<ShotGap>,
 }
 
-/// Rank `names` on the nominal chain, then climb the ladder. `on_step` is told each effect tried.
-pub fn rank(folds: &Folds, names: &[&str], on_step: &dyn Fn(&str)) -> Ranking {
-    let nominal = State::nominal(folds);
+/// Rank `names` on the chosen configuration, then climb the ladder. `on_step` is told each
+/// effect tried.
+pub fn rank(folds: &Folds, choice: &ConfigurationChoice, names: &[&str], on_step: &dyn Fn(&str)) -> Ranking {
+    let nominal = State::configured(choice);
     let mut effects: Vec<Trial> = names
         .iter()
         .filter_map(|n| {
@@ -501,6 +519,7 @@ mod tests {
     #[test]
     fn score_averages_the_two_shrinks_only_when_the_waveform_moves() {
         let c = |chi2: [f64; 2]| Comparison {
+            frame: Frame::Both,
             before: GapMetrics::default(),
             after: GapMetrics::default(),
             shrink: 0.6,
@@ -517,6 +536,7 @@ mod tests {
 
     fn trial(effect: Effect, shrink: f64, ci95: [f64; 2], gain_ci95: [f64; 2]) -> Trial {
         let held_out = Comparison {
+            frame: Frame::Both,
             before: GapMetrics::default(),
             after: GapMetrics::default(),
             shrink,
@@ -526,7 +546,7 @@ mod tests {
             profile_chi2: [1000.0, 1000.0],
             spread: None,
         };
-        Trial { effect, fold_effects: [None, None], held_out, gaps: Vec::new() }
+        Trial { effect, fold_effects: [None, None], held_out, gaps: Vec::new(), ground_test: None }
     }
 
     #[test]
@@ -547,6 +567,34 @@ mod tests {
         order(&mut trials);
         assert!(!explained(&trials));
         assert_eq!(trials[0].effect.name(), "occlusion");
+    }
+
+    #[test]
+    fn a_fit_on_a_bound_or_in_disguise_is_never_named() {
+        // A canopy change at the lowest height of its range (2 m) with a gain: a bound, and a
+        // weighting ratio in disguise. Its intervals clear every bar, yet it explains nothing.
+        let bound = trial(Effect::CanopyChange { height_m: 2.0, fraction: -0.41 }, 0.8, [0.5, 0.9], [0.1, 0.3]);
+        assert!(bound.credible() && !bound.nameable() && !bound.explains());
+        let mut trials = vec![bound.clone()];
+        order(&mut trials);
+        assert!(!explained(&trials), "an effect on a bound alone leaves the gap unexplained");
+        // With an interior fit that explains, that one is first and named.
+        let interior = trial(Effect::Pulse { pulse_sigma_m: 1.1 }, 0.5, [0.3, 0.6], [0.05, 0.1]);
+        let mut trials = vec![bound, interior];
+        order(&mut trials);
+        assert!(explained(&trials));
+        assert_eq!(trials[0].effect.name(), "pulse");
+    }
+
+    #[test]
+    fn each_effect_is_judged_in_its_frame() {
+        // A datum shows in the ALS frame alone: judged there, its shrink is not diluted by the RH
+        // frame's mismatch, which no datum can touch.
+        let before = GapMetrics { systematic_rh: 0.4, systematic_als: 1.0, systematic: 0.7, ..Default::default() };
+        let after = GapMetrics { systematic_rh: 0.4, systematic_als: 0.3, systematic: 0.35, ..Default::default() };
+        assert!((shrink_of(&before, &after, Frame::of("datum")) - 0.7).abs() < 1e-12);
+        assert!((shrink_of(&before, &after, Frame::Both) - 0.5).abs() < 1e-12);
+        assert_eq!(shrink_of(&before, &after, Frame::of("ground_detection")), 0.0);
     }
 
     #[test]

@@ -7,15 +7,15 @@ use std::path::Path;
 
 use super::html::{base64, escape};
 use crate::error::{Error, Result};
-use crate::kernels::diagnose::json::{DiagnosisJson, TrialJson};
+use crate::kernels::diagnose::json::{ConfigurationJson, DiagnosisJson, TrialJson};
 use crate::kernels::scenario::effects::ParamValue;
 
 /// The figures of a diagnosis shown in the page, with their captions.
 const FIGURES: [(&str, &str); 2] = [
     (
         "bias_profile_before_after",
-        "Held-out RH bias (simulated − GEDI) per percentile: the study's baseline, the nominal chain and each \
-         step of the ladder, above each side's own ground and above the ALS ground.",
+        "Held-out RH bias (simulated − GEDI) per percentile: the study's baseline, the chosen configuration and \
+         each step of the ladder, above each side's own ground and above the ALS ground.",
     ),
     (
         "waveform_residual",
@@ -57,6 +57,7 @@ pub fn section(dir: &Path, dataset: &Path) -> Result<String> {
         }
         s.push_str("</ul>\n");
     }
+    s.push_str(&configuration_tables(&d.configuration));
     for (title, trials) in
         [("Ladder (effects added in order)", &d.ladder), ("Every effect tried, best first", &d.effects)]
     {
@@ -78,6 +79,56 @@ pub fn section(dir: &Path, dataset: &Path) -> Result<String> {
         );
     }
     Ok(s)
+}
+
+/// The configuration stage: every configuration's gap (the chosen one marked), and the ground
+/// bias per L2A algorithm under it.
+fn configuration_tables(c: &ConfigurationJson) -> String {
+    let num = |v: Option<f64>| v.map_or("–".to_string(), |x| format!("{x:.2}"));
+    let signed = |v: Option<f64>| v.map_or("–".to_string(), |x| format!("{x:+.2}"));
+    let mut s = format!(
+        "<h3>Configuration (weighting × pulse)</h3>\n<p>Chosen: <strong>{}</strong>, on calibration tracks by the \
+         waveforms at each one's best ground/vegetation ratio ρ; effects (a ratio ρ among them) are ranked on top of \
+         it.</p>\n<table>\n<thead><tr><th>configuration</th>\
+         <th>mean |RH bias| RH1–99 (m)</th><th>MSD (m²)</th><th>RH98 bias (m)</th><th>RH50 bias (m)</th>\
+         <th>ground bias (m)</th><th>waveform χ²</th><th>at the best ρ</th></tr></thead>\n<tbody>\n",
+        escape(&c.chosen)
+    );
+    for r in &c.configurations {
+        let mark = if r.configuration == c.chosen { " (chosen)" } else { "" };
+        let _ = writeln!(
+            s,
+            "<tr><td>{}{mark}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td>\
+             <td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td></tr>",
+            escape(&r.configuration),
+            num(r.mean_abs_bias_rh1_99),
+            num(r.msd),
+            signed(r.rh98_bias),
+            signed(r.rh50_bias),
+            signed(r.ground_bias_m),
+            r.waveform_chi2.map_or("–".to_string(), |x| format!("{x:.0}")),
+            r.waveform_chi2_profiled.map_or("–".to_string(), |x| format!("{x:.0}"))
+        );
+    }
+    s.push_str(
+        "</tbody>\n</table>\n<table>\n<thead><tr><th>L2A algorithm</th><th>shots</th>\
+         <th>ground bias, GEDI − ALS (m)</th><th>95 % CI (m)</th></tr></thead>\n<tbody>\n",
+    );
+    for g in &c.ground_by_algorithm {
+        let mark = if c.least_biased_algorithm == Some(g.algorithm) { " (least biased)" } else { "" };
+        let _ = writeln!(
+            s,
+            "<tr><td>a{}{mark}</td><td class=\"num\">{}</td><td class=\"num\">{}</td>\
+             <td class=\"num\">{} to {}</td></tr>",
+            g.algorithm,
+            g.n_shots,
+            signed(g.bias_m),
+            signed(g.ci95[0]),
+            signed(g.ci95[1])
+        );
+    }
+    s.push_str("</tbody>\n</table>\n");
+    s
 }
 
 /// Effects with their parameters and held-out figures (units in the headers).
