@@ -839,8 +839,9 @@ fn configuration_lines(c: &crate::kernels::diagnose::configuration::Configuratio
     let mut lines = vec![
         format!(
             "Configuration first (weighting × pulse, chosen on calibration tracks by the waveforms at the best \
-             ground/vegetation ratio, scored on held-out ones): {}{folds}; from the study's count + Gaussian 15 ns the held-out gap goes {:.2} → {:.2} m \
-             ({}). A configuration is never reported as an effect: the causes below are ranked on top of it.",
+             ground/vegetation ratio, scored on held-out ones): {}{folds}; from the study's count + Gaussian 15 ns \
+             the held-out gap goes {:.2} → {:.2} m at ρ = 1 ({}). A configuration is never reported as an effect: \
+             the causes below, a ratio ρ among them, are ranked on top of it.",
             c.chosen.label(),
             h.before.mean_abs_bias,
             h.after.mean_abs_bias,
