@@ -6,10 +6,10 @@
 //! displacement leaves a trace a wrong model cannot: the whole footprint moved, so the position
 //! its **canopy** asks for also explains where GEDI found the **ground** on a slope. The test:
 //!
-//! 1. each shot's canopy is matched on its own — real and simulated waveforms each taken above
-//!    their own ground (GEDI's lowest mode; the site's ALS ground), canopy only
-//!    ([`CANOPY_FROM_M`] and up), Pearson r at every site — which holds the ground elevation out
-//!    of the fit and is blind to the ground/canopy energy ratio (weighting, occlusion, datum);
+//! 1. each shot's canopy is matched on its own — real and simulated waveforms each taken from
+//!    [`CANOPY_FROM_M`] above their own ground (GEDI's lowest mode; the site's ALS ground), the
+//!    best Pearson r over a free vertical shift at every site — which holds every elevation out of
+//!    the fit and is blind to the ground/canopy energy ratio (weighting, occlusion, datum);
 //! 2. the ground elevation that position predicts, relative to the segment's own site
 //!    (ALS ground at the canopy's site − at the segment's), against the one GEDI reports
 //!    (GEDI ground − ALS ground at the segment's site);
@@ -181,38 +181,53 @@ fn real_ground(case: &ShotCase, model: &Model) -> Option<f64> {
         .map(|p| p.ground)
 }
 
-/// Pearson r between the canopy parts of a real waveform (`real[k]` at elevation `top − k ·
+/// Largest vertical shift (m) tried between the canopy parts of a real and a simulated waveform.
+const MAX_LAG_M: f64 = 3.0;
+
+/// Best Pearson r between the canopy parts of a real waveform (`real[k]` at elevation `top − k ·
 /// GEDI_BIN_M`, ground at `real_ground`) and a simulated one (`sim[i]` at `z0 − i · dz`, ground at
-/// `sim_ground`), each read by height above its own ground, from [`CANOPY_FROM_M`] up.
+/// `sim_ground`), each from [`CANOPY_FROM_M`] above its own ground, over vertical shifts of the
+/// simulated one within ±[`MAX_LAG_M`] (steps of `dz`). The shift is free so that no elevation enters
+/// the match: with the two read by height above their own grounds alone, overlapping sites that
+/// differ only in their ground elevation would be told apart by GEDI's ground, and the test would
+/// find the ground it was meant to hold out.
 fn canopy_correlation(real: &[f32], top: f64, real_ground: f64, sim: &[f64], z0: f64, dz: f64, sim_ground: f64) -> f64 {
-    let (mut n, mut sx, mut sy, mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-    for (k, &r) in real.iter().enumerate() {
-        let h = top - k as f64 * GEDI_BIN_M - real_ground;
-        if h < CANOPY_FROM_M {
-            continue;
-        }
-        let p = (z0 - (sim_ground + h)) / dz;
-        let i = p.floor();
-        let m = if i >= 0.0 && (i as usize) + 1 < sim.len() {
-            let (i, t) = (i as usize, p - i);
-            (1.0 - t) * sim[i] + t * sim[i + 1]
-        } else {
-            0.0
-        };
-        let r = f64::from(r);
-        n += 1.0;
-        sx += r;
-        sy += m;
-        sxx += r * r;
-        syy += m * m;
-        sxy += r * m;
-    }
-    let var = (sxx - sx * sx / n) * (syy - sy * sy / n);
-    if n > 2.0 && var > 0.0 {
-        (sxy - sx * sy / n) / var.sqrt()
-    } else {
-        f64::NAN
-    }
+    let canopy: Vec<(f64, f64)> = real
+        .iter()
+        .enumerate()
+        .map(|(k, &r)| (top - k as f64 * GEDI_BIN_M - real_ground, f64::from(r)))
+        .filter(|(h, _)| *h >= CANOPY_FROM_M)
+        .collect();
+    let lags = (MAX_LAG_M / dz).round() as i64;
+    (-lags..=lags)
+        .map(|l| {
+            let shift = l as f64 * dz;
+            let (mut n, mut sx, mut sy, mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+            for &(h, r) in &canopy {
+                let p = (z0 - (sim_ground + h + shift)) / dz;
+                let i = p.floor();
+                let m = if i >= 0.0 && (i as usize) + 1 < sim.len() {
+                    let (i, t) = (i as usize, p - i);
+                    (1.0 - t) * sim[i] + t * sim[i + 1]
+                } else {
+                    0.0
+                };
+                n += 1.0;
+                sx += r;
+                sy += m;
+                sxx += r * r;
+                syy += m * m;
+                sxy += r * m;
+            }
+            let var = (sxx - sx * sx / n) * (syy - sy * sy / n);
+            if n > 2.0 && var > 0.0 {
+                (sxy - sx * sy / n) / var.sqrt()
+            } else {
+                f64::NAN
+            }
+        })
+        .filter(|r| r.is_finite())
+        .fold(f64::NAN, f64::max)
 }
 
 #[cfg(test)]
@@ -264,9 +279,10 @@ mod tests {
     }
 
     #[test]
-    fn canopy_correlation_reads_heights_above_each_ground() {
+    fn canopy_correlation_matches_shapes_whatever_the_grounds() {
         // The same canopy layer 12 m above two grounds 5 m apart correlates fully; one at 20 m
-        // does not.
+        // does not; and a ground misplaced by up to the largest shift changes nothing, so the
+        // match cannot tell sites apart by their ground elevation.
         let layer = |ground: f64, h: f64, z: f64| (-0.5 * ((z - ground - h) / 1.0).powi(2)).exp();
         let real: Vec<f32> = (0..300).map(|k| layer(100.0, 12.0, 130.0 - k as f64 * GEDI_BIN_M) as f32).collect();
         let dz = 0.15;
@@ -275,5 +291,7 @@ mod tests {
         let other = canopy_correlation(&real, 130.0, 100.0, &sim(20.0), 140.0, dz, 105.0);
         assert!(same > 0.99, "{same}");
         assert!(other < 0.2, "{other}");
+        let misplaced = canopy_correlation(&real, 130.0, 100.0, &sim(12.0), 140.0, dz, 106.5);
+        assert!((misplaced - same).abs() < 1e-3, "{misplaced} vs {same}");
     }
 }
