@@ -65,7 +65,7 @@ impl GroundTest {
     }
 }
 
-/// One shot's (predicted, reported) ground elevation change (m) and whether its canopy moved it.
+/// One shot's ground elevation change (m), predicted by its canopy's site and reported by GEDI.
 struct Pair {
     track: usize,
     predicted: f64,
