@@ -230,30 +230,43 @@ pub fn simulated_wave_at(dz: f64, site: &Site, model: &Model, pulse: Option<&Pul
 /// and the model's vertical offset) and `wave` (bins of `dz` from `z0`), read at the real
 /// samples by linear interpolation: the collocation's measure of fit of a position.
 fn correlation(case: &ShotCase, model: &Model, wave: &[f64], z0: f64, dz: f64) -> f64 {
-    let real = &case.real;
-    let top = real.bin0 - model.vertical_offset_m();
-    let (mut n, mut sx, mut sy, mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-    for (s, &r) in real.wave.iter().enumerate() {
-        let p = (z0 - (top - s as f64 * GEDI_BIN_M)) / dz;
-        let i = p.floor();
-        let m = if i >= 0.0 && (i as usize) + 1 < wave.len() {
-            let (i, t) = (i as usize, p - i);
-            (1.0 - t) * wave[i] + t * wave[i + 1]
-        } else {
-            0.0
-        };
-        let r = f64::from(r);
-        n += 1.0;
-        sx += r;
-        sy += m;
-        sxx += r * r;
-        syy += m * m;
-        sxy += r * m;
+    let top = case.real.bin0 - model.vertical_offset_m();
+    let pairs = case
+        .real
+        .wave
+        .iter()
+        .enumerate()
+        .map(|(s, &r)| (f64::from(r), value_at(wave, z0, dz, top - s as f64 * GEDI_BIN_M)));
+    pearson(pairs, 2)
+}
+
+/// The value of `wave` (bins of `dz` from `z0`, downwards) at elevation `z` by linear
+/// interpolation; 0 outside it.
+pub(super) fn value_at(wave: &[f64], z0: f64, dz: f64, z: f64) -> f64 {
+    let p = (z0 - z) / dz;
+    let i = p.floor();
+    if i >= 0.0 && (i as usize) + 1 < wave.len() {
+        let (i, t) = (i as usize, p - i);
+        (1.0 - t) * wave[i] + t * wave[i + 1]
+    } else {
+        0.0
     }
-    let cov = sxy - sx * sy / n;
+}
+
+/// Pearson r of the pairs (x, y); NaN with fewer than `min_n` pairs or without spread.
+pub(super) fn pearson(pairs: impl Iterator<Item = (f64, f64)>, min_n: usize) -> f64 {
+    let (mut n, mut sx, mut sy, mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    for (x, y) in pairs {
+        n += 1.0;
+        sx += x;
+        sy += y;
+        sxx += x * x;
+        syy += y * y;
+        sxy += x * y;
+    }
     let var = (sxx - sx * sx / n) * (syy - sy * sy / n);
-    if n > 1.0 && var > 0.0 {
-        cov / var.sqrt()
+    if n >= min_n as f64 && var > 0.0 {
+        (sxy - sx * sy / n) / var.sqrt()
     } else {
         f64::NAN
     }

@@ -25,7 +25,7 @@ use std::collections::HashMap;
 use rayon::prelude::*;
 
 use super::case::ShotCase;
-use super::chain::{real_products, reposition, simulated_wave_at, Model};
+use super::chain::{pearson, real_products, reposition, simulated_wave_at, value_at, Model};
 use super::fit::geolocation;
 use super::rank::{interval, Folds};
 use crate::kernels::gedi::N_ALGORITHMS;
@@ -202,29 +202,7 @@ fn canopy_correlation(real: &[f32], top: f64, real_ground: f64, sim: &[f64], z0:
     (-lags..=lags)
         .map(|l| {
             let shift = l as f64 * dz;
-            let (mut n, mut sx, mut sy, mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-            for &(h, r) in &canopy {
-                let p = (z0 - (sim_ground + h + shift)) / dz;
-                let i = p.floor();
-                let m = if i >= 0.0 && (i as usize) + 1 < sim.len() {
-                    let (i, t) = (i as usize, p - i);
-                    (1.0 - t) * sim[i] + t * sim[i + 1]
-                } else {
-                    0.0
-                };
-                n += 1.0;
-                sx += r;
-                sy += m;
-                sxx += r * r;
-                syy += m * m;
-                sxy += r * m;
-            }
-            let var = (sxx - sx * sx / n) * (syy - sy * sy / n);
-            if n > 2.0 && var > 0.0 {
-                (sxy - sx * sy / n) / var.sqrt()
-            } else {
-                f64::NAN
-            }
+            pearson(canopy.iter().map(|&(h, r)| (r, value_at(sim, z0, dz, sim_ground + h + shift))), 3)
         })
         .filter(|r| r.is_finite())
         .fold(f64::NAN, f64::max)

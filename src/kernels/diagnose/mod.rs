@@ -59,7 +59,7 @@ pub fn diagnose(mut cases: Vec<ShotCase>, names: &[&str], on_step: &dyn Fn(&str)
     let recorded = cases.iter().any(|c| c.real.pulse.is_some());
     let configuration = configuration::choose(&folds, &configuration::candidates(recorded), on_step);
     let ranking = rank::rank(&folds, &configuration, names, on_step);
-    let nominal = fit::total(&ranking.nominal_gaps).metrics();
+    let nominal = fit::total(&configuration.gaps).metrics();
     let n_replaceable = cases.iter().filter(|c| c.sim.short_segment && c.sim.sites.len() > 1).count();
     Diagnosis {
         where_,

@@ -449,8 +449,6 @@ pub struct Ranking {
     /// Effects that explain as well as the first within noise (`near_ties`): the diagnosis is
     /// then ambiguous between the first and these.
     pub ambiguous_with: Vec<String>,
-    /// Held-out gaps per shot of the chosen configuration (every first effect's "before").
-    pub nominal_gaps: Vec<ShotGap>,
 }
 
 /// Rank `names` on the chosen configuration, then climb the ladder. `on_step` is told each
@@ -491,7 +489,7 @@ pub fn rank(folds: &Folds, choice: &ConfigurationChoice, names: &[&str], on_step
             ladder.push(t);
         }
     }
-    Ranking { effects, ladder, unexplained, ambiguous_with, nominal_gaps: nominal.gaps }
+    Ranking { effects, ladder, unexplained, ambiguous_with }
 }
 
 fn advance(state: &State, t: &Trial) -> State {
