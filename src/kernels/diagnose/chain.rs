@@ -108,6 +108,12 @@ impl Model {
         EffectSet { effects: self.effects.clone() }
     }
 
+    /// Apply the model's effects that act on the waveform after the pulse (canopy change,
+    /// occlusion) to `parts`.
+    pub fn apply_after_pulse(&self, parts: &mut WaveParts) {
+        self.effects.iter().for_each(|e| e.apply_waveform(parts));
+    }
+
     /// GEDI − ALS vertical offset (m) of the model's effects.
     pub fn vertical_offset_m(&self) -> f64 {
         self.set().vertical_offset_m()
@@ -213,17 +219,40 @@ pub fn simulated_wave(case: &ShotCase, model: &Model) -> Vec<f64> {
 /// The noise-free simulated waveform at `site` (bins of `dz` from `site.z0`) with the shot's
 /// recorded `pulse`, if any.
 pub fn simulated_wave_at(dz: f64, site: &Site, model: &Model, pulse: Option<&Pulse>) -> Vec<f64> {
-    let (w, rho) = model.weighting();
-    let (ground, canopy) = parts_at(site, w, model.fsigma());
-    let mut parts = WaveParts {
+    let mut parts = pulsed_parts(dz, site, model, pulse);
+    model.apply_after_pulse(&mut parts);
+    composed(&parts, model)
+}
+
+/// The ground and canopy parts at `site` under `model`'s weighting and footprint, convolved with
+/// its pulse: [`simulated_wave_at`] before the effects that act after the pulse.
+pub fn pulsed_parts(dz: f64, site: &Site, model: &Model, pulse: Option<&Pulse>) -> WaveParts {
+    let (ground, canopy) = parts_at(site, model.weighting().0, model.fsigma());
+    WaveParts {
         ground: model.apply_pulse(&ground, pulse, dz),
         canopy: model.apply_pulse(&canopy, pulse, dz),
         z0: site.z0,
         dz,
         ground_z: site.als_ground,
-    };
-    model.set().apply_waveform(&mut parts);
-    parts.compose(rho).into_iter().map(|v| v.max(0.0)).collect()
+    }
+}
+
+/// The waveform of `parts` (after-pulse effects applied) at `model`'s ground/vegetation ratio,
+/// clipped at 0.
+pub fn composed(parts: &WaveParts, model: &Model) -> Vec<f64> {
+    parts.compose(model.weighting().1).into_iter().map(|v| v.max(0.0)).collect()
+}
+
+/// `model` and `other` simulate the same waveforms up to the effects that act after the pulse
+/// (a ground/vegetation ratio, a canopy change, an occlusion): same weighting method, footprint,
+/// pulse, vertical offset and placement.
+pub fn same_before_pulse(model: &Model, other: &Model) -> bool {
+    model.config == other.config
+        && model.weighting().0 == other.weighting().0
+        && model.fsigma() == other.fsigma()
+        && model.extra_pulse_sigma() == other.extra_pulse_sigma()
+        && model.vertical_offset_m() == other.vertical_offset_m()
+        && Arc::ptr_eq(&model.placement, &other.placement)
 }
 
 /// Pearson correlation between the real waveform of `case` (elevations through the nominal geoid

@@ -104,9 +104,9 @@ fn profiled_chi2(cases: &[&ShotCase], candidates: &[Configuration], study: usize
     candidates
         .iter()
         .map(|&config| {
-            let placed = reposition(cases, &Model::configured(config));
+            let placed = profile::AfterPulse::new(cases, &reposition(cases, &Model::configured(config)));
             let ratio = |lr: f64| Effect::Weighting { method: WeightMethod::Ratio, rho_ground_over_veg: lr.exp() };
-            minimise(&mut |lr| profile::sums(cases, &placed.with(ratio(lr))).chi2_against(&reference), &grid, 6).1
+            minimise(&mut |lr| placed.sums(&ratio(lr)).chi2_against(&reference), &grid, 6).1
         })
         .collect()
 }

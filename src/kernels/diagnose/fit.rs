@@ -188,9 +188,8 @@ fn fit_placed(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
     // Every parameter value weighed against the base model's between-shot variance (computed
     // once, and only for the effects fitted on the waveforms).
     let reference = std::cell::OnceCell::new();
-    let obj = |e: Effect| {
-        profile::sums(cases, &base.with(e)).chi2_against(reference.get_or_init(|| profile::sums(cases, base)))
-    };
+    let prepared = profile::AfterPulse::new(cases, base);
+    let obj = |e: Effect| prepared.sums(&e).chi2_against(reference.get_or_init(|| profile::sums(cases, base)));
     match name {
         "datum" => {
             // The collocation's vertical offsets come from whole waveforms, so a GEDI ground

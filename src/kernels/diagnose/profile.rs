@@ -12,7 +12,8 @@
 //! [`ProfileSums`] like the RH gap, so that tracks and bootstrap resamples combine by addition.
 
 use super::case::{ShotCase, Site};
-use super::chain::{simulated_wave, Model};
+use super::chain::{composed, pulsed_parts, same_before_pulse, simulated_wave, Model};
+use crate::kernels::scenario::effects::{Effect, WaveParts};
 use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
 
 /// Height grid: bins of this size (m) from [`PROFILE_MIN_M`].
@@ -55,9 +56,14 @@ pub fn real_profile(case: &ShotCase, site: &Site, vertical_offset_m: f64) -> Opt
 /// The model's noise-free simulated waveform of `case` on the height grid, normalised.
 pub fn simulated_profile(case: &ShotCase, model: &Model) -> Option<Vec<f64>> {
     let site = model.site(case);
+    profile_of(&simulated_wave(case, model), site.z0, case.sim.dz, site.als_ground)
+}
+
+/// `wave` (bins of `dz` from `z0`) on the height grid above `ground`, normalised.
+fn profile_of(wave: &[f64], z0: f64, dz: f64, ground: f64) -> Option<Vec<f64>> {
     let mut m = vec![0.0; PROFILE_BINS];
-    for (k, &v) in simulated_wave(case, model).iter().enumerate() {
-        add_at_height(&mut m, site.z0 - k as f64 * case.sim.dz - site.als_ground, v);
+    for (k, &v) in wave.iter().enumerate() {
+        add_at_height(&mut m, z0 - k as f64 * dz - ground, v);
     }
     normalised(m)
 }
@@ -87,7 +93,11 @@ pub struct ShotProfile {
 pub fn shot_profile(case: &ShotCase, model: &Model) -> Option<ShotProfile> {
     let r = real_profile(case, model.site(case), model.vertical_offset_m())?;
     let m = simulated_profile(case, model)?;
-    Some(ShotProfile { group: group(case), diff: r.iter().zip(&m).map(|(a, b)| (a - b) as f32).collect() })
+    Some(difference(group(case), &r, &m))
+}
+
+fn difference(group: usize, real: &[f64], simulated: &[f64]) -> ShotProfile {
+    ShotProfile { group, diff: real.iter().zip(simulated).map(|(a, b)| (a - b) as f32).collect() }
 }
 
 /// Σd and Σd² per group and bin, and the shot counts.
@@ -177,6 +187,64 @@ pub fn sums(cases: &[&ShotCase], model: &Model) -> ProfileSums {
     use rayon::prelude::*;
     let profiles: Vec<ShotProfile> = cases.par_iter().filter_map(|c| shot_profile(c, model)).collect();
     profiles.iter().collect()
+}
+
+/// The shots of a fit prepared once for the effects that act after the pulse (a ground/vegetation
+/// ratio, a canopy change, an occlusion): each shot's real profile and its simulated parts
+/// convolved with the pulse, the base model's own after-pulse effects applied. A fit's every
+/// trial value then costs a composition, not a simulation; [`AfterPulse::sums`] gives the same
+/// numbers as [`sums`] of the base model with the effect.
+pub struct AfterPulse<'a> {
+    cases: &'a [&'a ShotCase],
+    base: Model,
+    /// Prepared on the first effect that acts after the pulse.
+    shots: std::cell::OnceCell<Vec<Option<Prepared>>>,
+}
+
+/// A shot's real profile, its pulsed parts and its slope group.
+type Prepared = (Vec<f64>, WaveParts, usize);
+
+impl<'a> AfterPulse<'a> {
+    pub fn new(cases: &'a [&'a ShotCase], base: &Model) -> AfterPulse<'a> {
+        AfterPulse { cases, base: base.clone(), shots: std::cell::OnceCell::new() }
+    }
+
+    fn prepare(&self) -> Vec<Option<Prepared>> {
+        use rayon::prelude::*;
+        let (base, vo) = (&self.base, self.base.vertical_offset_m());
+        self.cases
+            .par_iter()
+            .map(|c| {
+                let site = base.site(c);
+                let real = real_profile(c, site, vo)?;
+                let mut parts = pulsed_parts(c.sim.dz, site, base, c.real.pulse.as_deref());
+                base.apply_after_pulse(&mut parts);
+                Some((real, parts, group(c)))
+            })
+            .collect()
+    }
+
+    /// The profile sums of the base model with `e` ([`sums`] when `e` acts before the pulse).
+    pub fn sums(&self, e: &Effect) -> ProfileSums {
+        use rayon::prelude::*;
+        let model = self.base.with(e.clone());
+        if !same_before_pulse(&model, &self.base) {
+            return sums(self.cases, &model);
+        }
+        let profiles: Vec<ShotProfile> = self
+            .shots
+            .get_or_init(|| self.prepare())
+            .par_iter()
+            .filter_map(|s| {
+                let (real, parts, group) = s.as_ref()?;
+                let mut parts = parts.clone();
+                e.apply_waveform(&mut parts);
+                let m = profile_of(&composed(&parts, &model), parts.z0, parts.dz, parts.ground_z)?;
+                Some(difference(*group, real, &m))
+            })
+            .collect();
+        profiles.iter().collect()
+    }
 }
 
 #[cfg(test)]
