@@ -42,6 +42,11 @@ pub struct DiagnoseArgs {
     /// Diagnose again even when <out> holds the diagnosis of the same inputs.
     #[arg(long)]
     force: bool,
+    /// Self-test: twin sets of the shots per planted hypothesis (each leading candidate, and none),
+    /// ranked the same way; they decide the verdict and say how often it is right. 0 skips it
+    /// (docs/diagnosis.md, "The self-test").
+    #[arg(long, default_value_t = gedisim::kernels::diagnose::selftest::TWINS, value_name = "N")]
+    twins: usize,
 }
 
 pub fn diagnose(a: DiagnoseArgs) -> Result<()> {
@@ -53,8 +58,13 @@ pub fn diagnose(a: DiagnoseArgs) -> Result<()> {
         // The first half of `gedisim run`, with the diagnosis's per-beam collocation.
         None => DiagnoseInput::Chain(Box::new(a.chain.run_options(a.als, a.l1b, a.l2a, &a.out.join("dataset")))),
     };
-    let pulse = a.pulse.model("recorded", None);
-    let r = gedisim::ops::diagnose::diagnose(input, &a.out, &a.effects, &pulse, a.force, &Bars::new())?;
+    let opts = gedisim::ops::diagnose::DiagnoseOptions {
+        effects: a.effects,
+        pulse: a.pulse.model("recorded", None),
+        twins: a.twins,
+        force: a.force,
+    };
+    let r = gedisim::ops::diagnose::diagnose(input, &a.out, &opts, &Bars::new())?;
     if let Some(chain) = &r.chain {
         print_ingest_and_collocation(chain);
     }

@@ -135,14 +135,7 @@ pub fn run_demo(opts: &DemoOptions, progress: &dyn Progress) -> Result<DemoRepor
     // The diagnosis of the world, told nothing about the withheld effect; then the report, which
     // shows it.
     let diagnosis_dir = opts.out.join("diagnosis");
-    let diagnosis = crate::ops::diagnose::diagnose_dataset(
-        &ds,
-        &diagnosis_dir,
-        &[],
-        &crate::kernels::sim::PulseModel::Recorded(Default::default()),
-        false,
-        progress,
-    )?;
+    let diagnosis = crate::ops::diagnose::diagnose_dataset(&ds, &diagnosis_dir, &Default::default(), progress)?;
     let report_opts = crate::ops::report::ReportOptions { out: None, diagnosis: Some(diagnosis_dir) };
     let report = crate::ops::report::run_report(&ds, &report_opts, &Default::default(), progress)?;
     let headline = Headline {

@@ -392,12 +392,13 @@ pub struct DiagnosisOutput {
 }
 
 /// The key of a diagnosis's inputs (a hex SHA-256 over these facts): this binary's path, size and
-/// modification time, the effects and pulse asked for (and a pulse file's size and time), and
+/// modification time, the effects, pulse (and a pulse file's size and time) and self-test twins
+/// asked for, and
 /// the path, size and modification time of every file of the tables it reads (gedisim writes a
 /// changed table file anew, with a new time). Stored in diagnosis.json: a re-run on the same
 /// inputs reuses the diagnosis. A file rewritten with the same size within the file system's
 /// time resolution would go unseen: `--force` recomputes.
-fn inputs_key(ds: &Dataset, names: &[&str], pulse: &PulseModel) -> Result<String> {
+fn inputs_key(ds: &Dataset, names: &[&str], pulse: &PulseModel, twins: usize) -> Result<String> {
     use sha2::{Digest, Sha256};
     let mut h = Sha256::new();
     let stamp = |h: &mut Sha256, path: &Path| -> Result<()> {
@@ -406,7 +407,7 @@ fn inputs_key(ds: &Dataset, names: &[&str], pulse: &PulseModel) -> Result<String
         h.update(format!("{}\0{}\0{}\0", path.display(), m.len(), mtime.as_nanos()));
         Ok(())
     };
-    h.update(format!("gedisim {}\0{}\0{pulse:?}\0", env!("CARGO_PKG_VERSION"), names.join(",")));
+    h.update(format!("gedisim {}\0{}\0{pulse:?}\0{twins}\0", env!("CARGO_PKG_VERSION"), names.join(",")));
     if let Ok(exe) = std::env::current_exe() {
         stamp(&mut h, &exe)?;
     }
@@ -507,16 +508,45 @@ pub struct DiagnoseReport {
     pub output: DiagnosisOutput,
 }
 
-/// `gedisim diagnose`: the dataset (made or collocated first when needed) diagnosed into `out`;
-/// `effects` as in [`diagnose_dataset`].
+/// What a diagnosis is asked for.
+#[derive(Debug, Clone)]
+pub struct DiagnoseOptions {
+    /// The effects tried (names of `diagnose::fit::FITTED_EFFECTS`; empty = all).
+    pub effects: Vec<String>,
+    /// The shots' transmit pulse in the nominal chain.
+    pub pulse: PulseModel,
+    /// Twin sets per planted hypothesis in the self-test (`diagnose::selftest`); 0 = none.
+    pub twins: usize,
+    /// Diagnose again even when `out` holds the diagnosis of the same inputs.
+    pub force: bool,
+}
+
+impl DiagnoseOptions {
+    /// Every effect, each shot's recorded pulse, the default self-test.
+    pub fn new() -> DiagnoseOptions {
+        DiagnoseOptions {
+            effects: Vec::new(),
+            pulse: PulseModel::Recorded(Default::default()),
+            twins: diagnose::selftest::TWINS,
+            force: false,
+        }
+    }
+}
+
+impl Default for DiagnoseOptions {
+    fn default() -> Self {
+        DiagnoseOptions::new()
+    }
+}
+
+/// `gedisim diagnose`: the dataset (made or collocated first when needed) diagnosed into `out`.
 pub fn diagnose(
     input: DiagnoseInput,
     out: &Path,
-    effects: &[String],
-    pulse: &PulseModel,
-    force: bool,
+    opts: &DiagnoseOptions,
     progress: &dyn Progress,
 ) -> Result<DiagnoseReport> {
+    let pulse = &opts.pulse;
     let (root, chain) = match input {
         DiagnoseInput::Dataset(root) => (root, None),
         DiagnoseInput::Chain(opts) => {
@@ -533,22 +563,20 @@ pub fn diagnose(
     } else {
         Some(crate::ops::collocate::collocate(&ds, &diagnosis_collocation(pulse), progress)?)
     };
-    let output = diagnose_dataset(&ds, out, effects, pulse, force, progress)?;
+    let output = diagnose_dataset(&ds, out, opts, progress)?;
     Ok(DiagnoseReport { chain, collocated, output })
 }
 
 /// Diagnose the dataset into `out`: its cases read and simulated, then each effect fitted and
 /// scored as one [`Step::DiagnoseFit`] (each effect a note) — unless `out` holds the diagnosis
-/// of the same inputs ([`inputs_key`]) and `force` is false, which is then returned as it is.
-/// `effects`: the effects tried (names of `diagnose::fit::FITTED_EFFECTS`; empty = all).
+/// of the same inputs ([`inputs_key`]) and `opts.force` is false, which is then returned as it is.
 pub fn diagnose_dataset(
     ds: &Dataset,
     out: &Path,
-    effects: &[String],
-    pulse: &PulseModel,
-    force: bool,
+    opts: &DiagnoseOptions,
     progress: &dyn Progress,
 ) -> Result<DiagnosisOutput> {
+    let (effects, pulse) = (&opts.effects, &opts.pulse);
     let names: Vec<&str> = if effects.is_empty() {
         diagnose::fit::FITTED_EFFECTS.to_vec()
     } else {
@@ -564,8 +592,8 @@ pub fn diagnose_dataset(
             })
             .collect::<Result<_>>()?
     };
-    let key = inputs_key(ds, &names, pulse)?;
-    if let Some(done) = reusable(out, &key).filter(|_| !force) {
+    let key = inputs_key(ds, &names, pulse, opts.twins)?;
+    if let Some(done) = reusable(out, &key).filter(|_| !opts.force) {
         return Ok(done);
     }
     let (cases, report) = read_cases(ds, pulse, progress)?;
@@ -580,7 +608,7 @@ pub fn diagnose_dataset(
         ));
     }
     progress.start(Step::DiagnoseFit, 0);
-    let d = diagnose::diagnose(cases, &names, &|step| progress.note(step));
+    let d = diagnose::diagnose(cases, &names, opts.twins, &|step| progress.note(step));
     progress.finish();
     std::fs::create_dir_all(out).map_err(|e| Error::file(out, e))?;
     // The old diagnosis.json goes first: tables half rewritten by an interrupted run are never
@@ -1014,11 +1042,12 @@ mod tests {
         let shots = ds.table_file(tables::SHOTS, "g1").unwrap();
         std::fs::write(&shots, b"first").unwrap();
         let pulse = PulseModel::Recorded(Default::default());
-        let key = |names: &[&str], pulse: &PulseModel| inputs_key(&ds, names, pulse).unwrap();
+        let key = |names: &[&str], pulse: &PulseModel| inputs_key(&ds, names, pulse, 10).unwrap();
         let k0 = key(&["datum"], &pulse);
         assert_eq!(k0, key(&["datum"], &pulse), "the same inputs, the same key");
         assert_ne!(k0, key(&["datum", "pulse"], &pulse), "other effects");
         assert_ne!(k0, key(&["datum"], &PulseModel::Gaussian(None)), "another pulse");
+        assert_ne!(k0, inputs_key(&ds, &["datum"], &pulse, 4).unwrap(), "another self-test");
         // A new file in a table the diagnosis reads.
         let strata = ds.table_file(tables::STRATA, "strata").unwrap();
         std::fs::write(&strata, b"s").unwrap();

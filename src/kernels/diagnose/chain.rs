@@ -420,7 +420,24 @@ pub fn null_case(case: &ShotCase, model: &Model, scratch: &mut Scratch) -> Optio
     let mut rng = crate::kernels::scenario::rng::Stream::new(seed, &["null position"]);
     let here = model.site(case).offset;
     let target = (here.0 + (rng.uniform() - 0.5) * SITE_STEP_M, here.1 + (rng.uniform() - 0.5) * SITE_STEP_M);
-    let (wave, z0) = wave_between(case, model, target)?;
+    twin_case(case, model, target, seed, scratch)
+}
+
+/// `case` with its real side replaced by a noise twin (noise draw `seed`) of `model`'s simulation
+/// at the horizontal offset `target` (m from the collocated position): at the model's own site
+/// when `target` is its offset, else between the sites around it ([`wave_between`]). The
+/// model's real-side effects (a datum, a ground detection) are put on the twin's products as
+/// GEDI's would carry them. `None` when no twin can be made.
+pub fn twin_case(
+    case: &ShotCase,
+    model: &Model,
+    target: (f64, f64),
+    seed: u64,
+    scratch: &mut Scratch,
+) -> Option<ShotCase> {
+    let site = model.site(case);
+    let (wave, z0) =
+        if target == site.offset { (simulated_wave(case, model), site.z0) } else { wave_between(case, model, target)? };
     let (wave, noise, products) = twin(case, model, &wave, z0, seed, scratch)?;
     let set = model.set();
     let vo = set.vertical_offset_m();

@@ -148,6 +148,26 @@ pub fn choose(folds: &Folds, candidates: &[Configuration], on_step: &dyn Fn(&str
     ConfigurationChoice { fold_chosen: fold_pick.map(|i| trials[i].config), trials, chosen, held_out, gaps, ground }
 }
 
+/// `config` taken as chosen, without trying others: its held-out gaps (what effects are ranked
+/// against) and the ground bias per algorithm. The self-test's twins (`super::selftest`) are made
+/// with the configuration already chosen; the comparison with the study's is not made (`held_out`
+/// compares the choice with itself).
+pub fn fixed(folds: &Folds, config: Configuration) -> ConfigurationChoice {
+    let m = Model::configured(config);
+    let gaps = folds.held_out(&[m.clone(), m]);
+    let metrics = super::fit::total(&gaps).metrics();
+    let held_out = compare(folds, &gaps, &gaps, "configuration", Frame::Both);
+    let ground = (0..N_ALGORITHMS).map(|a| algorithm_ground(folds, &gaps, a)).collect();
+    let trial = ConfigurationTrial {
+        config,
+        metrics,
+        waveform_chi2: f64::NAN,
+        waveform_chi2_profiled: f64::NAN,
+        gaps: gaps.clone(),
+    };
+    ConfigurationChoice { trials: vec![trial], chosen: config, fold_chosen: [config; 2], held_out, gaps, ground }
+}
+
 /// Mean ground difference of algorithm index `a` over the shots that have it, with its
 /// bootstrap interval over tracks.
 fn algorithm_ground(folds: &Folds, gaps: &[ShotGap], a: usize) -> AlgorithmGround {

@@ -16,6 +16,8 @@
 //! - [`rank`]: **which** and **how far** — cross-fitted on tracks, held-out shrink with bootstrap
 //!   intervals, the greedy ladder, `unexplained`.
 //! - [`geolocation`]: the ground test that per-shot geolocation must pass.
+//! - [`selftest`]: how often the verdict is right — twins of the shots with each leading
+//!   candidate planted, and with none, ranked the same way; the verdict follows from them.
 
 pub mod case;
 pub mod chain;
@@ -27,6 +29,7 @@ pub mod json;
 pub mod locate;
 pub mod profile;
 pub mod rank;
+pub mod selftest;
 
 pub use case::ShotCase;
 
@@ -40,6 +43,10 @@ pub struct Diagnosis {
     /// The chosen configuration's held-out gap (what every first effect's "before" is).
     pub nominal: gap::GapMetrics,
     pub ranking: rank::Ranking,
+    /// Twins of the shots, ranked the same way (`None` with `twins` 0).
+    pub self_test: Option<selftest::SelfTest>,
+    /// What the diagnosis concludes: the ranking, decided by the self-test ([`selftest::verdict`]).
+    pub verdict: selftest::Verdict,
     pub n_shots: usize,
     /// Shots of short collocation segments, which each hypothesis re-places (`chain::reposition`).
     pub n_replaceable: usize,
@@ -48,9 +55,10 @@ pub struct Diagnosis {
     pub mismatched: usize,
 }
 
-/// Diagnose `cases` with the effects `names` (normally [`fit::FITTED_EFFECTS`]); `on_step` hears
-/// each effect tried.
-pub fn diagnose(mut cases: Vec<ShotCase>, names: &[&str], on_step: &dyn Fn(&str)) -> Diagnosis {
+/// Diagnose `cases` with the effects `names` (normally [`fit::FITTED_EFFECTS`]) and a self-test of
+/// `twins` twin sets per planted hypothesis (0: none, the ranking's intervals decide alone);
+/// `on_step` hears each effect tried.
+pub fn diagnose(mut cases: Vec<ShotCase>, names: &[&str], twins: usize, on_step: &dyn Fn(&str)) -> Diagnosis {
     let where_ = locate::locate(&cases);
     case::set_nominal_noise(&mut cases);
     let mismatched = flag_ground_mismatches(&mut cases);
@@ -60,12 +68,17 @@ pub fn diagnose(mut cases: Vec<ShotCase>, names: &[&str], on_step: &dyn Fn(&str)
     let configuration = configuration::choose(&folds, &configuration::candidates(recorded), on_step);
     let ranking = rank::rank(&folds, &configuration, names, on_step);
     let nominal = fit::total(&configuration.gaps).metrics();
+    let self_test = (twins > 0 && !ranking.effects.is_empty())
+        .then(|| selftest::run(cases, configuration.chosen, &ranking, names, twins, on_step));
+    let verdict = selftest::verdict(&ranking, self_test.as_ref());
     let n_replaceable = cases.iter().filter(|c| c.sim.short_segment && c.sim.sites.len() > 1).count();
     Diagnosis {
         where_,
         configuration,
         nominal,
         ranking,
+        self_test,
+        verdict,
         n_shots: cases.len(),
         n_replaceable,
         n_tracks: folds.n_tracks,

@@ -62,7 +62,8 @@ pub fn simulated_profile(case: &ShotCase, model: &Model) -> Option<Vec<f64>> {
 /// `wave` (bins of `dz` from `z0`) on the height grid above `ground`, normalised.
 fn profile_of(wave: &[f64], z0: f64, dz: f64, ground: f64) -> Option<Vec<f64>> {
     let mut m = vec![0.0; PROFILE_BINS];
-    for (k, &v) in wave.iter().enumerate() {
+    // Zero bins add nothing.
+    for (k, &v) in wave.iter().enumerate().filter(|(_, &v)| v != 0.0) {
         add_at_height(&mut m, z0 - k as f64 * dz - ground, v);
     }
     normalised(m)

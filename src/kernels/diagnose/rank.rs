@@ -455,14 +455,7 @@ pub struct Ranking {
 /// effect tried.
 pub fn rank(folds: &Folds, choice: &ConfigurationChoice, names: &[&str], on_step: &dyn Fn(&str)) -> Ranking {
     let nominal = State::configured(choice);
-    let mut effects: Vec<Trial> = names
-        .iter()
-        .filter_map(|n| {
-            on_step(n);
-            try_effect(folds, &nominal, n)
-        })
-        .collect();
-    order(&mut effects);
+    let effects = rank_effects(folds, &nominal, names, on_step);
     let unexplained = !explained(&effects);
     let ambiguous_with = near_ties(folds, &nominal.gaps, &effects);
     let mut ladder: Vec<Trial> = Vec::new();
@@ -490,6 +483,24 @@ pub fn rank(folds: &Folds, choice: &ConfigurationChoice, names: &[&str], on_step
         }
     }
     Ranking { effects, ladder, unexplained, ambiguous_with }
+}
+
+/// Every effect of `names` tried on `state`, best first ([`order`]).
+pub fn rank_effects(folds: &Folds, state: &State, names: &[&str], on_step: &dyn Fn(&str)) -> Vec<Trial> {
+    let mut effects: Vec<Trial> = names
+        .iter()
+        .filter_map(|n| {
+            on_step(n);
+            try_effect(folds, state, n)
+        })
+        .collect();
+    order(&mut effects);
+    effects
+}
+
+/// The effect [`rank_effects`]'s ordered `trials` name first, if the gap is explained.
+pub fn named_first(trials: &[Trial]) -> Option<&Trial> {
+    trials.first().filter(|_| explained(trials))
 }
 
 fn advance(state: &State, t: &Trial) -> State {

@@ -202,21 +202,8 @@ impl Pulse {
     /// outside: a return in bin i spreads to bin i + k with the weight of the sample k bins after
     /// the reference point (later in time = lower).
     pub fn convolve_same(&self, x: &[f64]) -> Vec<f64> {
-        let n = x.len() as isize;
-        let c = self.cent_bin as isize;
-        let mut out = vec![0.0; x.len()];
-        for (i, &v) in x.iter().enumerate() {
-            if v == 0.0 {
-                continue;
-            }
-            for (j, &w) in self.y.iter().enumerate() {
-                let o = i as isize + j as isize - c;
-                if o >= 0 && o < n {
-                    out[o as usize] += v * f64::from(w);
-                }
-            }
-        }
-        out
+        let y: Vec<f64> = self.y.iter().map(|&w| f64::from(w)).collect();
+        spread(x, &y, self.cent_bin as isize)
     }
 
     /// The pulse as a pulse file (`x y` per line, range m and weight), readable by
@@ -244,17 +231,29 @@ pub fn gaussian_blur(x: &[f64], sigma: f64, dz: f64) -> Vec<f64> {
     let mut kernel: Vec<f64> = (-half..=half).map(|i| (-0.5 * (i as f64 * dz / sigma).powi(2)).exp()).collect();
     let sum: f64 = kernel.iter().sum();
     kernel.iter_mut().for_each(|k| *k /= sum);
+    spread(x, &kernel, half)
+}
+
+/// `x` spread by `kernel` (same length, zero outside): bin i adds `x[i]·kernel[j]` to bin
+/// i + j − `centre`. Bins are visited in order and zero bins skipped, so each output sums its
+/// terms in the order of i; the inner loop runs over the slice of taps that land inside.
+fn spread(x: &[f64], kernel: &[f64], centre: isize) -> Vec<f64> {
     let n = x.len() as isize;
     let mut out = vec![0.0; x.len()];
     for (i, &v) in x.iter().enumerate() {
         if v == 0.0 {
             continue;
         }
-        for (j, &k) in kernel.iter().enumerate() {
-            let o = i as isize + j as isize - half;
-            if o >= 0 && o < n {
-                out[o as usize] += v * k;
-            }
+        // Taps j with 0 ≤ i + j − centre < n.
+        let lo = (centre - i as isize).max(0);
+        let hi = (n + centre - i as isize).min(kernel.len() as isize);
+        if lo >= hi {
+            continue;
+        }
+        let start = (i as isize + lo - centre) as usize;
+        let taps = &kernel[lo as usize..hi as usize];
+        for (o, &k) in out[start..start + taps.len()].iter_mut().zip(taps) {
+            *o += v * k;
         }
     }
     out
