@@ -14,6 +14,10 @@ use std::path::Path;
 use common::gedisim;
 use serde_json::Value;
 
+/// Twin sets per planted hypothesis in the suites' self-tests (the default is 10; fewer keep the
+/// suites within CI's time, and the verdict's rules are rates).
+const TWINS: &str = "3";
+
 /// Build a world with `effect` and diagnose it with the whole chain (`--als --l1b --l2a`).
 fn diagnose_world(dir: &Path, effect: &str, extra: &[&str]) -> Value {
     let world = dir.join("world");
@@ -32,6 +36,8 @@ fn diagnose_world(dir: &Path, effect: &str, extra: &[&str]) -> Value {
         g.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
+        "--twins",
+        TWINS,
     ]);
     assert!(ok, "{err}");
     // One sign convention, stated (docs/diagnosis.md "Signs").
@@ -95,7 +101,29 @@ fn check_contract(d: &Value) {
         "best first: {keys:?}"
     );
     assert!(d["ambiguous_with"].is_array());
-    assert_eq!(d["unexplained"], !effects.iter().any(explains));
+    // The ranking names its first effect when some effect explains; the self-test then decides.
+    let v = &d["verdict"];
+    assert_eq!(v["ranking_names"].is_null(), !effects.iter().any(explains), "{v}");
+    assert_eq!(v["decided_by"], "self-test");
+    assert_eq!(d["unexplained"], v["kind"] == "unexplained");
+    if v["ranking_names"].is_null() {
+        assert_eq!(v["kind"], "unexplained");
+    } else if v["kind"] != "unexplained" {
+        assert_eq!(v["effects"][0], v["ranking_names"]);
+    }
+    assert_eq!(v["kind"] == "ambiguous", !d["ambiguous_with"].as_array().unwrap().is_empty());
+    // The self-test: each leading candidate planted, then nothing; every twin set named something
+    // or nothing.
+    let t = &d["self_test"];
+    let plantings = t["plantings"].as_array().unwrap();
+    assert!(plantings.len() >= 2 && plantings.len() <= 4, "{t:#}");
+    assert_eq!(plantings.last().unwrap()["planted"], "none");
+    for p in plantings {
+        let n: u64 = p["named_first"].as_array().unwrap().iter().map(|o| o["twins"].as_u64().unwrap()).sum();
+        assert_eq!(n, t["twins"].as_u64().unwrap(), "{p:#}");
+    }
+    assert_eq!(t["twins"].as_u64().unwrap(), TWINS.parse::<u64>().unwrap());
+    assert!(t["named"]["recovered"].as_u64().is_some(), "{t:#}");
     // The study's question first: every weighting × both pulses (scenario shots carry recorded
     // transmit pulses), the choice, its held-out comparison with the study's configuration, and
     // the ground bias of each algorithm.
@@ -119,11 +147,15 @@ fn check_contract(d: &Value) {
     }
 }
 
-/// `name` is ranked first and named, with a held-out shrink ≥ 0.5.
+/// `name` is ranked first and named, with a held-out shrink ≥ 0.5, and the self-test recovers it
+/// where it is planted.
 fn assert_named_first(d: &Value, name: &str) {
     check_contract(d);
     assert_eq!(first(d)["name"], name, "{:#}", d["effects"]);
-    assert_eq!(d["unexplained"], false);
+    assert_eq!(d["unexplained"], false, "{:#}", d["self_test"]);
+    assert_eq!(d["verdict"]["effects"][0], name, "{:#}", d["verdict"]);
+    assert_eq!(d["self_test"]["named"]["effect"], name);
+    assert!(d["self_test"]["named"]["recovered"].as_u64().unwrap() >= 1, "{:#}", d["self_test"]);
     assert!(num(&first(d)["held_out"]["shrink"]) >= 0.5, "{:#}", first(d));
 }
 

@@ -374,6 +374,10 @@ fn demo_runs_on_the_bundled_tiles_and_prints_the_headline_tables() {
         "Configuration first (weighting × pulse",
         "every configuration (mean |RH bias| RH1–RH99, MSD, RH98 bias): count + Gaussian 15 ns",
         "per L2A algorithm: a1 ",
+        // A verdict that says how often it is right.
+        "Self-test (10 twin sets of these shots per hypothesis",
+        "where nothing was",
+        "nothing planted → named first: ",
     ] {
         assert!(stdout.contains(text), "{text}: {stdout}");
     }
@@ -389,6 +393,8 @@ fn demo_runs_on_the_bundled_tiles_and_prints_the_headline_tables() {
         "<h3>Configuration (weighting × pulse)</h3>",
         " (chosen)</td>",
         "<th>ground bias, GEDI − ALS (m)</th>",
+        "<h3>Self-test</h3>",
+        "<td>none</td>",
     ] {
         assert!(page.contains(text), "{text} missing from report.html");
     }

@@ -92,6 +92,8 @@ pub fn diagnose(a: DiagnoseArgs) -> Result<()> {
                 "name": t.name, "params": t.params, "shrink": t.held_out.shrink, "ci95": t.held_out.ci95
             })).collect::<Vec<_>>(),
             "ambiguous_with": j.ambiguous_with,
+            "verdict": j.verdict,
+            "self_test": j.self_test.as_ref().and_then(|t| t.named.clone()),
             "signs": j.signs,
             "baseline": j.baseline,
             "shots": j.shots,

@@ -20,6 +20,7 @@ use crate::kernels::diagnose::case::{
 };
 use crate::kernels::diagnose::gap::N_PCT;
 use crate::kernels::diagnose::json::{params, DiagnosisJson};
+use crate::kernels::diagnose::selftest::{SelfTest, Verdict};
 use crate::kernels::diagnose::{self, Diagnosis, ShotCase};
 use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
 use crate::kernels::scenario::effects::ParamValue;
@@ -902,6 +903,50 @@ fn ground_test_text(g: &crate::kernels::diagnose::geolocation::GroundTest) -> St
     )
 }
 
+/// An effect's parameters as `name = value, …` (numbers to 3 decimals), in its own order.
+pub fn params_text(e: &crate::kernels::scenario::effects::Effect) -> String {
+    let p: Vec<(String, ParamValue)> = e.params().into_iter().map(|(k, v)| (k.to_string(), v)).collect();
+    crate::kernels::diagnose::json::params_text(&p)
+}
+
+/// The self-test in one line: what the twins of each planting were named first, and the named
+/// effect's recovery.
+fn self_test_line(t: &SelfTest, verdict: &Verdict) -> String {
+    let outcome = |n: &Option<String>| n.clone().unwrap_or_else(|| "nothing".into());
+    let plantings: Vec<String> = t
+        .plantings
+        .iter()
+        .map(|p| {
+            let what: Vec<String> = p.outcomes().iter().map(|(n, k)| format!("{} {k}", outcome(n))).collect();
+            let planted = match &p.effect {
+                Some(e) => format!("{} planted ({})", e.name(), params_text(e)),
+                None => "nothing planted".into(),
+            };
+            format!("{planted} → named first: {}", what.join(", "))
+        })
+        .collect();
+    let head = match verdict.first().or(t.plantings.first().and_then(|p| p.effect.as_ref()).map(|e| e.name())) {
+        Some(e) => match (t.planting(Some(e)), t.planting(None)) {
+            (Some(p), Some(none)) => format!(
+                "on data like yours, {e} was named first in {} of {} twins where it was planted and in {} of {} \
+                 where nothing was",
+                p.count(Some(e)),
+                p.named.len(),
+                none.count(Some(e)),
+                none.named.len()
+            ),
+            _ => String::new(),
+        },
+        None => String::new(),
+    };
+    format!(
+        "Self-test ({} twin sets of these shots per hypothesis, made from {} and ranked the same way): {head}. {}.",
+        t.twins,
+        t.configuration.label(),
+        plantings.join("; ")
+    )
+}
+
 /// The diagnosis in a few lines a scientist can read.
 pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
     let mut lines = Vec::new();
@@ -956,7 +1001,8 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
             format!("held-out gap {:.2} → {:.2} m", t.held_out.before.mean_abs_bias, t.held_out.after.mean_abs_bias)
         }
     };
-    if d.ranking.unexplained {
+    let verdict = &d.verdict;
+    if d.ranking.unexplained || *verdict == Verdict::Unexplained && d.self_test.is_none() {
         let best = d.ranking.effects.first();
         lines.push(match best {
             Some(t) => format!(
@@ -975,17 +1021,23 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
             ),
             None => "Which: unexplained — no effect could be fitted.".into(),
         });
+    } else if *verdict == Verdict::Unexplained {
+        let t = &d.ranking.effects[0];
+        let (k, n) = d
+            .self_test
+            .as_ref()
+            .and_then(|s| s.planting(None))
+            .map_or((0, 0), |p| (p.count(Some(t.effect.name())), p.named.len()));
+        lines.push(format!(
+            "Which: unexplained — {} ({}, {}) clears the intervals, but twins of these shots without any effect \
+             name it first in {k} of {n}: on data like these it is what the chain finds when nothing is there.",
+            t.effect.name(),
+            gap(t),
+            shrink_text(&t.held_out)
+        ));
     } else {
         for (i, t) in d.ranking.ladder.iter().enumerate() {
-            let params: Vec<String> = t
-                .effect
-                .params()
-                .iter()
-                .map(|(k, v)| match v {
-                    ParamValue::Number(x) => format!("{k} = {x:.3}"),
-                    other => format!("{k} = {other}"),
-                })
-                .collect();
+            let params = params_text(&t.effect);
             let gap = gap(t);
             let caveat = match (t.at_bound(), t.equivalent()) {
                 (_, Some(e)) => format!(" — equivalent to the simpler {}", e.name()),
@@ -993,21 +1045,38 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
                 (None, None) => String::new(),
             };
             lines.push(format!(
-                "{} {} ({}): {gap}, {}{caveat}.",
+                "{} {} ({params}): {gap}, {}{caveat}.",
                 if i == 0 { "Which:" } else { "  then" },
                 t.effect.name(),
-                params.join(", "),
                 shrink_text(&t.held_out)
             ));
-            if i == 0 && !d.ranking.ambiguous_with.is_empty() {
-                lines.push(format!(
+            match (verdict, &d.self_test) {
+                (Verdict::Ambiguous(v), Some(test)) if i == 0 => {
+                    let taken: Vec<String> = v[1..]
+                        .iter()
+                        .filter_map(|m| test.planting(Some(m)))
+                        .map(|p| {
+                            format!(
+                                "{} planted is named {} in {} of {}",
+                                p.label(),
+                                v[0],
+                                p.count(Some(&v[0])),
+                                p.named.len()
+                            )
+                        })
+                        .collect();
+                    lines.push(format!("  ambiguous: in twins of these shots, {}.", taken.join("; ")));
+                }
+                (Verdict::Ambiguous(v), None) if i == 0 => lines.push(format!(
                     "  ambiguous: {} explain(s) the gap as well within noise (paired 95 % interval of the shrink \
                      difference contains 0).",
-                    d.ranking.ambiguous_with.join(", ")
-                ));
+                    v[1..].join(", ")
+                )),
+                _ => {}
             }
         }
     }
+    lines.extend(d.self_test.as_ref().map(|t| self_test_line(t, verdict)));
     lines
 }
 

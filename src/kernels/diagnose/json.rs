@@ -17,6 +17,18 @@ use crate::kernels::scenario::truth::PlantedEffect;
 /// An effect's parameters by contract name.
 pub type Params = BTreeMap<String, ParamValue>;
 
+/// Parameters as `name = value, …` (numbers to 3 decimals), in the order given.
+pub fn params_text<K: AsRef<str>>(params: &[(K, ParamValue)]) -> String {
+    let text: Vec<String> = params
+        .iter()
+        .map(|(k, v)| match v {
+            ParamValue::Number(x) => format!("{} = {x:.3}", k.as_ref()),
+            other => format!("{} = {other}", k.as_ref()),
+        })
+        .collect();
+    text.join(", ")
+}
+
 /// The whole file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DiagnosisJson {
@@ -44,14 +56,133 @@ pub struct DiagnosisJson {
     pub effects: Vec<TrialJson>,
     /// The greedy ladder of combined causes.
     pub ladder: Vec<TrialJson>,
+    /// The verdict (`verdict.kind` is `unexplained`).
     pub unexplained: bool,
-    /// Effects that explain as well as the first within noise (paired bootstrap of the shrink
-    /// difference): the first is then not a confident answer.
+    /// The effects the first could be taken for (`verdict.kind` is `ambiguous`): in the self-test,
+    /// twins with one of these planted are named as the first.
     pub ambiguous_with: Vec<String>,
+    /// What the diagnosis concludes, and what decided it.
+    pub verdict: VerdictJson,
+    /// Twins of the shots with each leading candidate planted, and with none, ranked the same
+    /// way (absent with `--twins 0`).
+    pub self_test: Option<SelfTestJson>,
     #[serde(rename = "where")]
     pub where_: WhereJson,
     pub shots: ShotsJson,
     pub settings: Settings,
+}
+
+/// The verdict ([`super::selftest::verdict`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct VerdictJson {
+    /// `named`, `ambiguous` or `unexplained`.
+    pub kind: String,
+    /// The effect named, or those it is ambiguous between (the first first).
+    pub effects: Vec<String>,
+    /// The ranking's first effect explains the gap by its intervals (before the self-test).
+    pub ranking_names: Option<String>,
+    /// `self-test` or `intervals` (without a self-test).
+    pub decided_by: String,
+}
+
+/// The self-test ([`super::selftest`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SelfTestJson {
+    /// The configuration the twins were made and ranked with.
+    pub configuration: String,
+    /// Twin sets per planted hypothesis.
+    pub twins: usize,
+    /// Each hypothesis planted (the leading candidates, then `none`).
+    pub plantings: Vec<PlantingJson>,
+    /// For the effect the verdict names first: twins where it was planted that named it first,
+    /// and twins without any effect that named it.
+    pub named: Option<RecoveryJson>,
+    /// Rates that decide the verdict.
+    pub max_false_rate: f64,
+    pub max_confusion_rate: f64,
+}
+
+/// One hypothesis planted in twins.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlantingJson {
+    /// The effect planted, or `none`.
+    pub planted: String,
+    /// Its parameters (the magnitude fitted on the real shots).
+    pub params: Option<Params>,
+    /// What the twins named first, most often first (`unexplained`: nothing named).
+    pub named_first: Vec<OutcomeJson>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OutcomeJson {
+    pub name: String,
+    pub twins: usize,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RecoveryJson {
+    pub effect: String,
+    /// Twins with it planted that named it first, of `twins`.
+    pub recovered: usize,
+    /// Twins without any effect that named it first, of `twins`.
+    pub named_without: usize,
+    pub twins: usize,
+}
+
+impl VerdictJson {
+    fn of(d: &Diagnosis) -> VerdictJson {
+        use super::selftest::Verdict;
+        let (kind, effects) = match &d.verdict {
+            Verdict::Named(e) => ("named", vec![e.clone()]),
+            Verdict::Ambiguous(v) => ("ambiguous", v.clone()),
+            Verdict::Unexplained => ("unexplained", Vec::new()),
+        };
+        VerdictJson {
+            kind: kind.to_string(),
+            effects,
+            ranking_names: d
+                .ranking
+                .effects
+                .first()
+                .filter(|_| !d.ranking.unexplained)
+                .map(|t| t.effect.name().to_string()),
+            decided_by: if d.self_test.is_some() { "self-test" } else { "intervals" }.to_string(),
+        }
+    }
+}
+
+impl SelfTestJson {
+    fn of(t: &super::selftest::SelfTest, verdict: &super::selftest::Verdict) -> SelfTestJson {
+        use super::selftest::{MAX_CONFUSION_RATE, MAX_FALSE_RATE};
+        let named = verdict.first().or(t.plantings.first().and_then(|p| p.effect.as_ref()).map(Effect::name));
+        SelfTestJson {
+            configuration: t.configuration.label(),
+            twins: t.twins,
+            plantings: t
+                .plantings
+                .iter()
+                .map(|p| PlantingJson {
+                    planted: p.label().to_string(),
+                    params: p.effect.as_ref().map(params),
+                    named_first: p
+                        .outcomes()
+                        .into_iter()
+                        .map(|(n, k)| OutcomeJson { name: n.unwrap_or_else(|| "unexplained".into()), twins: k })
+                        .collect(),
+                })
+                .collect(),
+            named: named.and_then(|e| {
+                Some(RecoveryJson {
+                    effect: e.to_string(),
+                    recovered: t.planting(Some(e))?.count(Some(e)),
+                    named_without: t.planting(None)?.count(Some(e)),
+                    twins: t.twins,
+                })
+            }),
+            max_false_rate: MAX_FALSE_RATE,
+            max_confusion_rate: MAX_CONFUSION_RATE,
+        }
+    }
 }
 
 /// The sign conventions (the study's, the same as the report's).
@@ -468,9 +599,18 @@ impl DiagnosisJson {
             configuration: ConfigurationJson::of(&d.configuration),
             nominal_chain: Gap::of(&d.nominal),
             effects: d.ranking.effects.iter().map(TrialJson::of).collect(),
-            ladder: d.ranking.ladder.iter().map(TrialJson::of).collect(),
-            unexplained: d.ranking.unexplained,
-            ambiguous_with: d.ranking.ambiguous_with.clone(),
+            // A ladder stands on its first effect: none when the verdict names nothing.
+            ladder: match d.verdict {
+                super::selftest::Verdict::Unexplained => Vec::new(),
+                _ => d.ranking.ladder.iter().map(TrialJson::of).collect(),
+            },
+            unexplained: d.verdict == super::selftest::Verdict::Unexplained,
+            ambiguous_with: match &d.verdict {
+                super::selftest::Verdict::Ambiguous(v) => v[1..].to_vec(),
+                _ => Vec::new(),
+            },
+            verdict: VerdictJson::of(d),
+            self_test: d.self_test.as_ref().map(|t| SelfTestJson::of(t, &d.verdict)),
             where_: WhereJson {
                 percentiles: w
                     .percentiles

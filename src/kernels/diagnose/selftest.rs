@@ -65,7 +65,7 @@ impl Planting {
                 None => out.push((n.clone(), 1)),
             }
         }
-        out.sort_by(|a, b| b.1.cmp(&a.1));
+        out.sort_by_key(|o| std::cmp::Reverse(o.1));
         out
     }
 }

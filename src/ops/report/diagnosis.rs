@@ -7,7 +7,7 @@ use std::path::Path;
 
 use super::html::{base64, escape};
 use crate::error::{Error, Result};
-use crate::kernels::diagnose::json::{ConfigurationJson, DiagnosisJson, TrialJson};
+use crate::kernels::diagnose::json::{params_text, ConfigurationJson, DiagnosisJson, SelfTestJson, TrialJson};
 use crate::kernels::scenario::effects::ParamValue;
 
 /// The figures of a diagnosis shown in the page, with their captions.
@@ -43,11 +43,18 @@ pub fn section(dir: &Path, dataset: &Path) -> Result<String> {
         escape(&d.signs.rh_bias),
         escape(&d.signs.ground_bias)
     );
-    let verdict = if d.unexplained {
-        "unexplained: no effect shrinks the held-out gap enough to be named".to_string()
-    } else {
-        let names: Vec<&str> = d.ladder.iter().map(|t| t.name.as_str()).collect();
-        format!("explained by {}", names.join(" + "))
+    let v = &d.verdict;
+    let verdict = match v.kind.as_str() {
+        "unexplained" if v.ranking_names.is_some() => format!(
+            "unexplained: {} clears the intervals, but the self-test names it as often without any effect",
+            v.ranking_names.as_deref().unwrap_or_default()
+        ),
+        "unexplained" => "unexplained: no effect shrinks the held-out gap enough to be named".to_string(),
+        "ambiguous" => format!("ambiguous between {}", v.effects.join(" and ")),
+        _ => {
+            let names: Vec<&str> = d.ladder.iter().map(|t| t.name.as_str()).collect();
+            format!("explained by {}", names.join(" + "))
+        }
     };
     let _ = writeln!(s, "<p><strong>Verdict: {}.</strong></p>", escape(&verdict));
     if !d.summary.is_empty() {
@@ -58,6 +65,9 @@ pub fn section(dir: &Path, dataset: &Path) -> Result<String> {
         s.push_str("</ul>\n");
     }
     s.push_str(&configuration_tables(&d.configuration));
+    if let Some(t) = &d.self_test {
+        s.push_str(&self_test_table(t));
+    }
     for (title, trials) in
         [("Ladder (effects added in order)", &d.ladder), ("Every effect tried, best first", &d.effects)]
     {
@@ -79,6 +89,33 @@ pub fn section(dir: &Path, dataset: &Path) -> Result<String> {
         );
     }
     Ok(s)
+}
+
+/// The self-test: per planted hypothesis, what its twins were named first.
+fn self_test_table(t: &SelfTestJson) -> String {
+    let mut s = format!(
+        "<h3>Self-test</h3>\n<p>{} twin sets of these shots per hypothesis, made from {} with each leading candidate \
+         planted at its fitted magnitude (and with nothing), ranked the same way. The verdict is unexplained when \
+         twins without any effect name the first effect in ≥ {:.0} % of them, ambiguous when twins with another \
+         candidate planted do.</p>\n<table>\n<thead><tr><th>planted</th><th>parameters</th>\
+         <th>named first (twin sets)</th></tr></thead>\n<tbody>\n",
+        t.twins,
+        escape(&t.configuration),
+        100.0 * t.max_false_rate
+    );
+    for p in &t.plantings {
+        let params: Vec<(&String, ParamValue)> = p.params.iter().flatten().map(|(k, v)| (k, v.clone())).collect();
+        let named: Vec<String> = p.named_first.iter().map(|o| format!("{} {}", o.name, o.twins)).collect();
+        let _ = writeln!(
+            s,
+            "<tr><td>{}</td><td>{}</td><td>{}</td></tr>",
+            escape(&p.planted),
+            escape(&params_text(&params)),
+            escape(&named.join(", "))
+        );
+    }
+    s.push_str("</tbody>\n</table>\n");
+    s
 }
 
 /// The configuration stage: every configuration's gap (the chosen one marked), and the ground
@@ -140,14 +177,8 @@ fn trial_table(trials: &[TrialJson]) -> String {
     let num = |v: Option<f64>, scale: f64| v.map_or("–".to_string(), |x| format!("{:.2}", x * scale));
     let pct = |v: Option<f64>| v.map_or("–".to_string(), |x| format!("{:.0}", 100.0 * x));
     for t in trials {
-        let params: Vec<String> = t
-            .params
-            .iter()
-            .map(|(k, v)| match v {
-                ParamValue::Number(x) => format!("{k} = {x:.3}"),
-                other => format!("{k} = {other}"),
-            })
-            .collect();
+        let params: Vec<(&String, ParamValue)> = t.params.iter().map(|(k, v)| (k, v.clone())).collect();
+        let params = params_text(&params);
         let h = &t.held_out;
         let note = match (&t.at_bound, &t.equivalent_to) {
             (_, Some(e)) => format!("equivalent to the simpler {}", e.name),
@@ -159,7 +190,7 @@ fn trial_table(trials: &[TrialJson]) -> String {
             "<tr><td>{}</td><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td>\
              <td class=\"num\">{} to {}</td><td>{}</td></tr>",
             escape(&t.name),
-            escape(&params.join(", ")),
+            escape(&params),
             num(h.mean_abs_bias_rh1_99_before, 1.0),
             num(h.mean_abs_bias_rh1_99_after, 1.0),
             pct(h.shrink),
