@@ -228,7 +228,8 @@ fn control_world_is_unexplained() {
     let (world, out) = (tmp.path().join("world"), tmp.path().join("diagnosis"));
     let g = world.join("gedi");
     let (g, a, o) = (g.to_str().unwrap(), world.join("als"), out.to_str().unwrap());
-    let args = ["diagnose", "--als", a.to_str().unwrap(), "--l1b", g, "--l2a", g, "--out", o, "--json"];
+    let args =
+        ["diagnose", "--als", a.to_str().unwrap(), "--l1b", g, "--l2a", g, "--out", o, "--twins", TWINS, "--json"];
     let (ok, stdout, err) = gedisim(&args);
     assert!(ok, "{err}");
     assert!(err.contains("inputs unchanged") && err.contains("diagnosis reused"), "{err}");

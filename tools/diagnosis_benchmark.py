@@ -106,7 +106,14 @@ def score(world, truth, d):
         "configuration": (d.get("configuration") or {}).get("chosen"),
         "geolocation_named": "geolocation" in named,
         "geolocation_planted": "geolocation" in planted,
+        # The ranking's first effect by its intervals, before the self-test decided the verdict.
+        "ranking_first": (d.get("verdict") or {}).get("ranking_names"),
+        "verdict": (d.get("verdict") or {}).get("kind"),
     }
+    st = d.get("self_test")
+    if st and st.get("named"):
+        n = st["named"]
+        row["self_test"] = (n["effect"], n["recovered"], n["named_without"], n["twins"])
     geo = next((t for t in effects if t["name"] == "geolocation"), None)
     if geo and geo.get("ground_test"):
         g = geo["ground_test"]
@@ -126,6 +133,13 @@ def score(world, truth, d):
     return row
 
 
+def self_test_text(row):
+    if "self_test" not in row:
+        return ""
+    effect, recovered, without, twins = row["self_test"]
+    return f" self-test {effect} {recovered}/{twins} planted, {without}/{twins} none"
+
+
 def median(v):
     v = sorted(v)
     return v[len(v) // 2] if v else float("nan")
@@ -135,6 +149,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--gedisim", default="gedisim")
     ap.add_argument("--json")
+    ap.add_argument("--twins", help="twin sets per planted hypothesis of the self-test (default: gedisim's)")
     ap.add_argument("worlds", nargs="+", type=Path)
     a = ap.parse_args()
     rows = []
@@ -144,7 +159,7 @@ def main():
         if not diag.exists():
             t0 = time.time()
             cmd = [a.gedisim, "diagnose", "--als", str(w / "als"), "--l1b", str(w / "gedi"), "--l2a", str(w / "gedi"),
-                   "--out", str(w / "diag")]
+                   "--out", str(w / "diag")] + (["--twins", a.twins] if a.twins else [])
             r = subprocess.run(cmd, capture_output=True, text=True)
             if r.returncode != 0:
                 print(f"{w.name}: diagnose failed: {r.stderr.strip().splitlines()[-1:]}", file=sys.stderr)
@@ -161,6 +176,8 @@ def main():
               f"{' ambiguous ' + ','.join(row['ambiguous_with']) if row['ambiguous_with'] else ''}"
               f" shrink {row.get('shrink', float('nan')):.2f} param_err {row.get('param_rel_err', float('nan')):.2f}"
               f" config {row['configuration']}"
+              f" ranking {row['ranking_first'] or '–'}"
+              f"{self_test_text(row)}"
               f"{' GEOLOCATION named' if row['geolocation_named'] else ''}"
               f" segments {len(col)} median dz err {median([c[0] for c in col]):+.3f} m")
     for g in sorted({r["generator"] for r in rows}):
