@@ -146,13 +146,16 @@ pub fn verdict(ranking: &Ranking, test: Option<&SelfTest>) -> Verdict {
 }
 
 /// The hypotheses planted: the ranking's first effect (named or not), the effects it is
-/// ambiguous with, then the next effects in ranking order, [`OTHER_CANDIDATES`] besides the first
-/// in all — only fits inside their ranges that are not a simpler effect in disguise.
+/// ambiguous with, then the next credible effects in ranking order, [`OTHER_CANDIDATES`] besides
+/// the first in all — only fits inside their ranges that are not a simpler effect in disguise. An
+/// effect that is not credible on the real shots (its intervals, or for geolocation offsets
+/// under 1 m) is not an alternative the data support, and is not planted beside the first.
 pub fn leading(ranking: &Ranking) -> Vec<Effect> {
     let nameable = ranking.effects.iter().filter(|t| t.nameable());
     let mut out: Vec<Effect> = Vec::new();
     let by_tie = ranking.ambiguous_with.iter().filter_map(|n| ranking.effects.iter().find(|t| t.effect.name() == n));
-    for t in nameable.clone().take(1).chain(by_tie.filter(|t| t.nameable())).chain(nameable) {
+    let others = nameable.clone().filter(|t| t.credible());
+    for t in nameable.take(1).chain(by_tie.filter(|t| t.nameable())).chain(others) {
         if out.len() > OTHER_CANDIDATES {
             break;
         }
@@ -305,6 +308,10 @@ mod tests {
                 }),
                 trial(Effect::CanopyChange { height_m: 2.0, fraction: -0.4 }),
                 trial(Effect::CanopyChange { height_m: 8.0, fraction: 0.3 }),
+                Trial {
+                    held_out: Comparison { ci95: [-0.2, 0.4], ..trial(Effect::Pulse { pulse_sigma_m: 1.0 }).held_out },
+                    ..trial(Effect::Pulse { pulse_sigma_m: 1.0 })
+                },
                 trial(Effect::Datum { dz_m: 0.3 }),
                 trial(Effect::Noise { noise_sigma_factor: 1.1 }),
             ],
@@ -321,7 +328,8 @@ mod tests {
     #[test]
     fn leading_candidates_are_nameable_fits_in_ranking_order() {
         let names: Vec<&str> = leading(&ranking(false)).iter().map(Effect::name).collect();
-        // The canopy change on its 2 m bound is skipped; the next nameable one counts.
+        // The canopy change on its 2 m bound is skipped, and so is the pulse its intervals do not
+        // support; the next nameable, credible one counts.
         assert_eq!(names, ["weighting", "canopy_change", "datum"]);
         let lead = leading(&ranking(false));
         assert_eq!(lead[1], Effect::CanopyChange { height_m: 8.0, fraction: 0.3 });
