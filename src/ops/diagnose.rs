@@ -925,7 +925,7 @@ fn self_test_line(t: &SelfTest, verdict: &Verdict) -> String {
             format!("{planted} → named first: {}", what.join(", "))
         })
         .collect();
-    let head = match verdict.first().or(t.plantings.first().and_then(|p| p.effect.as_ref()).map(|e| e.name())) {
+    let head = match t.subject(verdict) {
         Some(e) => match (t.planting(Some(e)), t.planting(None)) {
             (Some(p), Some(none)) => format!(
                 "on data like yours, {e} was named first in {} of {} twins where it was planted and in {} of {} \
@@ -1002,7 +1002,7 @@ pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
         }
     };
     let verdict = &d.verdict;
-    if d.ranking.unexplained || *verdict == Verdict::Unexplained && d.self_test.is_none() {
+    if d.ranking.unexplained {
         let best = d.ranking.effects.first();
         lines.push(match best {
             Some(t) => format!(

@@ -154,7 +154,7 @@ impl VerdictJson {
 impl SelfTestJson {
     fn of(t: &super::selftest::SelfTest, verdict: &super::selftest::Verdict) -> SelfTestJson {
         use super::selftest::{MAX_CONFUSION_RATE, MAX_FALSE_RATE};
-        let named = verdict.first().or(t.plantings.first().and_then(|p| p.effect.as_ref()).map(Effect::name));
+        let named = t.subject(verdict);
         SelfTestJson {
             configuration: t.configuration.label(),
             twins: t.twins,

@@ -515,7 +515,7 @@ fn advance(state: &State, t: &Trial) -> State {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
 
     #[test]
@@ -543,7 +543,13 @@ mod tests {
         assert!((c([1000.0, 800.0]).score() - 0.4).abs() < 1e-12);
     }
 
-    fn trial(effect: Effect, shrink: f64, ci95: [f64; 2], gain_ci95: [f64; 2]) -> Trial {
+    /// A trial of `effect` with these held-out figures (also the self-test's tests').
+    pub(in crate::kernels::diagnose) fn trial(
+        effect: Effect,
+        shrink: f64,
+        ci95: [f64; 2],
+        gain_ci95: [f64; 2],
+    ) -> Trial {
         let held_out = Comparison {
             frame: Frame::Both,
             before: GapMetrics::default(),

@@ -82,6 +82,12 @@ pub struct SelfTest {
 }
 
 impl SelfTest {
+    /// The effect the self-test reports on: the one `verdict` names first, else the best candidate
+    /// (the first planted).
+    pub fn subject<'a>(&'a self, verdict: &'a Verdict) -> Option<&'a str> {
+        verdict.first().or(self.plantings.first().and_then(|p| p.effect.as_ref()).map(Effect::name))
+    }
+
     /// The planting of effect `name` (`None`: nothing planted).
     pub fn planting(&self, name: Option<&str>) -> Option<&Planting> {
         self.plantings.iter().find(|p| p.effect.as_ref().map(Effect::name) == name)
@@ -281,22 +287,10 @@ fn median(mut v: Vec<f64>) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kernels::diagnose::gap::{Frame, GapMetrics};
-    use crate::kernels::diagnose::rank::{Comparison, Trial};
+    use crate::kernels::diagnose::rank::{tests, Trial};
 
     fn trial(effect: Effect) -> Trial {
-        let held_out = Comparison {
-            frame: Frame::Both,
-            before: GapMetrics::default(),
-            after: GapMetrics::default(),
-            shrink: 0.5,
-            ci95: [0.3, 0.6],
-            gain_ci95: [0.05, 0.1],
-            shrink_mean_abs_bias: 0.5,
-            profile_chi2: [1000.0, 1000.0],
-            spread: None,
-        };
-        Trial { effect, fold_effects: [None, None], held_out, gaps: Vec::new(), ground_test: None }
+        tests::trial(effect, 0.5, [0.3, 0.6], [0.05, 0.1])
     }
 
     fn ranking(unexplained: bool) -> Ranking {
@@ -308,10 +302,7 @@ mod tests {
                 }),
                 trial(Effect::CanopyChange { height_m: 2.0, fraction: -0.4 }),
                 trial(Effect::CanopyChange { height_m: 8.0, fraction: 0.3 }),
-                Trial {
-                    held_out: Comparison { ci95: [-0.2, 0.4], ..trial(Effect::Pulse { pulse_sigma_m: 1.0 }).held_out },
-                    ..trial(Effect::Pulse { pulse_sigma_m: 1.0 })
-                },
+                tests::trial(Effect::Pulse { pulse_sigma_m: 1.0 }, 0.5, [-0.2, 0.4], [0.05, 0.1]),
                 trial(Effect::Datum { dz_m: 0.3 }),
                 trial(Effect::Noise { noise_sigma_factor: 1.1 }),
             ],
