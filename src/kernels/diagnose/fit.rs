@@ -127,19 +127,20 @@ pub const RESHAPING_EFFECTS: [&str; 5] = ["weighting", "pulse", "footprint", "ca
 const REPLACEMENTS: usize = 2;
 
 /// Fit the effect `name` on top of `base` to `cases`, with the shots of short segments re-placed
-/// for each hypothesis ([`reposition`]): first for `base`, then — for an effect that reshapes the
+/// for each hypothesis ([`reposition`]): first for `base` (`placed`, which is `reposition(cases,
+/// base)`: every effect tried on one base shares it), then — for an effect that reshapes the
 /// waveform — alternately re-placed for the fitted model and re-fitted (positions and
 /// parameters are fitted jointly). `None` when the cases carry no information about the effect
 /// (e.g. no ground differences).
-pub fn fit(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
+pub fn fit(name: &str, base: &Model, placed: &Model, cases: &[&ShotCase]) -> Option<Effect> {
     if cases.is_empty() {
         return None;
     }
     if name == "geolocation" {
         return fit_geolocation(base, cases);
     }
-    let base = reposition(cases, base);
-    let mut effect = fit_placed(name, &base, cases)?;
+    let base = placed;
+    let mut effect = fit_placed(name, base, cases)?;
     if RESHAPING_EFFECTS.contains(&name) {
         let mut placed = base.clone();
         for _ in 0..REPLACEMENTS {

@@ -418,12 +418,31 @@ impl State {
     }
 }
 
+/// A state's models re-placed for fitting ([`reposition`]): the full model on every case, fold f's
+/// on the calibration cases of fold f (the other fold's). Every effect tried on the state starts
+/// from them, so they are computed once per state.
+pub struct Placed {
+    full: Model,
+    folds: [Model; 2],
+}
+
+impl Placed {
+    pub fn new(folds: &Folds, state: &State) -> Placed {
+        Placed {
+            full: reposition(&folds.cases, &state.full),
+            folds: std::array::from_fn(|f| reposition(&folds.of(1 - f), &state.folds[f])),
+        }
+    }
+}
+
 /// Fit `name` on top of `state` (per fold on the other fold's tracks; once on all for the
-/// reported parameters) and score it on the held-out tracks.
-pub fn try_effect(folds: &Folds, state: &State, name: &str) -> Option<Trial> {
-    let effect = fit(name, &state.full, &folds.cases)?;
+/// reported parameters) and score it on the held-out tracks. `placed` is [`Placed::new`] of
+/// `folds` and `state`.
+pub fn try_effect(folds: &Folds, state: &State, placed: &Placed, name: &str) -> Option<Trial> {
+    let effect = fit(name, &state.full, &placed.full, &folds.cases)?;
     // Fold f is scored with the parameters fitted on fold 1 − f.
-    let fitted: [Option<Effect>; 2] = std::array::from_fn(|f| fit(name, &state.folds[f], &folds.of(1 - f)));
+    let fitted: [Option<Effect>; 2] =
+        std::array::from_fn(|f| fit(name, &state.folds[f], &placed.folds[f], &folds.of(1 - f)));
     let models: [Model; 2] = std::array::from_fn(|f| match &fitted[f] {
         Some(e) => state.folds[f].with(e.clone()),
         None => state.folds[f].clone(),
@@ -465,12 +484,13 @@ pub fn rank(folds: &Folds, choice: &ConfigurationChoice, names: &[&str], on_step
         ladder.push(first);
         while ladder.len() < MAX_LADDER {
             let used: Vec<&str> = ladder.iter().map(|t| t.effect.name()).collect();
+            let placed = Placed::new(folds, &state);
             let mut step: Vec<Trial> = names
                 .iter()
                 .filter(|n| !used.contains(n))
                 .filter_map(|n| {
                     on_step(&format!("ladder step {}: {n}", ladder.len() + 1));
-                    try_effect(folds, &state, n)
+                    try_effect(folds, &state, &placed, n)
                 })
                 .collect();
             order(&mut step);
@@ -487,11 +507,12 @@ pub fn rank(folds: &Folds, choice: &ConfigurationChoice, names: &[&str], on_step
 
 /// Every effect of `names` tried on `state`, best first ([`order`]).
 pub fn rank_effects(folds: &Folds, state: &State, names: &[&str], on_step: &dyn Fn(&str)) -> Vec<Trial> {
+    let placed = Placed::new(folds, state);
     let mut effects: Vec<Trial> = names
         .iter()
         .filter_map(|n| {
             on_step(n);
-            try_effect(folds, state, n)
+            try_effect(folds, state, &placed, n)
         })
         .collect();
     order(&mut effects);
