@@ -40,9 +40,49 @@ impl Error {
     }
 }
 
-/// Collapse a multi-line message from a library into one line.
+/// Longest word an error line keeps whole: a longer one (a 20 MB CSV field a parser echoes) is
+/// shown by its first [`WORD_HEAD`] bytes and its length.
+pub const MAX_WORD: usize = 300;
+const WORD_HEAD: usize = 60;
+/// Longest error line (bytes); a longer one is cut and says so.
+pub const MAX_LINE: usize = 4000;
+
+/// Collapse a multi-line message from a library into one line of at most [`MAX_LINE`] bytes.
 pub fn one_line(s: &str) -> String {
-    s.split_whitespace().collect::<Vec<_>>().join(" ")
+    let mut out = String::new();
+    for w in s.split_whitespace() {
+        if out.len() >= MAX_LINE {
+            out.push_str(" …(cut)");
+            break;
+        }
+        if !out.is_empty() {
+            out.push(' ');
+        }
+        if w.len() <= MAX_WORD {
+            out.push_str(w);
+        } else {
+            let head = (0..=WORD_HEAD).rev().find(|&i| w.is_char_boundary(i)).unwrap_or(0);
+            out.push_str(&format!("{}…({} bytes)", &w[..head], w.len()));
+        }
+    }
+    out
 }
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn error_lines_stay_short() {
+        assert_eq!(one_line("a\n  b\tc"), "a b c");
+        let field = "é".repeat(10_000_000);
+        let line = one_line(&format!("bad field {field} in x.csv"));
+        assert!(line.starts_with("bad field é") && line.ends_with("…(20000000 bytes) in x.csv"), "{}", &line[..80]);
+        assert!(line.len() < 200);
+        let many = "1+1 ".repeat(100_000);
+        let line = one_line(&many);
+        assert!(line.len() <= MAX_LINE + 20 && line.ends_with("…(cut)"));
+    }
+}

@@ -53,7 +53,7 @@ pub struct IngestGediArgs {
     #[arg(long)]
     epsg: Option<u32>,
     /// Geoid offset N (m, ellipsoid − orthometric) for every shot, instead of each shot's L1B geoid.
-    #[arg(long, allow_hyphen_values = true)]
+    #[arg(long, allow_hyphen_values = true, value_parser = super::values::geoid_offset)]
     geoid_offset: Option<f64>,
     /// Fail when a shot of a paired granule is in only one of L1B and L2A (default: keep it, warn).
     #[arg(long)]

@@ -18,6 +18,7 @@ mod run;
 mod scenario;
 mod simulate;
 mod sql;
+mod values;
 
 use std::path::PathBuf;
 

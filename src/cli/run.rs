@@ -21,7 +21,7 @@ pub struct ChainArgs {
     #[arg(long)]
     pub epsg: Option<u32>,
     /// Geoid offset N (m, ellipsoid − orthometric) for every shot, instead of each shot's L1B geoid.
-    #[arg(long, allow_hyphen_values = true)]
+    #[arg(long, allow_hyphen_values = true, value_parser = super::values::geoid_offset)]
     pub geoid_offset: Option<f64>,
 }
 

@@ -49,10 +49,10 @@ pub struct SimulateArgs {
     #[arg(long, value_enum, default_value = "last-returns", conflicts_with = "no_norm")]
     density: DensityArg,
     /// Footprint Gaussian σ (m).
-    #[arg(long, default_value_t = 5.5)]
+    #[arg(long, default_value_t = 5.5, allow_negative_numbers = true, value_parser = super::values::footprint_sigma)]
     fsigma: f32,
     /// Gaussian pulse σ (m) instead of the 15 ns FWHM.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::values::pulse_sigma)]
     psigma: Option<f32>,
     /// Convolve each return with the pulse while binning instead of after.
     #[arg(long)]

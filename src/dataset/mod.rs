@@ -212,6 +212,7 @@ enum Writer {
 impl AtomicParquet {
     /// Start writing `dest` with `schema` and `props`.
     pub fn create(dest: &Path, schema: SchemaRef, props: WriterProperties) -> Result<Self> {
+        writable_name(dest)?;
         let tmp = tmp_path(dest);
         let file = File::create(&tmp).map_err(|e| Error::file(&tmp, format!("cannot create: {e}")))?;
         let writer = ArrowWriter::try_new(file, schema, Some(props)).map_err(|e| {
@@ -297,6 +298,7 @@ pub fn write_parquet(
 /// Write `bytes` to `path` through a temporary name in the same folder, renamed when complete (the
 /// one atomic write of every non-Parquet output: CSV, JSON, figures, HTML).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    writable_name(path)?;
     let tmp = tmp_path(path);
     place(&tmp, path, std::fs::write(&tmp, bytes).map_err(|e| Error::file(&tmp, format!("cannot write: {e}"))))
 }
@@ -317,6 +319,16 @@ fn rename_into_place(tmp: &Path, dest: &Path) -> Result<()> {
         return Err(Error::file(dest, "is a directory: give a file name"));
     }
     std::fs::rename(tmp, dest).map_err(|e| Error::file(dest, format!("cannot rename into place: {e}")))
+}
+
+/// Refuse an output name no file should have: `-` (standard output, which gedisim does not write
+/// tables or figures to; the user meant a file or a pipe) and an empty name.
+pub fn writable_name(dest: &Path) -> Result<()> {
+    match dest.file_name().and_then(|n| n.to_str()) {
+        Some("-") => Err(Error::file(dest, "--out -: standard output is not an output here; give a file name")),
+        None => Err(Error::file(dest, "names no file: give a file name")),
+        Some(_) => Ok(()),
+    }
 }
 
 /// A temporary name beside `dest`, unique to this process and this call:
@@ -377,6 +389,7 @@ pub fn write_result(out: &Path, batches: &[RecordBatch], format: ResultFormat) -
     if out.is_dir() {
         return Err(Error::file(out, "is a directory: give a .csv, .json or .parquet file name"));
     }
+    writable_name(out)?;
     if format == ResultFormat::Parquet {
         let schema = batches.first().map_or_else(|| Arc::new(arrow::datatypes::Schema::empty()), |b| b.schema());
         return write_parquet(out, schema, batches, &HashMap::new()).map(|_| ());

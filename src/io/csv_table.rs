@@ -44,6 +44,21 @@ impl CsvTable {
         if headers.iter().all(str::is_empty) {
             return Err(Error::field(path, "header", format!("empty file: expected a header `{expected}`")));
         }
+        let names: Vec<String> = headers.iter().map(|h| h.to_ascii_lowercase()).collect();
+        for (j, n) in names.iter().enumerate().filter(|(_, n)| !n.is_empty()) {
+            if let Some(i) = names[..j].iter().position(|m| m == n) {
+                return Err(Error::field(
+                    path,
+                    &headers[j],
+                    format!(
+                        "the header names `{}` twice (columns {} and {}): rename or drop one",
+                        &headers[j],
+                        i + 1,
+                        j + 1
+                    ),
+                ));
+            }
+        }
         let mut rows = Vec::new();
         for record in reader.records() {
             let record = record.map_err(|e| {
@@ -57,7 +72,7 @@ impl CsvTable {
         }
         Ok(CsvTable {
             path: path.to_path_buf(),
-            names: headers.iter().map(|h| h.to_ascii_lowercase()).collect(),
+            names,
             header: headers.iter().collect::<Vec<_>>().join(&char::from(delimiter).to_string()),
             rows,
         })

@@ -388,7 +388,8 @@ pub(crate) fn tile_header(path: &Path, h: &las::Header, layout: &Layout) -> Resu
         .or(layout.wkt_evlr.as_deref())
         .map(|bytes| String::from_utf8_lossy(bytes).trim_end_matches('\0').trim().to_string())
         .filter(|s| !s.is_empty());
-    let mut epsg = crs_wkt.as_deref().and_then(epsg_from_wkt);
+    // A vertical CRS alone (EPSG:5720, NGF-IGN69 heights) says nothing of x and y.
+    let mut epsg = crs_wkt.as_deref().filter(|w| !is_vertical_only(w)).and_then(epsg_from_wkt);
     if epsg.is_none() {
         let geotiff = h.get_geotiff_crs().map_err(|e| las_error(path, "GeoKeyDirectory", e))?;
         if let Some(g) = geotiff {
@@ -424,6 +425,13 @@ pub(crate) fn tile_header(path: &Path, h: &las::Header, layout: &Layout) -> Resu
 /// Names of the extra-bytes dimensions in a LASF_Spec/4 record (192 bytes per dimension).
 fn extra_bytes_names(data: &[u8]) -> Vec<String> {
     data.chunks_exact(192).map(|d| String::from_utf8_lossy(&d[4..36]).trim_end_matches('\0').to_string()).collect()
+}
+
+/// Whether a WKT string's outermost CRS is a vertical one (WKT1 `VERT_CS`, WKT2 `VERTCRS` or
+/// `VERTICALCRS`): heights only, no horizontal CRS.
+pub fn is_vertical_only(wkt: &str) -> bool {
+    let head = wkt.trim_start().get(..12).unwrap_or(wkt).to_ascii_uppercase();
+    ["VERT_CS[", "VERTCRS[", "VERTICALCRS["].iter().any(|k| head.starts_with(k))
 }
 
 /// The EPSG code of the outermost CRS of a WKT string (WKT1 `AUTHORITY["EPSG","n"]` or WKT2

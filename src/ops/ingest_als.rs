@@ -208,6 +208,15 @@ fn resolve_epsg(h: &TileHeader, opts: &AlsOptions, existing: Option<u32>) -> Res
         }
         (Some(file), _) => file,
         (None, Some(given)) => given,
+        (None, None) if h.crs_wkt.as_deref().is_some_and(crate::io::las::is_vertical_only) => {
+            let code = h.crs_wkt.as_deref().and_then(crate::io::las::epsg_from_wkt);
+            let code = code.map_or(String::new(), |c| format!(" (EPSG:{c})"));
+            return Err(Error::field(
+                &h.path,
+                "CRS",
+                format!("the file's CRS is vertical only{code}: pass --epsg with its horizontal CRS"),
+            ));
+        }
         (None, None) => return Err(Error::field(&h.path, "CRS", "no WKT or GeoTIFF CRS record: pass --epsg")),
     };
     if let Some(ds) = existing {

@@ -20,6 +20,9 @@ pub struct L2aReport {
 
 /// Run the GEDI `algorithms` (1..6) on every waveform of `l1b` into `out` (atomically).
 pub fn l2a(l1b: &Path, algorithms: &[u8], out: &Path) -> Result<L2aReport> {
+    if let Some(n) = algorithms.iter().enumerate().find_map(|(i, n)| algorithms[..i].contains(n).then_some(n)) {
+        return Err(Error::Usage(format!("--algorithms: {n} given twice (each algorithm's rows once)")));
+    }
     let settings = algorithms
         .iter()
         .map(|&n| {

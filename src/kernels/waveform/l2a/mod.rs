@@ -72,6 +72,10 @@ pub enum NoResult {
     /// The elevation of the first or last sample is not finite (relative heights need both).
     #[error("elevation of the first or last sample is not finite")]
     InvalidElevation,
+    /// The first sample is not above the last: a waveform is recorded downwards, so such a
+    /// geolocation is corrupt (`run` skips the shot as `bad_waveform_geometry`).
+    #[error("bad waveform geometry: elevation_bin0 is not above elevation_lastbin")]
+    BadGeometry,
     /// The smoothed waveform never rises above the front or back threshold, or carries no energy
     /// between them.
     #[error("no signal above the thresholds")]
@@ -347,6 +351,9 @@ fn validate_input(wave: &[f32], noise: Noise, geo: &WaveformGeolocation) -> Resu
     }
     if !geo.is_valid() {
         return Err(NoResult::InvalidElevation);
+    }
+    if geo.sample_count > 1 && geo.elevation_bin0 <= geo.elevation_lastbin {
+        return Err(NoResult::BadGeometry);
     }
     Ok(())
 }

@@ -1,0 +1,193 @@
+//! Bad values met through the binary (issue "Nothing silently wrong, round two"): each is refused
+//! in one line naming the flag, file or field, or bounded with a warning — never accepted
+//! silently (docs/robustness.md, "Bad values").
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{data, gedisim};
+
+const L1B: &str = "gedi/GEDI01_B_2019108080338_O01964_T05337_02_003_01_sub.h5";
+const TILE: &str = "als/pdal-ign-plugin_mnx_input_crop_2.laz";
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// The first line of stderr names every one of `needles`, and the run failed.
+fn refused(ok: bool, err: &str, needles: &[&str]) {
+    assert!(!ok, "the run should fail: {err}");
+    let first = err.lines().find(|l| !l.trim().is_empty()).unwrap_or_default();
+    for n in needles {
+        assert!(first.contains(n), "{n:?} in the first line of: {err}");
+    }
+}
+
+#[test]
+fn nonsensical_widths_and_geoid_offsets_are_refused_naming_the_flag() {
+    for (flag, value) in
+        [("--fsigma", "0"), ("--fsigma", "-1"), ("--fsigma", "NaN"), ("--psigma", "-1"), ("--psigma", "NaN")]
+    {
+        let (ok, _, err) = gedisim(&["simulate", flag, value]);
+        refused(ok, &err, &[flag, value]);
+    }
+    for value in ["NaN", "1e300", "-inf"] {
+        for cmd in [&["run", "--dataset", "ds"][..], &["ingest", "gedi", "--out", "ds"][..]] {
+            let (ok, _, err) = gedisim(&[cmd, &["--geoid-offset", value]].concat());
+            refused(ok, &err, &["--geoid-offset", value]);
+        }
+    }
+    // Sense still passes the parser (and fails later for want of inputs, not of the value).
+    let (ok, _, err) = gedisim(&["simulate", "--fsigma", "7.5", "--psigma", "0.8"]);
+    assert!(!ok && !err.contains("--fsigma") && !err.contains("--psigma"), "{err}");
+}
+
+#[test]
+fn thread_counts_beyond_a_few_per_core_are_capped_with_a_warning() {
+    let (ok, out, err) = gedisim(&["--threads", "100000", "completions", "bash"]);
+    assert!(ok, "{err}");
+    assert!(out.contains("gedisim"), "the completions are still written");
+    let warning = err.lines().find(|l| l.contains("--threads 100000")).unwrap_or_else(|| panic!("a warning: {err}"));
+    assert!(warning.contains("per core") && warning.contains("using"), "{warning}");
+    let (ok, _, err) = gedisim(&["--threads", "1", "completions", "bash"]);
+    assert!(ok && !err.contains("--threads"), "{err}");
+}
+
+/// Simulate the footprints of `csv` (text) over the small tile into `dir`.
+fn simulate_csv(dir: &Path, csv: &str) -> (bool, String, PathBuf) {
+    let path = dir.join("plots.csv");
+    std::fs::write(&path, csv).unwrap();
+    let out = dir.join("out.parquet");
+    let (ok, _, err) = gedisim(&["simulate", "--als", s(&data(TILE)), "--footprints", s(&path), "--out", s(&out)]);
+    (ok, err, path)
+}
+
+#[test]
+fn a_repeated_csv_column_is_refused_and_a_huge_field_is_not_echoed() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (ok, err, csv) = simulate_csv(tmp.path(), "id,x,y,X\np1,1,2,3\n");
+    refused(ok, &err, &[s(&csv), "`X` twice", "columns 2 and 4"]);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    // A 20 MB field where a number belongs: the error line names the file and the column, and shows
+    // the field by its start and length.
+    let field = "9".repeat(20_000_000) + "x";
+    let (ok, err, csv) = simulate_csv(tmp.path(), &format!("id,x,y\np1,{field},2\n"));
+    refused(ok, &err, &[s(&csv)]);
+    assert!(err.len() < 2_000, "{} bytes of error: {}…", err.len(), &err[..200]);
+    assert!(err.contains("…(2000000") && err.contains(" bytes)"), "{err}");
+    assert!(!tmp.path().join("out.parquet").exists());
+}
+
+/// A copy of the test L1B whose first BEAM0001 shot has `elevation_lastbin` = `lastbin`.
+fn l1b_with_lastbin(dir: &Path, lastbin: Option<f64>) -> PathBuf {
+    let path = dir.join("GEDI01_B_2019108080338_O01964_T05337_02_003_01_sub.h5");
+    std::fs::copy(data(L1B), &path).unwrap();
+    let f = hdf5::File::open_rw(&path).unwrap();
+    let geo = f.group("BEAM0001/geolocation").unwrap();
+    let top: Vec<f64> = geo.dataset("elevation_bin0").unwrap().read_raw().unwrap();
+    let last = geo.dataset("elevation_lastbin").unwrap();
+    let mut v: Vec<f64> = last.read_raw().unwrap();
+    // Above the first sample (inverted), or equal to it.
+    v[0] = lastbin.unwrap_or(top[0]);
+    last.write_raw(&v).unwrap();
+    path
+}
+
+/// `status` of every row of an l2a output for the first BEAM0001 shot, and the count of other
+/// rows that are `ok`.
+fn first_shot_statuses(out: &Path) -> (Vec<String>, usize) {
+    use arrow::array::{AsArray, RecordBatchReader};
+    use arrow::datatypes::UInt64Type;
+    let file = std::fs::File::open(out).unwrap();
+    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap().build().unwrap();
+    let _ = reader.schema();
+    let (mut first, mut others_ok) = (Vec::new(), 0);
+    for b in reader {
+        let b = b.unwrap();
+        let sn = b.column_by_name("shot_number").unwrap().as_primitive::<UInt64Type>().clone();
+        let beam = b.column_by_name("beam").unwrap().as_string::<i32>().clone();
+        let status = b.column_by_name("status").unwrap().as_string::<i32>().clone();
+        for i in 0..b.num_rows() {
+            if beam.value(i) == "BEAM0001" && sn.value(i) == 19640119100108615 {
+                first.push(status.value(i).to_string());
+            } else if status.value(i) == "ok" {
+                others_ok += 1;
+            }
+        }
+    }
+    (first, others_ok)
+}
+
+#[test]
+fn l2a_refuses_repeated_algorithms_and_standard_output_and_flags_upside_down_waveforms() {
+    let tmp = tempfile::tempdir().unwrap();
+    let l1b = data(L1B);
+    let out = tmp.path().join("l2a.parquet");
+    let (ok, _, err) = gedisim(&["l2a", "--l1b", s(&l1b), "--out", s(&out), "--algorithms", "1,1,1"]);
+    refused(ok, &err, &["--algorithms", "1 given twice"]);
+    let (ok, _, err) = gedisim(&["l2a", "--l1b", s(&l1b), "--out", "-", "--algorithms", "1"]);
+    refused(ok, &err, &["--out -", "standard output"]);
+    assert!(!out.exists() && !Path::new("-").exists());
+    // A first sample below the last, or at the same height: no result, said in the status (as `run`
+    // skips the shot as bad_waveform_geometry), where every row used to be `ok` with RH98 −25 m.
+    for (name, lastbin) in [("inverted", Some(900.0)), ("flat", None)] {
+        let dir = tmp.path().join(name);
+        std::fs::create_dir(&dir).unwrap();
+        let edited = l1b_with_lastbin(&dir, lastbin);
+        let out = dir.join("l2a.parquet");
+        let (ok, _, err) = gedisim(&["l2a", "--l1b", s(&edited), "--out", s(&out), "--algorithms", "1,3"]);
+        assert!(ok, "{err}");
+        let (first, others_ok) = first_shot_statuses(&out);
+        assert_eq!(first.len(), 2, "{name}");
+        for st in &first {
+            assert!(st.starts_with("no_result: bad waveform geometry"), "{name}: {st}");
+        }
+        assert!(others_ok > 100, "{name}: the other shots are processed ({others_ok} ok rows)");
+    }
+}
+
+/// A LAS 1.4 file of a few points whose only CRS record is the WKT `wkt`.
+fn las_with_wkt(path: &Path, wkt: &str) {
+    let mut b = las::Builder::from((1, 4));
+    b.point_format = las::point::Format::new(6).unwrap();
+    b.has_wkt_crs = true;
+    let t = |offset| las::Transform { scale: 0.01, offset };
+    b.transforms = las::Vector { x: t(700_000.0), y: t(6_600_000.0), z: t(0.0) };
+    b.vlrs.push(las::Vlr {
+        user_id: "LASF_Projection".into(),
+        record_id: 2112,
+        description: String::new(),
+        data: wkt.as_bytes().to_vec(),
+    });
+    let mut w = las::Writer::from_path(path, b.into_header().unwrap()).unwrap();
+    for i in 0..10 {
+        let p = las::Point {
+            x: 700_000.0 + f64::from(i),
+            y: 6_600_000.0,
+            z: 100.0,
+            gps_time: Some(1.0e8 + f64::from(i)),
+            ..Default::default()
+        };
+        w.write_point(p).unwrap();
+    }
+    w.close().unwrap();
+}
+
+#[test]
+fn a_tile_with_a_vertical_crs_only_is_refused_at_ingest_naming_the_tile() {
+    let tmp = tempfile::tempdir().unwrap();
+    let tile = tmp.path().join("heights_only.las");
+    let wkt = concat!(
+        r#"VERT_CS["NGF-IGN69 height",VERT_DATUM["Nivellement General de la France - IGN69",2005,"#,
+        r#"AUTHORITY["EPSG","5119"]],UNIT["metre",1],AXIS["Gravity-related height",UP],AUTHORITY["EPSG","5720"]]"#
+    );
+    las_with_wkt(&tile, wkt);
+    let ds = tmp.path().join("ds");
+    let (ok, _, err) = gedisim(&["ingest", "als", "--out", s(&ds), s(&tile)]);
+    refused(ok, &err, &[s(&tile), "CRS", "vertical only (EPSG:5720)", "--epsg"]);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    // With the horizontal CRS given, the tile is ingested.
+    let (ok, _, err) = gedisim(&["ingest", "als", "--out", s(&ds), "--epsg", "2154", s(&tile)]);
+    assert!(ok, "{err}");
+}
