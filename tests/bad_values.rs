@@ -191,3 +191,33 @@ fn a_tile_with_a_vertical_crs_only_is_refused_at_ingest_naming_the_tile() {
     let (ok, _, err) = gedisim(&["ingest", "als", "--out", s(&ds), "--epsg", "2154", s(&tile)]);
     assert!(ok, "{err}");
 }
+
+#[test]
+fn query_and_simulation_outputs_never_land_in_a_dataset_table() {
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tmp.path().join("ds");
+    let (ok, _, err) = gedisim(&["ingest", "als", "--out", s(&ds), s(&data(TILE))]);
+    assert!(ok, "{err}");
+    let count = || gedisim(&["sql", "--dataset", s(&ds), "--format", "csv", "select count(*) as n from tiles"]).1;
+    let before = count();
+    // `sql --out` into a table folder used to add its rows to the table.
+    let dup = ds.join("tiles/dup.parquet");
+    let (ok, _, err) = gedisim(&["sql", "--dataset", s(&ds), "--out", s(&dup), "select * from tiles"]);
+    refused(ok, &err, &["--out", "`tiles` table", "write elsewhere"]);
+    assert!(!dup.exists());
+    assert_eq!(count(), before);
+    // Likewise a simulation's output, and a relative path from inside the folder.
+    let csv = tmp.path().join("plots.csv");
+    std::fs::write(&csv, "id,x,y\np1,1,2\n").unwrap();
+    let (ok, _, err) = common::gedisim_in(
+        &ds.join("als"),
+        &[],
+        &["simulate", "--als", s(&data(TILE)), "--footprints", s(&csv), "--out", "x.parquet"],
+    );
+    refused(ok, &err, &["`als` table"]);
+    // Outside the tables (the dataset's report/ folder, or elsewhere) is fine.
+    let fine = ds.join("report/n.csv");
+    std::fs::create_dir_all(fine.parent().unwrap()).unwrap();
+    let (ok, _, err) = gedisim(&["sql", "--dataset", s(&ds), "--out", s(&fine), "select count(*) as n from tiles"]);
+    assert!(ok && fine.exists(), "{err}");
+}

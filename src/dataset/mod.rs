@@ -331,6 +331,41 @@ pub fn writable_name(dest: &Path) -> Result<()> {
     }
 }
 
+/// Refuse an output chosen by the user (`sql --out`, `simulate --out`) that lies in a table folder of
+/// a dataset: a table is written only by gedisim's own commands, under the writer lock and with
+/// its registry rows (a query result in `results/` would be read as results by `run` and
+/// `report`). The folder counts as a dataset's when it holds the writer lock file or another
+/// table. docs/robustness.md.
+pub fn outside_tables(out: &Path) -> Result<()> {
+    let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let Ok(parent) = parent.canonicalize() else { return Ok(()) };
+    let (Some(table), Some(root)) = (parent.file_name().and_then(|n| n.to_str()), parent.parent()) else {
+        return Ok(());
+    };
+    const TABLES: [&str; 8] = [
+        tables::ALS,
+        tables::TILES,
+        tables::SHOTS,
+        tables::GRANULES,
+        tables::SIM,
+        tables::STRATA,
+        tables::RESULTS,
+        tables::OFFSETS,
+    ];
+    let in_dataset = root.join(lock::LOCK_FILE).exists() || TABLES.iter().any(|t| *t != table && root.join(t).is_dir());
+    if TABLES.contains(&table) && in_dataset {
+        return Err(Error::file(
+            out,
+            format!(
+                "--out: inside the `{table}` table of the dataset {}: only gedisim's own commands write its \
+                 tables; write elsewhere",
+                root.display()
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// A temporary name beside `dest`, unique to this process and this call:
 /// `<name>.<pid>-<n>.tmp`. Readers ignore `*.tmp`; [`remove_stale_temporaries`] removes those of
 /// dead processes.

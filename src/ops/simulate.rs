@@ -276,7 +276,10 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
                 Some(csv) => {
                     let stem = csv.file_stem().and_then(|s| s.to_str()).unwrap_or("footprints");
                     let dest = match out {
-                        Some(out) => out.clone(),
+                        Some(out) => {
+                            crate::dataset::outside_tables(out)?;
+                            out.clone()
+                        }
                         None => ds.table_file(tables::SIM, stem)?,
                     };
                     let table = crate::io::footprints::read_footprints_csv(csv)?;
@@ -328,6 +331,7 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
             return Err(Error::Usage("--cluster: a cluster simulates from a dataset (--dataset)".into()))
         }
         Source::Direct { als, footprints, out, keep_all_classes } => {
+            crate::dataset::outside_tables(out)?;
             let table = crate::io::footprints::read_footprints_csv(footprints)?;
             let inputs = AlsInputs::open(als)?;
             let (footprints, how) = place_footprints(&table, opts.footprints_crs, inputs.epsg, footprints)?;

@@ -170,6 +170,9 @@ pub fn sql(
     print: &mut dyn FnMut(&str),
 ) -> Result<()> {
     let format = result_format(out, format)?;
+    if let Some(out) = out {
+        crate::dataset::outside_tables(out)?;
+    }
     let session = SqlSession::open(dataset, limits, engine)?;
     match (out, format) {
         (None, format) => session.run(query, &mut |batches| {
