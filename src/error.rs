@@ -42,7 +42,7 @@ impl Error {
 
 /// Longest word an error line keeps whole: a longer one (a 20 MB CSV field a parser echoes) is
 /// shown by its first [`WORD_HEAD`] bytes and its length.
-pub const MAX_WORD: usize = 300;
+pub const MAX_WORD: usize = 1024;
 const WORD_HEAD: usize = 60;
 /// Longest error line (bytes); a longer one is cut and says so.
 pub const MAX_LINE: usize = 4000;
