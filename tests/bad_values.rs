@@ -221,3 +221,28 @@ fn query_and_simulation_outputs_never_land_in_a_dataset_table() {
     let (ok, _, err) = gedisim(&["sql", "--dataset", s(&ds), "--out", s(&fine), "select count(*) as n from tiles"]);
     assert!(ok && fine.exists(), "{err}");
 }
+
+#[test]
+fn a_granule_repeating_a_shot_number_in_two_beams_is_refused_and_the_dataset_takes_the_good_one() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("edited");
+    std::fs::create_dir(&dir).unwrap();
+    let l1b = dir.join("GEDI01_B_2019108080338_O01964_T05337_02_003_01_sub.h5");
+    std::fs::copy(data(L1B), &l1b).unwrap();
+    {
+        let f = hdf5::File::open_rw(&l1b).unwrap();
+        let first: Vec<u64> = f.dataset("BEAM0001/shot_number").unwrap().read_raw().unwrap();
+        let ds = f.dataset("BEAM0010/shot_number").unwrap();
+        let mut v: Vec<u64> = ds.read_raw().unwrap();
+        v[0] = first[0];
+        ds.write_raw(&v).unwrap();
+    }
+    let ds = tmp.path().join("ds");
+    let (ok, _, err) = gedisim(&["ingest", "gedi", "--out", s(&ds), "--l1b", s(&l1b)]);
+    refused(ok, &err, &[s(&l1b), "shot_number", "19640119100108615", "BEAM0001", "BEAM0010"]);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(common::files_with_suffix(&ds, ".parquet").is_empty(), "nothing of the granule is kept");
+    // The dataset takes the good granule afterwards.
+    let (ok, _, err) = gedisim(&["ingest", "gedi", "--out", s(&ds), "--l1b", s(&data(L1B))]);
+    assert!(ok, "{err}");
+}

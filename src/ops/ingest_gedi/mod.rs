@@ -377,6 +377,41 @@ struct Row {
     xy: Option<(f64, f64, XySource)>,
 }
 
+/// The shot numbers of one granule's beams read so far: a shot number is unique in a granule
+/// (docs/gedi-products.md §1), and one seen in two beams would put one shot in two collocation
+/// segments, which `run` cannot write (docs/robustness.md).
+#[derive(Default)]
+struct ShotsSeen(HashMap<u64, String>);
+
+impl ShotsSeen {
+    /// Refuse a batch of `shots` rows holding a shot number already seen in another beam.
+    fn check(&mut self, pair: &GranulePair, batch: &RecordBatch) -> Result<()> {
+        let path = pair.l1b.as_deref().or(pair.l2a.as_deref()).unwrap_or(Path::new(&pair.granule));
+        let (Some(sn), Some(beam)) = (batch.column_by_name("shot_number"), batch.column_by_name("beam")) else {
+            return Ok(());
+        };
+        use arrow::array::AsArray;
+        let (sn, beam) = (sn.as_primitive::<arrow::datatypes::UInt64Type>(), beam.as_string::<i32>());
+        for i in 0..batch.num_rows() {
+            let b = beam.value(i);
+            match self.0.get(&sn.value(i)) {
+                Some(first) if first != b => {
+                    return Err(Error::field(
+                        path,
+                        "shot_number",
+                        format!("shot {} is in {first} and in {b}: a shot number is unique in a granule", sn.value(i)),
+                    ))
+                }
+                Some(_) => {}
+                None => {
+                    self.0.insert(sn.value(i), b.to_string());
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 fn duplicate_check(path: Option<&Path>, beam: &str, shots: &[u64]) -> Result<()> {
     let mut sorted = shots.to_vec();
     sorted.sort_unstable();
@@ -766,7 +801,11 @@ pub fn ingest_into_dataset(
             metadata.insert("gedisim:vertical_reference".to_string(), VERTICAL_DATUM.to_string());
             let props = dataset::writer_properties(&metadata, 1 << 16);
             let mut writer = AtomicParquet::create(&shots_dir.join(format!("{key}.parquet")), schema, props)?;
-            let beams = read_granule(pair, opts, &mut |b| writer.write(&b))?;
+            let mut seen = ShotsSeen::default();
+            let beams = read_granule(pair, opts, &mut |b| {
+                seen.check(pair, &b)?;
+                writer.write(&b)
+            })?;
             writer.finish()?;
             let shots: usize = beams.iter().map(BeamReport::rows).sum();
             let path = |p: &Option<PathBuf>| p.as_ref().map(|p| p.display().to_string());
