@@ -91,8 +91,14 @@ pub fn ingest_als(a: IngestAlsArgs) -> Result<()> {
     let (mut read, mut written) = (0, 0);
     for o in &outcomes {
         match o {
-            TileOutcome::Ingested { tile, points, dropped, window } => {
+            TileOutcome::Ingested { tile, points, dropped, odd_returns, window } => {
                 (read, written) = (read + points + dropped, written + points);
+                if *odd_returns > 0 {
+                    warn!(
+                        "{tile}: return_number: {odd_returns} points have a return number of 0 or above their \
+                         number_of_returns; the simulation takes each as the last return of its pulse"
+                    );
+                }
                 match window {
                     None => info!("{tile}: {points} points ({dropped} dropped by class)"),
                     Some(w) => info!(

@@ -107,7 +107,10 @@ pub fn inputs_epsg(inputs: &[PathBuf]) -> Result<Option<u32>> {
 pub enum TileOutcome {
     /// Points written (`window`: a COPC tile read in windows; `points` and `dropped` count the
     /// points of the cells read this time).
-    Ingested { tile: String, points: u64, dropped: u64, window: Option<WindowRead> },
+    ///
+    /// `odd_returns`: points of the tile whose return number is 0 or above their number of returns
+    /// (the simulation takes each as the last return of its pulse; `sim::density::is_last_return`).
+    Ingested { tile: String, points: u64, dropped: u64, odd_returns: u64, window: Option<WindowRead> },
     /// The same content was ingested before (keyed by content hash).
     AlreadyIngested { tile: String },
 }
@@ -234,6 +237,8 @@ struct TileStats {
     gps: [f64; 2],
     kept: u64,
     dropped: u64,
+    /// Kept points whose return number is 0 or above their number of returns.
+    odd_returns: u64,
 }
 
 impl TileStats {
@@ -251,6 +256,7 @@ impl TileStats {
             gps: [f64::INFINITY, f64::NEG_INFINITY],
             kept: 0,
             dropped: 0,
+            odd_returns: 0,
         }
     }
 
@@ -269,6 +275,8 @@ impl TileStats {
             self.gps[1] = self.gps[1].max(t);
         }
         self.kept += 1;
+        let (rn, nr) = (p.return_number[i], p.number_of_returns[i]);
+        self.odd_returns += u64::from(rn == 0 || rn > nr);
     }
 
     /// Intensity at cumulative fraction `q` (exact, from the histogram).
@@ -455,7 +463,13 @@ fn ingest_windows(t: &Target, opts: &AlsOptions, windows: &Windows, progress: &d
     writer.finish()?;
     t.write_row(&header, &stats, Some(&window), &metadata)?;
     let window_read = WindowRead { cells_new: missing.len(), cells_read: window.cells.len(), copc: read };
-    Ok(TileOutcome::Ingested { tile, points: points_new, dropped: dropped_new, window: Some(window_read) })
+    Ok(TileOutcome::Ingested {
+        tile,
+        points: points_new,
+        dropped: dropped_new,
+        odd_returns: stats.odd_returns,
+        window: Some(window_read),
+    })
 }
 
 /// The `n_dropped` and `read_cells` of a tile's `tiles/` row.
@@ -523,7 +537,13 @@ fn ingest_tile(t: &Target, opts: &AlsOptions, parallel_decode: bool, progress: &
         let _ = std::fs::remove_file(&spill);
 
         t.write_row(&header, &stats, None, &metadata)?;
-        Ok(TileOutcome::Ingested { tile: tile.clone(), points: stats.kept, dropped: stats.dropped, window: None })
+        Ok(TileOutcome::Ingested {
+            tile: tile.clone(),
+            points: stats.kept,
+            dropped: stats.dropped,
+            odd_returns: stats.odd_returns,
+            window: None,
+        })
     })();
     if result.is_err() {
         let _ = std::fs::remove_file(&spill_path);

@@ -92,9 +92,13 @@ pub struct Densities {
     pub beam: f32,
 }
 
-/// Whether point `i` is the last return of its pulse (so counts once per pulse).
+/// Whether point `i` is the last return of its pulse (so counts once per pulse). A return numbered
+/// 0 or beyond its pulse's number of returns (a corrupt or mis-written tile; ingest warns) counts as
+/// its last: otherwise a tile of such points has no pulse at all, and every footprint over it would
+/// be `partly_covered`.
 pub fn is_last_return(points: &AlsPoints, i: usize) -> bool {
-    points.return_number[i] == points.number_of_returns[i]
+    let rn = points.return_number[i];
+    rn == 0 || rn >= points.number_of_returns[i]
 }
 
 /// How the density normalisation counts pulses.
