@@ -246,3 +246,100 @@ fn a_granule_repeating_a_shot_number_in_two_beams_is_refused_and_the_dataset_tak
     let (ok, _, err) = gedisim(&["ingest", "gedi", "--out", s(&ds), "--l1b", s(&data(L1B))]);
     assert!(ok, "{err}");
 }
+
+/// A LAS 1.4 tile of a 40 m × 40 m grid of returns every 0.5 m (Lambert-93), every return numbered
+/// `return_number` of `number_of_returns`, the ground class on even rows.
+fn grid_tile(path: &Path, return_number: u8, number_of_returns: u8) {
+    let mut b = las::Builder::from((1, 4));
+    b.point_format = las::point::Format::new(6).unwrap();
+    let t = |offset| las::Transform { scale: 0.01, offset };
+    b.transforms = las::Vector { x: t(700_000.0), y: t(6_600_000.0), z: t(0.0) };
+    b.evlrs.push(las::Vlr {
+        user_id: "LASF_Projection".into(),
+        record_id: 2112,
+        description: String::new(),
+        data: br#"PROJCS["RGF93 v1 / Lambert-93",AUTHORITY["EPSG","2154"]]"#.to_vec(),
+    });
+    b.has_wkt_crs = true;
+    let mut w = las::Writer::from_path(path, b.into_header().unwrap()).unwrap();
+    for i in 0..80 {
+        for j in 0..80 {
+            w.write_point(las::Point {
+                x: 700_000.0 + 0.5 * f64::from(i),
+                y: 6_600_000.0 + 0.5 * f64::from(j),
+                z: if j % 2 == 0 { 100.0 } else { 112.0 },
+                return_number,
+                number_of_returns,
+                classification: if j % 2 == 0 {
+                    las::point::Classification::Ground
+                } else {
+                    las::point::Classification::HighVegetation
+                },
+                gps_time: Some(1.0e8 + f64::from(i * 80 + j)),
+                ..Default::default()
+            })
+            .unwrap();
+        }
+    }
+    w.close().unwrap();
+}
+
+#[test]
+fn returns_numbered_beyond_their_pulse_are_warned_of_and_still_cover_the_footprint() {
+    let tmp = tempfile::tempdir().unwrap();
+    let csv = tmp.path().join("plot.csv");
+    std::fs::write(&csv, "id,x,y\np1,700020,6600020\n").unwrap();
+    // Status and RH98 of the `count` row.
+    let status = |tile: &Path| {
+        use arrow::array::AsArray;
+        let out = tmp.path().join("out.parquet");
+        let args = ["simulate", "--als", s(tile), "--footprints", s(&csv), "--out", s(&out)];
+        let (ok, _, err) = gedisim(&args);
+        assert!(ok, "{err}");
+        let file = std::fs::File::open(&out).unwrap();
+        let reader =
+            parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).unwrap().build().unwrap();
+        let mut rows = Vec::new();
+        for b in reader {
+            let b = b.unwrap();
+            let weighting = b.column_by_name("weighting").unwrap().as_string::<i32>().clone();
+            let st = b.column_by_name("status").unwrap().as_string::<i32>().clone();
+            for i in (0..b.num_rows()).filter(|&i| weighting.value(i) == "count") {
+                rows.push(st.value(i).to_string());
+            }
+        }
+        rows.join(";")
+    };
+    let good = tmp.path().join("good.las");
+    grid_tile(&good, 1, 1);
+    let odd = tmp.path().join("odd.las");
+    grid_tile(&odd, 3, 1);
+    let (good, odd) = (status(&good), status(&odd));
+    assert_eq!(good, "ok");
+    assert_eq!(odd, "ok", "a return numbered 3 of 1 counts as its pulse's last, as 1 of 1 does");
+    // Ingest says how many points are odd, naming the tile and the field.
+    let (ok, _, err) = gedisim(&["ingest", "als", "--out", s(&tmp.path().join("ds")), s(&tmp.path().join("odd.las"))]);
+    assert!(ok, "{err}");
+    let warning = err.lines().find(|l| l.contains("return_number")).unwrap_or_else(|| panic!("a warning: {err}"));
+    assert!(warning.contains("odd") && warning.contains("6400 points"), "{warning}");
+}
+
+#[test]
+fn a_stray_file_in_a_table_folder_is_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tmp.path().join("ds");
+    let (ok, _, err) = gedisim(&["ingest", "als", "--out", s(&ds), s(&data(TILE))]);
+    assert!(ok, "{err}");
+    let junk = ds.join("tiles/junk.parquet");
+    std::fs::write(&junk, b"PAR1\n").unwrap();
+    let (ok, _, err) = gedisim(&["sql", "--dataset", s(&ds), "select count(*) from tiles"]);
+    refused(ok, &err, &[s(&junk), "not a Parquet file gedisim can read", "move it out"]);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    // `report` reads `results/`: a stray file there is named too.
+    std::fs::remove_file(&junk).unwrap();
+    let junk = ds.join("results/junk.parquet");
+    std::fs::create_dir_all(junk.parent().unwrap()).unwrap();
+    std::fs::write(&junk, b"PAR1\n").unwrap();
+    let (ok, _, err) = gedisim(&["report", "--dataset", s(&ds)]);
+    refused(ok, &err, &[s(&junk), "not a Parquet file gedisim can read"]);
+}

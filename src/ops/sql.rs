@@ -72,6 +72,17 @@ fn sql_err(e: datafusion::error::DataFusionError) -> Error {
 }
 
 impl SqlSession {
+    /// The error of a failed statement; a Parquet error names the table file that cannot be read,
+    /// if one cannot (a stray file in a table folder).
+    fn failed(&self, e: datafusion::error::DataFusionError) -> Error {
+        let parquet = matches!(e.find_root(), datafusion::error::DataFusionError::ParquetError(_))
+            || e.to_string().contains("Parquet error");
+        match self.ds.as_ref().filter(|_| parquet).and_then(crate::sql::unreadable_table_file) {
+            Some(named) => named,
+            None => sql_err(e),
+        }
+    }
+
     /// Open `dataset` with `limits` on `engine`.
     pub fn open(dataset: &Path, limits: &SessionLimits, engine: &Engine) -> Result<SqlSession> {
         if limits.allow_writes && crate::io::source::is_remote(dataset) {
@@ -131,9 +142,9 @@ impl SqlSession {
                         self.dataset.display()
                     )));
                 }
-                let df = self.ctx.execute_logical_plan(plan).await.map_err(sql_err)?;
+                let df = self.ctx.execute_logical_plan(plan).await.map_err(|e| self.failed(e))?;
                 let has_columns = !df.schema().fields().is_empty();
-                let batches = df.collect().await.map_err(sql_err)?;
+                let batches = df.collect().await.map_err(|e| self.failed(e))?;
                 if has_columns {
                     on_result(batches)?;
                 }

@@ -298,7 +298,39 @@ pub async fn register_table(ctx: &SessionContext, name: &str, files: &[PathBuf],
             ListingTableUrl::parse(path.to_string_lossy()).map_err(|e| Error::table(dir, e))
         })
         .collect::<Result<Vec<_>>>()?;
-    register_listing(ctx, name, dir, urls, read_only).await
+    register_listing(ctx, name, dir, urls, read_only).await.map_err(|e| unreadable_file(files).unwrap_or(e))
+}
+
+/// The first file of a table of `ds` that is not a readable Parquet file, as its error (see
+/// [`unreadable_file`]): what a query's Parquet error is about. Reads every table file's footer, so
+/// it is called only once a statement has failed.
+pub fn unreadable_table_file(ds: &Dataset) -> Option<Error> {
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(ds.root()).ok()?.flatten().map(|e| e.path()).collect();
+    dirs.sort();
+    dirs.iter()
+        .filter(|d| d.is_dir())
+        .filter_map(|d| d.file_name().and_then(|n| n.to_str()))
+        .filter(|name| *name != dataset::tables::REPORT)
+        .find_map(|name| unreadable_file(&ds.visible_files(name).ok()?))
+}
+
+/// The first of `files` that is not a readable Parquet file, as its error: a table that cannot be
+/// registered is named by its folder, and the user needs the file (a 5-byte or foreign file put in a
+/// table folder by hand). docs/robustness.md.
+fn unreadable_file(files: &[PathBuf]) -> Option<Error> {
+    files.iter().find_map(|f| {
+        let why = match std::fs::File::open(f) {
+            Ok(file) => parquet::file::reader::SerializedFileReader::new(file).err()?.to_string(),
+            Err(e) => e.to_string(),
+        };
+        Some(Error::file(
+            f,
+            format!(
+                "not a Parquet file gedisim can read ({}): a table folder holds only gedisim's own files; move it out",
+                crate::error::one_line(&why)
+            ),
+        ))
+    })
 }
 
 /// Register the Parquet files `urls` of the table folder `dir` as the table `name`.
