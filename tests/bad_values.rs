@@ -343,3 +343,20 @@ fn a_stray_file_in_a_table_folder_is_named() {
     let (ok, _, err) = gedisim(&["report", "--dataset", s(&ds)]);
     refused(ok, &err, &[s(&junk), "not a Parquet file gedisim can read"]);
 }
+
+#[test]
+fn dataset_paths_with_glob_or_control_characters() {
+    let tmp = tempfile::tempdir().unwrap();
+    // `?` (a glob character to the SQL engine's path parser): ingested and queried.
+    let ds = tmp.path().join("plots?2024[a]").join("ds");
+    let (ok, _, err) = gedisim(&["ingest", "als", "--out", s(&ds), s(&data(TILE))]);
+    assert!(ok, "{err}");
+    let (ok, out, err) = gedisim(&["sql", "--dataset", s(&ds), "--format", "csv", "select count(*) as n from tiles"]);
+    assert!(ok && out.contains("\n1"), "{out} {err}");
+    // A newline, which the engine's object store cannot address: refused before anything is written.
+    let ds = tmp.path().join("two\nlines").join("ds");
+    let (ok, _, err) = gedisim(&["ingest", "als", "--out", s(&ds), s(&data(TILE))]);
+    refused(ok, &err, &["control character", "'\\n'", "rename it"]);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(!ds.exists());
+}

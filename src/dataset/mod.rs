@@ -60,6 +60,20 @@ pub mod tables {
     pub const REPORT: &str = "report";
 }
 
+/// Refuse a dataset path the SQL engine cannot address: its object store rejects control
+/// characters (a newline) in a path, so `sql` and `report` would fail after `run` had worked.
+fn addressable(root: &Path) -> Result<()> {
+    match root.to_string_lossy().chars().find(|c| c.is_control()) {
+        Some(c) => Err(Error::file(
+            root,
+            format!(
+                "the dataset path holds a control character ({c:?}), which the SQL engine cannot address: rename it"
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
 /// A dataset directory.
 #[derive(Debug, Clone)]
 pub struct Dataset {
@@ -72,6 +86,7 @@ impl Dataset {
     /// Open (and create if needed) the dataset at `root`, without the writer lock (library use
     /// where the caller is the only writer; commands use [`Dataset::writer`]).
     pub fn create(root: &Path) -> Result<Self> {
+        addressable(root)?;
         std::fs::create_dir_all(root)
             .map_err(|e| Error::file(root, format!("cannot create dataset directory: {e}")))?;
         Ok(Dataset { root: root.to_path_buf(), lock: None })
@@ -89,6 +104,7 @@ impl Dataset {
 
     /// Open an existing dataset for reading.
     pub fn open(root: &Path) -> Result<Self> {
+        addressable(root)?;
         if !root.is_dir() {
             return Err(Error::file(root, "not a dataset directory (run `gedisim ingest` first)"));
         }

@@ -295,7 +295,10 @@ pub async fn register_table(ctx: &SessionContext, name: &str, files: &[PathBuf],
         .iter()
         .map(|f| {
             let path = f.canonicalize().map_err(|e| Error::file(f, e))?;
-            ListingTableUrl::parse(path.to_string_lossy()).map_err(|e| Error::table(dir, e))
+            // As a file URL, percent-encoded: a bare path would read `?`, `*` and `[` as glob
+            // characters, and a dataset folder may hold them.
+            let url = url::Url::from_file_path(&path).map_err(|_| Error::file(f, "not an absolute path"))?;
+            ListingTableUrl::parse(url.as_str()).map_err(|e| Error::table(dir, e))
         })
         .collect::<Result<Vec<_>>>()?;
     register_listing(ctx, name, dir, urls, read_only).await.map_err(|e| unreadable_file(files).unwrap_or(e))
