@@ -360,3 +360,28 @@ fn dataset_paths_with_glob_or_control_characters() {
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(!ds.exists());
 }
+
+#[test]
+fn simulate_on_a_dataset_never_writes_into_runs_sim_table() {
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tmp.path().join("ds");
+    let (ok, _, err) = gedisim(&["ingest", "als", "--out", s(&ds), s(&data(TILE))]);
+    assert!(ok, "{err}");
+    // Named like a granule's `sim/` file, as a user may name a plot list: it used to replace that file.
+    let csv = tmp.path().join("GEDI02_A_2019108080338_O01964_T05337_02_001_01_sub.csv");
+    std::fs::write(&csv, "id,x,y\np1,1,2\n").unwrap();
+    let (ok, _, err) = gedisim(&["simulate", "--dataset", s(&ds), "--footprints", s(&csv)]);
+    assert!(ok, "{err}");
+    assert!(!ds.join("sim").exists(), "sim/ is run's alone");
+    let written = ds.join("simulated/GEDI02_A_2019108080338_O01964_T05337_02_001_01_sub.parquet");
+    assert!(written.exists());
+    let (ok, out, err) = gedisim(&[
+        "sql",
+        "--dataset",
+        s(&ds),
+        "--format",
+        "csv",
+        "select count(distinct footprint_id) as n from simulated",
+    ]);
+    assert!(ok && out.contains("\n1"), "{out} {err}");
+}

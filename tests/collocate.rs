@@ -250,7 +250,7 @@ fn beam_level_recovers_the_planted_offset_and_simulate_applies_it() {
     // simulate --dataset moves each shot by its segment's offset and says which.
     let (ok, _, err) = gedisim(&["simulate", "--dataset", tmp.path().to_str().unwrap()]);
     assert!(ok, "{err}");
-    let q = "select footprint_id, x, offset_segment_id, offset_dx, offset_dy from sim where weighting = 'count' \
+    let q = "select footprint_id, x, offset_segment_id, offset_dx, offset_dy from simulated where weighting = 'count' \
         order by footprint_id";
     let (ok, out, err) = gedisim(&["sql", "--dataset", tmp.path().to_str().unwrap(), q]);
     assert!(ok, "{err}");

@@ -254,7 +254,7 @@ fn shots_carry_real_transmit_pulses_and_plots_get_their_mean() {
     let (ok, _, err) =
         gedisim(&["simulate", "--dataset", d, "--footprints", csv.to_str().unwrap(), "--pulse", "recorded"]);
     assert!(ok, "{err}");
-    let text = std::fs::read_to_string(ds.join("sim/plots.pulse.txt")).unwrap();
+    let text = std::fs::read_to_string(ds.join("simulated/plots.pulse.txt")).unwrap();
     let pairs = parse_pulse_text(&text).unwrap();
     let total: f32 = pairs.iter().map(|p| p.1).sum();
     assert!((total - 1.0).abs() < 1e-3 && pairs.len() > 50, "{} samples, Σ {total}", pairs.len());

@@ -27,11 +27,11 @@ pub struct SimulateArgs {
     #[arg(long, value_name = "EPSG", value_parser = parse_epsg)]
     crs: Option<u32>,
     /// Output Parquet file (direct mode; dataset mode with --footprints, default
-    /// <dataset>/sim/<CSV name>.parquet).
+    /// <dataset>/simulated/<CSV name>.parquet).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Dataset directory: simulate every ingested shot into <dataset>/sim/shots.parquet (or the
-    /// --footprints) from the ingested ALS points.
+    /// Dataset directory: simulate every ingested shot into <dataset>/simulated/shots.parquet (or
+    /// the --footprints) from the ingested ALS points (`sim/` is `run`'s alone).
     #[arg(long)]
     dataset: Option<PathBuf>,
     /// gedirat reproduces Hancock's gediRat exactly (batch-dependent bin grid, every point of

@@ -48,8 +48,11 @@ pub mod tables {
     pub const SHOTS: &str = "shots";
     /// One row per ingested GEDI granule file.
     pub const GRANULES: &str = "granules";
-    /// Simulated waveforms and RH.
+    /// Simulated waveforms and RH of the shots, written by `run` alone (one file per granule).
     pub const SIM: &str = "sim";
+    /// What `simulate --dataset` writes (every shot, or a footprint CSV's positions): apart from
+    /// `sim/`, so that a shot is never there twice and plot rows never mix with shot rows.
+    pub const SIMULATED: &str = "simulated";
     /// Shot → forest type (`ingest strata`).
     pub const STRATA: &str = "strata";
     /// One row per shot × weighting × algorithm: the study's input (`run`).
@@ -358,12 +361,13 @@ pub fn outside_tables(out: &Path) -> Result<()> {
     let (Some(table), Some(root)) = (parent.file_name().and_then(|n| n.to_str()), parent.parent()) else {
         return Ok(());
     };
-    const TABLES: [&str; 8] = [
+    const TABLES: [&str; 9] = [
         tables::ALS,
         tables::TILES,
         tables::SHOTS,
         tables::GRANULES,
         tables::SIM,
+        tables::SIMULATED,
         tables::STRATA,
         tables::RESULTS,
         tables::OFFSETS,

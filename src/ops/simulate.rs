@@ -34,8 +34,8 @@ pub enum Source {
     /// A COPC file is read only around the footprints ([`read_around`]).
     Direct { als: Vec<PathBuf>, footprints: PathBuf, out: PathBuf, keep_all_classes: bool },
     /// Dataset mode: every ingested shot (moved by its collocation offset) into
-    /// `<dataset>/sim/shots.parquet`, or the `footprints` CSV into `out` (default
-    /// `<dataset>/sim/<CSV name>.parquet`).
+    /// `<dataset>/simulated/shots.parquet`, or the `footprints` CSV into `out` (default
+    /// `<dataset>/simulated/<CSV name>.parquet`). Never into `sim/`, which `run` writes.
     Dataset { dataset: PathBuf, footprints: Option<PathBuf>, out: Option<PathBuf> },
 }
 
@@ -280,7 +280,7 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
                             crate::dataset::outside_tables(out)?;
                             out.clone()
                         }
-                        None => ds.table_file(tables::SIM, stem)?,
+                        None => ds.table_file(tables::SIMULATED, stem)?,
                     };
                     let table = crate::io::footprints::read_footprints_csv(csv)?;
                     let (placed, how) =
@@ -289,7 +289,7 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
                     (placed.into_iter().map(|f| (f, None)).collect(), dest)
                 }
                 None if out.is_some() => return Err(Error::Usage("--out in dataset mode needs --footprints".into())),
-                None => (crate::dataset::shots::shot_footprints(&ds)?, ds.table_file(tables::SIM, "shots")?),
+                None => (crate::dataset::shots::shot_footprints(&ds)?, ds.table_file(tables::SIMULATED, "shots")?),
             };
             if let PulseModel::Recorded(reference) = opts.pulse {
                 let pulses = crate::dataset::shots::shot_pulses(&ds, reference, cfg.res)?;
