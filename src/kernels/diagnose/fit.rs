@@ -139,17 +139,16 @@ pub fn fit(name: &str, base: &Model, placed: &Model, cases: &[&ShotCase]) -> Opt
     if name == "geolocation" {
         return fit_geolocation(base, cases);
     }
-    let base = placed;
-    let mut effect = fit_placed(name, base, cases)?;
+    let mut effect = fit_placed(name, placed, cases)?;
     if RESHAPING_EFFECTS.contains(&name) {
-        let mut placed = base.clone();
+        let mut current = placed.clone();
         for _ in 0..REPLACEMENTS {
-            let next = reposition(cases, &placed.with(effect.clone()));
-            if next.placement == placed.placement {
+            let next = reposition(cases, &current.with(effect.clone()));
+            if next.placement == current.placement {
                 break;
             }
-            placed = base.placed_as(&next);
-            effect = fit_placed(name, &placed, cases)?;
+            current = placed.placed_as(&next);
+            effect = fit_placed(name, &current, cases)?;
         }
     }
     Some(effect)
