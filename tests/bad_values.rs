@@ -6,14 +6,10 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{data, gedisim};
+use common::{data, gedisim, s};
 
 const L1B: &str = "gedi/GEDI01_B_2019108080338_O01964_T05337_02_003_01_sub.h5";
 const TILE: &str = "als/pdal-ign-plugin_mnx_input_crop_2.laz";
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// The first line of stderr names every one of `needles`, and the run failed.
 fn refused(ok: bool, err: &str, needles: &[&str]) {
@@ -147,8 +143,9 @@ fn l2a_refuses_repeated_algorithms_and_standard_output_and_flags_upside_down_wav
     }
 }
 
-/// A LAS 1.4 file of a few points whose only CRS record is the WKT `wkt`.
-fn las_with_wkt(path: &Path, wkt: &str) {
+/// A LAS 1.4 file (point format 6, Lambert-93 coordinates at 1 cm) of `points` whose only CRS
+/// record is the WKT `wkt`.
+fn write_las(path: &Path, wkt: &str, points: impl IntoIterator<Item = las::Point>) {
     let mut b = las::Builder::from((1, 4));
     b.point_format = las::point::Format::new(6).unwrap();
     b.has_wkt_crs = true;
@@ -161,17 +158,22 @@ fn las_with_wkt(path: &Path, wkt: &str) {
         data: wkt.as_bytes().to_vec(),
     });
     let mut w = las::Writer::from_path(path, b.into_header().unwrap()).unwrap();
-    for i in 0..10 {
-        let p = las::Point {
-            x: 700_000.0 + f64::from(i),
-            y: 6_600_000.0,
-            z: 100.0,
-            gps_time: Some(1.0e8 + f64::from(i)),
-            ..Default::default()
-        };
+    for p in points {
         w.write_point(p).unwrap();
     }
     w.close().unwrap();
+}
+
+/// A LAS 1.4 file of a few points whose only CRS record is the WKT `wkt`.
+fn las_with_wkt(path: &Path, wkt: &str) {
+    let points = (0..10).map(|i| las::Point {
+        x: 700_000.0 + f64::from(i),
+        y: 6_600_000.0,
+        z: 100.0,
+        gps_time: Some(1.0e8 + f64::from(i)),
+        ..Default::default()
+    });
+    write_las(path, wkt, points);
 }
 
 #[test]
@@ -250,38 +252,23 @@ fn a_granule_repeating_a_shot_number_in_two_beams_is_refused_and_the_dataset_tak
 /// A LAS 1.4 tile of a 40 m × 40 m grid of returns every 0.5 m (Lambert-93), every return numbered
 /// `return_number` of `number_of_returns`, the ground class on even rows.
 fn grid_tile(path: &Path, return_number: u8, number_of_returns: u8) {
-    let mut b = las::Builder::from((1, 4));
-    b.point_format = las::point::Format::new(6).unwrap();
-    let t = |offset| las::Transform { scale: 0.01, offset };
-    b.transforms = las::Vector { x: t(700_000.0), y: t(6_600_000.0), z: t(0.0) };
-    b.evlrs.push(las::Vlr {
-        user_id: "LASF_Projection".into(),
-        record_id: 2112,
-        description: String::new(),
-        data: br#"PROJCS["RGF93 v1 / Lambert-93",AUTHORITY["EPSG","2154"]]"#.to_vec(),
+    let points = (0..80).flat_map(|i| {
+        (0..80).map(move |j| las::Point {
+            x: 700_000.0 + 0.5 * f64::from(i),
+            y: 6_600_000.0 + 0.5 * f64::from(j),
+            z: if j % 2 == 0 { 100.0 } else { 112.0 },
+            return_number,
+            number_of_returns,
+            classification: if j % 2 == 0 {
+                las::point::Classification::Ground
+            } else {
+                las::point::Classification::HighVegetation
+            },
+            gps_time: Some(1.0e8 + f64::from(i * 80 + j)),
+            ..Default::default()
+        })
     });
-    b.has_wkt_crs = true;
-    let mut w = las::Writer::from_path(path, b.into_header().unwrap()).unwrap();
-    for i in 0..80 {
-        for j in 0..80 {
-            w.write_point(las::Point {
-                x: 700_000.0 + 0.5 * f64::from(i),
-                y: 6_600_000.0 + 0.5 * f64::from(j),
-                z: if j % 2 == 0 { 100.0 } else { 112.0 },
-                return_number,
-                number_of_returns,
-                classification: if j % 2 == 0 {
-                    las::point::Classification::Ground
-                } else {
-                    las::point::Classification::HighVegetation
-                },
-                gps_time: Some(1.0e8 + f64::from(i * 80 + j)),
-                ..Default::default()
-            })
-            .unwrap();
-        }
-    }
-    w.close().unwrap();
+    write_las(path, r#"PROJCS["RGF93 v1 / Lambert-93",AUTHORITY["EPSG","2154"]]"#, points);
 }
 
 #[test]

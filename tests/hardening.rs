@@ -6,15 +6,11 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{data, files_with_suffix, gedisim};
+use common::{data, files_with_suffix, gedisim, s};
 
 const L1B: &str = "gedi/GEDI01_B_2019108080338_O01964_T05337_02_003_01_sub.h5";
 const L2A: &str = "gedi/GEDI02_A_2019108080338_O01964_T05337_02_001_01_sub.h5";
 const SMALL_TILE: &str = "als/pdal-ign-plugin_mnx_input_crop_2.laz";
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// The error of a failed run: exactly one line on stderr, naming `needles`.
 fn one_line_error(ok: bool, err: &str, needles: &[&str]) {

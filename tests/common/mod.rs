@@ -12,6 +12,11 @@ pub fn data(rel: &str) -> PathBuf {
 /// The three real LiDAR HD tiles bundled in tests/data/als.
 pub const TILES: [&str; 3] = ["lidarforfuel_1_42", "lidarforfuel_2_bas_lig", "pdal-ign-plugin_mnx_input_crop_2"];
 
+/// A path as a command-line argument.
+pub fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
 /// Run the gedisim binary; returns (success, stdout, stderr).
 pub fn gedisim(args: &[&str]) -> (bool, String, String) {
     outcome(Command::new(env!("CARGO_BIN_EXE_gedisim")).args(args).output().expect("run gedisim"))
