@@ -47,6 +47,11 @@ pub struct DiagnoseArgs {
     /// (docs/diagnosis.md, "The self-test").
     #[arg(long, default_value_t = gedisim::kernels::diagnose::selftest::TWINS, value_name = "N")]
     twins: usize,
+    /// The configuration, the effects and the self-test on the shots of whole tracks drawn at
+    /// random until they hold N shots; where the gap lies on every shot. 0: every shot
+    /// (docs/diagnosis.md, "Shots ranked").
+    #[arg(long, default_value_t = gedisim::kernels::diagnose::sample::RANKED_SHOTS, value_name = "N")]
+    ranked_shots: usize,
 }
 
 pub fn diagnose(a: DiagnoseArgs) -> Result<()> {
@@ -62,6 +67,7 @@ pub fn diagnose(a: DiagnoseArgs) -> Result<()> {
         effects: a.effects,
         pulse: a.pulse.model("recorded", None),
         twins: a.twins,
+        ranked_shots: a.ranked_shots,
         force: a.force,
     };
     let r = gedisim::ops::diagnose::diagnose(input, &a.out, &opts, &Bars::new())?;
@@ -75,7 +81,7 @@ pub fn diagnose(a: DiagnoseArgs) -> Result<()> {
     let shots = &out.json.shots;
     let dropped: Vec<(&str, usize)> = shots.dropped.iter().map(|d| (d.reason.as_str(), d.n)).collect();
     let dropped = gedisim::ops::diagnose::dropped_text(&dropped);
-    info!("shots: {} read, {} used; dropped: {dropped}", shots.read, shots.used);
+    info!("shots: {} read, {} used, {} ranked; dropped: {dropped}", shots.read, shots.used, shots.ranked);
     if out.reused {
         info!(
             "inputs unchanged since {}: diagnosis reused (--force recomputes)",

@@ -56,12 +56,25 @@ struct Pending {
     /// Its collocation segment is short ([`SHORT_SEGMENT_SHOTS`]): its [`site_grid`] is centred on
     /// the segment's re-collocated position and simulated at every width.
     short_segment: bool,
+    /// Its track is among those ranked ([`diagnose::sample`]): simulated at its sites. Another
+    /// shot is simulated at its collocated position, nominal width, for `where` alone.
+    ranked: bool,
+}
+
+/// The shots of a dataset, read and simulated for the diagnosis.
+pub struct Cases {
+    /// Shots of the ranked tracks.
+    pub ranked: Vec<ShotCase>,
+    /// The other shots (located only).
+    pub located: Vec<ShotCase>,
+    pub report: CaseReport,
 }
 
 /// Read every usable shot of the dataset with its simulations, simulated as one
-/// [`Step::DiagnoseSimulate`].
+/// [`Step::DiagnoseSimulate`]: the shots of tracks drawn up to `ranked_shots`
+/// ([`diagnose::sample::ranked_tracks`]) at all their sites and widths, the others for `where`.
 /// `pulse`: the shots' transmit pulse in the nominal chain (recorded, a file, or the Gaussian).
-pub fn read_cases(ds: &Dataset, pulse: &PulseModel, progress: &dyn Progress) -> Result<(Vec<ShotCase>, CaseReport)> {
+pub fn read_cases(ds: &Dataset, pulse: &PulseModel, ranked_shots: usize, progress: &dyn Progress) -> Result<Cases> {
     let res = configs().0.res;
     let pulses = ShotPulseSource::new(pulse, res)?;
     let mut report = CaseReport::default();
@@ -76,15 +89,19 @@ pub fn read_cases(ds: &Dataset, pulse: &PulseModel, progress: &dyn Progress) -> 
     }
     let mut segment_shots: HashMap<&str, usize> = HashMap::new();
     offsets.values().for_each(|o| *segment_shots.entry(o.segment_id.as_str()).or_default() += 1);
+    let ranked = diagnose::sample::ranked_tracks(pending.iter().map(|p| p.real.track.as_str()), ranked_shots);
     for p in &mut pending {
         p.short_segment = segment_shots.get(p.real.segment.as_str()).is_some_and(|&n| n < SHORT_SEGMENT_SHOTS);
+        p.ranked = ranked.contains(&p.real.track);
     }
     let als = AlsTable::open(ds)?;
     let centres = recollocate(&als, &pending, reference_dz(&offsets))?;
     progress.start(Step::DiagnoseSimulate, pending.len() as u64);
     let cases = simulate_cases(&als, pending, &centres, &mut report, &|| progress.advance(1));
     progress.finish();
-    Ok((cases?, report))
+    let (ranked, located) = cases?.into_iter().partition(|(r, _)| *r);
+    let strip = |v: Vec<(bool, ShotCase)>| v.into_iter().map(|(_, c)| c).collect();
+    Ok(Cases { ranked: strip(ranked), located: strip(located), report })
 }
 
 fn read_shots(
@@ -190,6 +207,7 @@ fn read_shots(
             footprint: Footprint::at(shot.to_string(), px + dx, py + dy),
             reported: (px, py),
             short_segment: false,
+            ranked: false,
         });
     }
     Ok(())
@@ -221,7 +239,7 @@ fn recollocate(als: &AlsTable, pending: &[Pending], dz: f64) -> Result<HashMap<u
     let mut segments: std::collections::BTreeMap<&str, Vec<&Pending>> = Default::default();
     pending
         .iter()
-        .filter(|p| p.short_segment)
+        .filter(|p| p.short_segment && p.ranked)
         .for_each(|p| segments.entry(p.real.segment.as_str()).or_default().push(p));
     let inputs: Vec<(&[&Pending], Vec<ShotInput>)> = segments
         .values()
@@ -265,8 +283,9 @@ fn recollocate(als: &AlsTable, pending: &[Pending], dz: f64) -> Result<HashMap<u
     Ok(out)
 }
 
-/// A shot to simulate: its real facts, whether its segment is short, and its sites.
-type ToSimulate = (RealShot, bool, Vec<(f64, f64)>);
+/// A shot to simulate: its real facts, whether its segment is short, whether it is ranked, and
+/// its sites.
+type ToSimulate = (RealShot, bool, bool, Vec<(f64, f64)>);
 
 fn simulate_cases(
     als: &AlsTable,
@@ -274,7 +293,7 @@ fn simulate_cases(
     centres: &HashMap<u64, (f64, f64)>,
     report: &mut CaseReport,
     on_shot: &(dyn Fn() + Sync),
-) -> Result<Vec<ShotCase>> {
+) -> Result<Vec<(bool, ShotCase)>> {
     if pending.is_empty() {
         return Ok(Vec::new());
     }
@@ -283,40 +302,41 @@ fn simulate_cases(
     let half = sim::footprint::read_radius(fmax);
     let grid = site_grid();
     // Site 0 at the collocated position, then the grid around the short segment's re-collocated
-    // centre (every width) or around the collocated position (a long segment: nominal width).
+    // centre (every width) or around the collocated position (a long segment: nominal width). A
+    // shot that is not ranked: site 0 alone, at the nominal width.
     let items: Vec<(Footprint, ToSimulate)> = pending
         .into_iter()
         .map(|p| {
             let (x0, y0) = (p.footprint.x, p.footprint.y);
             let centre = if p.short_segment { centres.get(&p.real.shot_number).copied() } else { Some((x0, y0)) };
             let mut sites = vec![(x0, y0)];
-            if let Some((cx, cy)) = centre {
+            if let Some((cx, cy)) = centre.filter(|_| p.ranked) {
                 sites.extend(grid.iter().map(|(dx, dy)| (cx + dx, cy + dy)));
             }
-            (p.footprint, (p.real, p.short_segment, sites))
+            (p.footprint, (p.real, p.short_segment, p.ranked, sites))
         })
         .collect();
     let mut cases = Vec::new();
     for block in crate::dataset::blocks::blocks(items) {
         let mut bb = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
-        for (x, y) in block.iter().flat_map(|(_, (_, _, sites))| sites.iter().copied()) {
+        for (x, y) in block.iter().flat_map(|(_, (_, _, _, sites))| sites.iter().copied()) {
             bb = [bb[0].min(x - half), bb[1].min(y - half), bb[2].max(x + half), bb[3].max(y + half)];
         }
         let (points, _) = als.points_in(bb)?;
         let (fps, reals): (Vec<Footprint>, Vec<ToSimulate>) = block.into_iter().unzip();
         let nom = sim::simulate(&points, &fps, &nominal)?;
-        // Sites simulated at every width (site 0, a short segment's grid) and at the nominal one
-        // (a long segment's grid), each as one footprint: index[j][k] = (light, i) for shot j,
-        // site k.
+        // Sites simulated at every width (a ranked shot's site 0, a short segment's grid) and at
+        // the nominal one (a long segment's grid, a shot not ranked), each as one footprint:
+        // index[j][k] = (light, i) for shot j, site k.
         let (mut full, mut light): (Vec<Footprint>, Vec<Footprint>) = (Vec::new(), Vec::new());
         let mut index: Vec<Vec<(bool, usize)>> = Vec::with_capacity(fps.len());
-        for (f, (_, short, sites)) in fps.iter().zip(&reals) {
+        for (f, (_, short, ranked, sites)) in fps.iter().zip(&reals) {
             index.push(
                 sites
                     .iter()
                     .enumerate()
                     .map(|(k, &(x, y))| {
-                        let is_light = k > 0 && !short;
+                        let is_light = !ranked || (k > 0 && !short);
                         let list = if is_light { &mut light } else { &mut full };
                         list.push(Footprint { id: f.id.clone(), x, y, pulse: f.pulse.clone() });
                         (is_light, list.len() - 1)
@@ -326,7 +346,7 @@ fn simulate_cases(
         }
         let vars = variants.iter().map(|cfg| sim::simulate(&points, &full, cfg)).collect::<Result<Vec<_>>>()?;
         let light_vars = sim::simulate(&points, &light, &variants[NOMINAL_WIDTH])?;
-        for (j, (mut real, short, positions)) in reals.into_iter().enumerate() {
+        for (j, (mut real, short, ranked, positions)) in reals.into_iter().enumerate() {
             on_shot();
             let Ok(n) = &nom[j] else {
                 count_dropped(report, "footprint not simulated (no ALS points or partly covered)");
@@ -373,11 +393,14 @@ fn simulate_cases(
             real.strata.slope_class = classes::slope_class(count.truth.slope_deg.map(f64::from)).to_string();
             let cover = f64::from(count.truth.als_cover);
             real.strata.cover_class = classes::cover_class((cover >= 0.0).then_some(cover)).to_string();
-            cases.push(ShotCase {
-                real,
-                sim: Arc::new(SimShot { dz, sites, short_segment: short, rh_nominal: rh.to_vec() }),
-                mismatch: [false; N_ALGORITHMS],
-            });
+            cases.push((
+                ranked,
+                ShotCase {
+                    real,
+                    sim: Arc::new(SimShot { dz, sites, short_segment: short, rh_nominal: rh.to_vec() }),
+                    mismatch: [false; N_ALGORITHMS],
+                },
+            ));
         }
     }
     Ok(cases)
@@ -399,7 +422,7 @@ pub struct DiagnosisOutput {
 /// changed table file anew, with a new time). Stored in diagnosis.json: a re-run on the same
 /// inputs reuses the diagnosis. A file rewritten with the same size within the file system's
 /// time resolution would go unseen: `--force` recomputes.
-fn inputs_key(ds: &Dataset, names: &[&str], pulse: &PulseModel, twins: usize) -> Result<String> {
+fn inputs_key(ds: &Dataset, names: &[&str], opts: &DiagnoseOptions) -> Result<String> {
     use sha2::{Digest, Sha256};
     let mut h = Sha256::new();
     let stamp = |h: &mut Sha256, path: &Path| -> Result<()> {
@@ -408,7 +431,8 @@ fn inputs_key(ds: &Dataset, names: &[&str], pulse: &PulseModel, twins: usize) ->
         h.update(format!("{}\0{}\0{}\0", path.display(), m.len(), mtime.as_nanos()));
         Ok(())
     };
-    h.update(format!("gedisim {}\0{}\0{pulse:?}\0{twins}\0", env!("CARGO_PKG_VERSION"), names.join(",")));
+    let (pulse, twins, ranked) = (&opts.pulse, opts.twins, opts.ranked_shots);
+    h.update(format!("gedisim {}\0{}\0{pulse:?}\0{twins}\0{ranked}\0", env!("CARGO_PKG_VERSION"), names.join(",")));
     if let Ok(exe) = std::env::current_exe() {
         stamp(&mut h, &exe)?;
     }
@@ -518,6 +542,9 @@ pub struct DiagnoseOptions {
     pub pulse: PulseModel,
     /// Twin sets per planted hypothesis in the self-test (`diagnose::selftest`); 0 = none.
     pub twins: usize,
+    /// The configuration, the effects and the self-test on the shots of tracks drawn up to this
+    /// many shots (`diagnose::sample`); 0 = every shot.
+    pub ranked_shots: usize,
     /// Diagnose again even when `out` holds the diagnosis of the same inputs.
     pub force: bool,
 }
@@ -529,6 +556,7 @@ impl DiagnoseOptions {
             effects: Vec::new(),
             pulse: PulseModel::Recorded(Default::default()),
             twins: diagnose::selftest::TWINS,
+            ranked_shots: diagnose::sample::RANKED_SHOTS,
             force: false,
         }
     }
@@ -593,11 +621,11 @@ pub fn diagnose_dataset(
             })
             .collect::<Result<_>>()?
     };
-    let key = inputs_key(ds, &names, pulse, opts.twins)?;
+    let key = inputs_key(ds, &names, opts)?;
     if let Some(done) = reusable(out, &key).filter(|_| !opts.force) {
         return Ok(done);
     }
-    let (cases, report) = read_cases(ds, pulse, progress)?;
+    let Cases { ranked: cases, located, report } = read_cases(ds, pulse, opts.ranked_shots, progress)?;
     if cases.len() < 4 {
         return Err(Error::file(
             ds.root().join(tables::SHOTS),
@@ -609,7 +637,8 @@ pub fn diagnose_dataset(
         ));
     }
     progress.start(Step::DiagnoseFit, 0);
-    let d = diagnose::diagnose(cases, &names, opts.twins, &|step| progress.note(step));
+    let d = diagnose::diagnose(cases, &located, &names, opts.twins, &|step| progress.note(step));
+    drop(located);
     progress.finish();
     std::fs::create_dir_all(out).map_err(|e| Error::file(out, e))?;
     // The old diagnosis.json goes first: tables half rewritten by an interrupted run are never
@@ -621,13 +650,14 @@ pub fn diagnose_dataset(
     let mut files = write_tables(&d, out)?;
     files.extend(write_figures(&d, out)?);
     let names = files.iter().filter_map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned())).collect();
-    let json = DiagnosisJson {
+    let mut json = DiagnosisJson {
         summary: summary_lines(&d),
         dataset: Some(ds.root().canonicalize().unwrap_or_else(|_| ds.root().to_path_buf()).display().to_string()),
         inputs_key: Some(key),
         files: names,
         ..DiagnosisJson::of(&d, report.shots_read, &report.dropped)
     };
+    json.shots.ranked_limit = opts.ranked_shots;
     // diagnosis.json last: a diagnosis interrupted before it is never reused.
     let text = serde_json::to_string_pretty(&json).map_err(|e| Error::file(&path, e))?;
     crate::dataset::write_atomic(&path, text.as_bytes())?;
@@ -951,10 +981,19 @@ fn self_test_line(t: &SelfTest, verdict: &Verdict) -> String {
 pub fn summary_lines(d: &Diagnosis) -> Vec<String> {
     let mut lines = Vec::new();
     let w = &d.where_;
+    let ranked = if d.n_shots < d.n_located {
+        format!(
+            " The configuration, the effects and the self-test use the {} shots of {} tracks drawn at random \
+             (--ranked-shots); where the gap lies uses them all.",
+            d.n_shots, d.n_tracks
+        )
+    } else {
+        String::new()
+    };
     lines.push(format!(
-        "{} shots on {} tracks. Signs: RH bias = simulated − GEDI RH; ground bias = GEDI ground − ALS ground \
-         (positive: GEDI's ground is higher; GEDI's brought into the ALS datum through the geoid).",
-        d.n_shots, d.n_tracks
+        "{} shots on {} tracks.{ranked} Signs: RH bias = simulated − GEDI RH; ground bias = GEDI ground − ALS \
+         ground (positive: GEDI's ground is higher; GEDI's brought into the ALS datum through the geoid).",
+        d.n_located, d.n_located_tracks
     ));
     lines.push(format!(
         "Baseline (the study's simulation — noise-free, 15 ns Gaussian pulse, at the collocated position — against \
@@ -1111,12 +1150,19 @@ mod tests {
         let shots = ds.table_file(tables::SHOTS, "g1").unwrap();
         std::fs::write(&shots, b"first").unwrap();
         let pulse = PulseModel::Recorded(Default::default());
-        let key = |names: &[&str], pulse: &PulseModel| inputs_key(&ds, names, pulse, 10).unwrap();
+        let with = |pulse: &PulseModel, twins, ranked_shots| DiagnoseOptions {
+            pulse: pulse.clone(),
+            twins,
+            ranked_shots,
+            ..DiagnoseOptions::new()
+        };
+        let key = |names: &[&str], pulse: &PulseModel| inputs_key(&ds, names, &with(pulse, 10, 1500)).unwrap();
         let k0 = key(&["datum"], &pulse);
         assert_eq!(k0, key(&["datum"], &pulse), "the same inputs, the same key");
         assert_ne!(k0, key(&["datum", "pulse"], &pulse), "other effects");
         assert_ne!(k0, key(&["datum"], &PulseModel::Gaussian(None)), "another pulse");
-        assert_ne!(k0, inputs_key(&ds, &["datum"], &pulse, 4).unwrap(), "another self-test");
+        assert_ne!(k0, inputs_key(&ds, &["datum"], &with(&pulse, 4, 1500)).unwrap(), "another self-test");
+        assert_ne!(k0, inputs_key(&ds, &["datum"], &with(&pulse, 10, 0)).unwrap(), "another sample");
         // A new file in a table the diagnosis reads.
         let strata = ds.table_file(tables::STRATA, "strata").unwrap();
         std::fs::write(&strata, b"s").unwrap();

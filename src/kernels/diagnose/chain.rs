@@ -15,7 +15,7 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use super::case::{RealAlgorithm, ShotCase, Site, FSIGMA_GRID, SITE_STEP_M};
+use super::case::{RealAlgorithm, ShotCase, SimShot, Site, FSIGMA_GRID, SITE_STEP_M};
 use crate::kernels::gedi::{N_ALGORITHMS, RH_LEN};
 use crate::kernels::scenario::effects::{
     Effect, GeoLevel, WaveParts, WeightMethod, NOMINAL_FSIGMA_M, NOMINAL_PULSE_SIGMA_M, NOMINAL_WEIGHTING,
@@ -78,12 +78,89 @@ pub struct Model {
     pub effects: Vec<Effect>,
     /// Site index (`SimShot::sites`) of a shot, by shot number; absent = the collocated position.
     pub placement: Arc<HashMap<u64, usize>>,
+    /// Pulsed parts computed once, used where they are this model's ([`PulsedSites`]).
+    pub pulsed: PulsedSites,
+}
+
+/// What a site's pulsed parts depend on in a model: the pulse choice, the weighting method, the
+/// footprint σ and the extra pulse σ (compared as numbers: an extra σ of −0 is 0).
+type PulseSignature = (PulseChoice, Weighting, f64, f64);
+
+fn pulse_signature(m: &Model) -> PulseSignature {
+    (m.config.pulse, m.weighting().0, m.fsigma(), m.extra_pulse_sigma())
+}
+
+/// The pulsed parts ([`pulsed_parts`]) of every site of a set of shots under one model, computed
+/// once: the chosen configuration's, which the ranking and the self-test re-place shots and make
+/// twins with again and again (twins share their shots' sites). A model carries them
+/// ([`Model::with_pulsed`]); one whose parts before the pulse differ, or a site, pulse or bin
+/// size they were not made for, computes its own. The same numbers either way.
+#[derive(Clone, Default)]
+pub struct PulsedSites(Option<Arc<PulsedTable>>);
+
+struct PulsedTable {
+    signature: PulseSignature,
+    /// By a site's address: the address of the pulse and the bin size the parts were made with,
+    /// and the parts.
+    parts: HashMap<usize, (usize, f64, WaveParts)>,
+    /// The shots whose sites these are, kept alive so that no address is reused.
+    _shots: Vec<Arc<SimShot>>,
+}
+
+fn address<T>(t: Option<&T>) -> usize {
+    t.map_or(0, |t| t as *const T as usize)
+}
+
+impl PulsedSites {
+    /// The parts of every site of `cases` under `model`.
+    pub fn new(cases: &[&ShotCase], model: &Model) -> PulsedSites {
+        let parts = cases
+            .par_iter()
+            .flat_map_iter(|c| {
+                let pulse = c.real.pulse.as_deref();
+                c.sim.sites.iter().filter(|s| !s.variants.is_empty()).map(move |s| {
+                    let parts = pulsed_parts(c.sim.dz, s, model, pulse);
+                    (address(Some(s)), (address(pulse), c.sim.dz, parts))
+                })
+            })
+            .collect();
+        PulsedSites(Some(Arc::new(PulsedTable {
+            signature: pulse_signature(model),
+            parts,
+            _shots: cases.iter().map(|c| c.sim.clone()).collect(),
+        })))
+    }
+
+    /// The parts of `site` under `model` with `pulse` and bins of `dz`, if these are they.
+    fn get(&self, site: &Site, model: &Model, pulse: Option<&Pulse>, dz: f64) -> Option<&WaveParts> {
+        let table = self.0.as_ref()?;
+        let (p, d, parts) = table.parts.get(&address(Some(site)))?;
+        (*p == address(pulse) && *d == dz && table.signature == pulse_signature(model)).then_some(parts)
+    }
+}
+
+impl PartialEq for PulsedSites {
+    /// A cache: it never changes what a model is.
+    fn eq(&self, _: &PulsedSites) -> bool {
+        true
+    }
+}
+
+impl std::fmt::Debug for PulsedSites {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "PulsedSites({} sites)", self.0.as_ref().map_or(0, |t| t.parts.len()))
+    }
 }
 
 impl Model {
     /// The configuration `config` without effects, at the collocated positions.
     pub fn configured(config: Configuration) -> Model {
         Model { config, ..Model::default() }
+    }
+
+    /// This model using `pulsed` where they are its parts.
+    pub fn with_pulsed(self, pulsed: &PulsedSites) -> Model {
+        Model { pulsed: pulsed.clone(), ..self }
     }
 
     /// This model with `e` added (same placement).
@@ -219,14 +296,40 @@ pub fn simulated_wave(case: &ShotCase, model: &Model) -> Vec<f64> {
 /// The noise-free simulated waveform at `site` (bins of `dz` from `site.z0`) with the shot's
 /// recorded `pulse`, if any.
 pub fn simulated_wave_at(dz: f64, site: &Site, model: &Model, pulse: Option<&Pulse>) -> Vec<f64> {
+    if let Some(parts) = model.pulsed.get(site, model, pulse, dz) {
+        return composed_after_pulse(parts, model);
+    }
     let mut parts = pulsed_parts(dz, site, model, pulse);
     model.apply_after_pulse(&mut parts);
     composed(&parts, model)
 }
 
+/// `composed` of `parts` with `model`'s after-pulse effects applied, without copying them: each
+/// bin's canopy scaled by every band it lies in, in the effects' order, as
+/// [`Model::apply_after_pulse`] does.
+fn composed_after_pulse(parts: &WaveParts, model: &Model) -> Vec<f64> {
+    let bands: Vec<(f64, f64, f64)> = model.effects.iter().filter_map(Effect::canopy_band).collect();
+    let rho = model.weighting().1;
+    (parts.canopy.iter().zip(&parts.ground).enumerate())
+        .map(|(k, (&c, &g))| {
+            let c = match bands.as_slice() {
+                [] => c,
+                bands => {
+                    let h = parts.height(k);
+                    bands.iter().fold(c, |c, &(lo, hi, f)| if (lo..hi).contains(&h) { c * f } else { c })
+                }
+            };
+            (c + rho * g).max(0.0)
+        })
+        .collect()
+}
+
 /// The ground and canopy parts at `site` under `model`'s weighting and footprint, convolved with
 /// its pulse: [`simulated_wave_at`] before the effects that act after the pulse.
 pub fn pulsed_parts(dz: f64, site: &Site, model: &Model, pulse: Option<&Pulse>) -> WaveParts {
+    if let Some(parts) = model.pulsed.get(site, model, pulse, dz) {
+        return parts.clone();
+    }
     let (ground, canopy) = parts_at(site, model.weighting().0, model.fsigma());
     WaveParts {
         ground: model.apply_pulse(&ground, pulse, dz),
@@ -255,18 +358,48 @@ pub fn same_before_pulse(model: &Model, other: &Model) -> bool {
         && Arc::ptr_eq(&model.placement, &other.placement)
 }
 
+/// Σx, Σx² and the count of a real waveform's samples: the same at every site a shot is
+/// correlated at ([`correlation`]).
+#[derive(Debug, Clone, Copy)]
+struct RealSums {
+    n: f64,
+    sx: f64,
+    sxx: f64,
+}
+
+impl RealSums {
+    fn of(wave: &[f32]) -> RealSums {
+        let (mut sx, mut sxx) = (0.0, 0.0);
+        for &r in wave {
+            let x = f64::from(r);
+            sx += x;
+            sxx += x * x;
+        }
+        RealSums { n: wave.len() as f64, sx, sxx }
+    }
+}
+
 /// Pearson correlation between the real waveform of `case` (elevations through the nominal geoid
 /// and the model's vertical offset) and `wave` (bins of `dz` from `z0`), read at the real
-/// samples by linear interpolation: the collocation's measure of fit of a position.
-fn correlation(case: &ShotCase, model: &Model, wave: &[f64], z0: f64, dz: f64) -> f64 {
+/// samples by linear interpolation: the collocation's measure of fit of a position. `real`: the
+/// real waveform's [`RealSums`]. `wave` is 0 outside its bins, so only the real samples within
+/// them add to the sums that involve it.
+fn correlation(case: &ShotCase, model: &Model, wave: &[f64], z0: f64, dz: f64, real: RealSums) -> f64 {
     let top = case.real.bin0 - model.vertical_offset_m();
-    let pairs = case
-        .real
-        .wave
-        .iter()
-        .enumerate()
-        .map(|(s, &r)| (f64::from(r), value_at(wave, z0, dz, top - s as f64 * GEDI_BIN_M)));
-    pearson(pairs, 2)
+    let samples = &case.real.wave;
+    // Sample s lies at p = (z0 − top + s·b)/dz bins into `wave`, inside for 0 ≤ p < len − 1;
+    // a sample more on each side (value_at gives 0 there).
+    let bins = |p: f64| (p * dz + top - z0) / GEDI_BIN_M;
+    let lo = (bins(0.0).floor() - 1.0).clamp(0.0, samples.len() as f64) as usize;
+    let hi = (bins(wave.len() as f64 - 1.0).ceil() + 2.0).clamp(lo as f64, samples.len() as f64) as usize;
+    let (mut sy, mut syy, mut sxy) = (0.0, 0.0, 0.0);
+    for (s, &r) in samples.iter().enumerate().take(hi).skip(lo) {
+        let (x, y) = (f64::from(r), value_at(wave, z0, dz, top - s as f64 * GEDI_BIN_M));
+        sy += y;
+        syy += y * y;
+        sxy += x * y;
+    }
+    pearson_of(real.n, real.sx, sy, real.sxx, syy, sxy, 2)
 }
 
 /// The value of `wave` (bins of `dz` from `z0`, downwards) at elevation `z` by linear
@@ -293,6 +426,11 @@ pub(super) fn pearson(pairs: impl Iterator<Item = (f64, f64)>, min_n: usize) -> 
         syy += y * y;
         sxy += x * y;
     }
+    pearson_of(n, sx, sy, sxx, syy, sxy, min_n)
+}
+
+/// Pearson r from the sums of n pairs; NaN with fewer than `min_n` pairs or without spread.
+fn pearson_of(n: f64, sx: f64, sy: f64, sxx: f64, syy: f64, sxy: f64, min_n: usize) -> f64 {
     let var = (sxx - sx * sx / n) * (syy - sy * sy / n);
     if n >= min_n as f64 && var > 0.0 {
         (sxy - sx * sy / n) / var.sqrt()
@@ -322,6 +460,7 @@ pub fn reposition(cases: &[&ShotCase], model: &Model) -> Model {
             if !movable(c) {
                 return Vec::new();
             }
+            let real = RealSums::of(&c.real.wave);
             c.sim
                 .sites
                 .iter()
@@ -330,7 +469,7 @@ pub fn reposition(cases: &[&ShotCase], model: &Model) -> Model {
                         f64::NAN
                     } else {
                         let wave = simulated_wave_at(c.sim.dz, s, model, c.real.pulse.as_deref());
-                        correlation(c, model, &wave, s.z0, c.sim.dz)
+                        correlation(c, model, &wave, s.z0, c.sim.dz, real)
                     }
                 })
                 .collect()

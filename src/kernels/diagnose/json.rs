@@ -398,7 +398,17 @@ pub struct WaveformResidualJson {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ShotsJson {
     pub read: usize,
+    /// Shots whose baseline gap (`where`) was measured.
     pub used: usize,
+    /// Shots of the tracks drawn for the configuration, the effects and the self-test
+    /// (`sample::ranked_tracks`), and those tracks.
+    #[serde(default)]
+    pub ranked: usize,
+    #[serde(default)]
+    pub ranked_tracks: usize,
+    /// The limit the tracks were drawn to (`--ranked-shots`; 0: every shot).
+    #[serde(default)]
+    pub ranked_limit: usize,
     pub re_placed_per_hypothesis: usize,
     pub pairs_ground_mismatch: usize,
     pub dropped: Vec<DroppedJson>,
@@ -593,8 +603,8 @@ impl DiagnosisJson {
                 lcs: mean(|p| p.lcs),
                 mean_abs_bias_als_frame: finite(w.overall.mean_abs_bias_als),
                 ground_bias_m: finite(w.overall.ground_bias),
-                n_shots: d.n_shots,
-                n_tracks: d.n_tracks,
+                n_shots: d.n_located,
+                n_tracks: d.n_located_tracks,
             },
             configuration: ConfigurationJson::of(&d.configuration),
             nominal_chain: Gap::of(&d.nominal),
@@ -651,7 +661,10 @@ impl DiagnosisJson {
             },
             shots: ShotsJson {
                 read: shots_read,
-                used: d.n_shots,
+                used: d.n_located,
+                ranked: d.n_shots,
+                ranked_tracks: d.n_tracks,
+                ranked_limit: 0,
                 re_placed_per_hypothesis: d.n_replaceable,
                 pairs_ground_mismatch: d.mismatched,
                 dropped: dropped.iter().map(|(reason, n)| DroppedJson { reason: reason.clone(), n: *n }).collect(),

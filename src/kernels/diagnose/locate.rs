@@ -69,8 +69,8 @@ fn squared_error(s: &GapSums) -> f64 {
     (0..N_PCT).map(|k| s.rh.syy[k] - 2.0 * s.rh.syp[k] + s.rh.spp[k]).sum()
 }
 
-pub fn locate(cases: &[ShotCase]) -> Where {
-    let per: Vec<GapSums> = cases.iter().map(baseline_sums).collect();
+pub fn locate(cases: &[&ShotCase]) -> Where {
+    let per: Vec<GapSums> = cases.iter().map(|c| baseline_sums(c)).collect();
     let mut all = GapSums::default();
     per.iter().for_each(|s| all.merge(s));
     let overall = all.metrics();
@@ -117,7 +117,7 @@ pub fn locate(cases: &[ShotCase]) -> Where {
 /// Mean of the real and simulated waveforms (each normalised to unit energy) on the height grid
 /// of [`profile`](super::profile), the nominal chain's simulation against the real waveform at
 /// the nominal geoid.
-pub fn residual(cases: &[ShotCase]) -> WaveResidual {
+pub fn residual(cases: &[&ShotCase]) -> WaveResidual {
     let mut real = vec![0.0; PROFILE_BINS];
     let mut sim = vec![0.0; PROFILE_BINS];
     let mut n = 0;

@@ -16,6 +16,7 @@
 //! - [`rank`]: **which** and **how far** — cross-fitted on tracks, held-out shrink with bootstrap
 //!   intervals, the greedy ladder, `unexplained`.
 //! - [`geolocation`]: the ground test that per-shot geolocation must pass.
+//! - [`sample`]: the shots the effects are ranked on (whole tracks, up to a number of shots).
 //! - [`selftest`]: how often the verdict is right — twins of the shots with each leading
 //!   candidate planted, and with none, ranked the same way; the verdict follows from them.
 
@@ -29,6 +30,7 @@ pub mod json;
 pub mod locate;
 pub mod profile;
 pub mod rank;
+pub mod sample;
 pub mod selftest;
 
 pub use case::ShotCase;
@@ -47,7 +49,13 @@ pub struct Diagnosis {
     pub self_test: Option<selftest::SelfTest>,
     /// What the diagnosis concludes: the ranking, decided by the self-test ([`selftest::verdict`]).
     pub verdict: selftest::Verdict,
+    /// Shots ranked (the configuration, the effects, the self-test).
     pub n_shots: usize,
+    /// Shots whose baseline gap `where_` measures: the ranked ones and the others
+    /// ([`sample::ranked_tracks`]).
+    pub n_located: usize,
+    /// Tracks of the shots located.
+    pub n_located_tracks: usize,
     /// Shots of short collocation segments, which each hypothesis re-places (`chain::reposition`).
     pub n_replaceable: usize,
     pub n_tracks: usize,
@@ -57,19 +65,33 @@ pub struct Diagnosis {
 
 /// Diagnose `cases` with the effects `names` (normally [`fit::FITTED_EFFECTS`]) and a self-test of
 /// `twins` twin sets per planted hypothesis (0: none, the ranking's intervals decide alone);
-/// `on_step` hears each effect tried.
-pub fn diagnose(mut cases: Vec<ShotCase>, names: &[&str], twins: usize, on_step: &dyn Fn(&str)) -> Diagnosis {
-    let where_ = locate::locate(&cases);
+/// `on_step` hears each effect tried. `located` are shots outside the ranked sample
+/// ([`sample`]): only where the gap lies is measured on them (with `cases`).
+pub fn diagnose(
+    mut cases: Vec<ShotCase>,
+    located: &[ShotCase],
+    names: &[&str],
+    twins: usize,
+    on_step: &dyn Fn(&str),
+) -> Diagnosis {
+    let every: Vec<&ShotCase> = cases.iter().chain(located).collect();
+    let where_ = locate::locate(&every);
+    let n_located_tracks = every.iter().map(|c| c.real.track.as_str()).collect::<std::collections::BTreeSet<_>>().len();
+    let n_located = every.len();
+    drop(every);
     case::set_nominal_noise(&mut cases);
     let mismatched = flag_ground_mismatches(&mut cases);
     let cases = &cases;
     let folds = rank::Folds::new(cases);
     let recorded = cases.iter().any(|c| c.real.pulse.is_some());
     let configuration = configuration::choose(&folds, &configuration::candidates(recorded), on_step);
-    let ranking = rank::rank(&folds, &configuration, names, on_step);
+    // Every site's pulsed parts under the chosen configuration, shared by the ranking and the
+    // self-test (its twins have their shots' sites).
+    let pulsed = chain::PulsedSites::new(&folds.cases, &chain::Model::configured(configuration.chosen));
+    let ranking = rank::rank(&folds, &configuration, &pulsed, names, on_step);
     let nominal = fit::total(&configuration.gaps).metrics();
     let self_test = (twins > 0 && !ranking.effects.is_empty())
-        .then(|| selftest::run(cases, configuration.chosen, &ranking, names, twins, on_step));
+        .then(|| selftest::run(cases, configuration.chosen, &pulsed, &ranking, names, twins, on_step));
     let verdict = selftest::verdict(&ranking, self_test.as_ref());
     let n_replaceable = cases.iter().filter(|c| c.sim.short_segment && c.sim.sites.len() > 1).count();
     Diagnosis {
@@ -80,6 +102,8 @@ pub fn diagnose(mut cases: Vec<ShotCase>, names: &[&str], twins: usize, on_step:
         self_test,
         verdict,
         n_shots: cases.len(),
+        n_located,
+        n_located_tracks,
         n_replaceable,
         n_tracks: folds.n_tracks,
         mismatched,

@@ -12,7 +12,7 @@
 //! [`ProfileSums`] like the RH gap, so that tracks and bootstrap resamples combine by addition.
 
 use super::case::{ShotCase, Site};
-use super::chain::{composed, pulsed_parts, same_before_pulse, simulated_wave, Model};
+use super::chain::{pulsed_parts, same_before_pulse, simulated_wave, Model};
 use crate::kernels::scenario::effects::{Effect, WaveParts};
 use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
 
@@ -26,9 +26,19 @@ pub const PROFILE_GROUPS: usize = 2;
 /// Add `v` at height `h` to `acc`, shared between the two nearest bin centres (linear weights):
 /// 1 ns samples (0.15 m) do not tile 0.5 m bins, and nearest-bin counting would show a saw-tooth.
 pub fn add_at_height(acc: &mut [f64], h: f64, v: f64) {
+    add_at(acc, grid_place(h), v);
+}
+
+/// Where height `h` lands on the height grid: the lower bin centre's index (as a float, may lie
+/// outside the grid) and the upper one's weight.
+fn grid_place(h: f64) -> (f64, f64) {
     let p = (h - PROFILE_MIN_M) / PROFILE_BIN_M - 0.5;
     let i = p.floor();
-    let w = p - i;
+    (i, p - i)
+}
+
+/// [`add_at_height`] at a place [`grid_place`] gave.
+fn add_at(acc: &mut [f64], (i, w): (f64, f64), v: f64) {
     for (j, f) in [(i, 1.0 - w), (i + 1.0, w)] {
         if j >= 0.0 && (j as usize) < acc.len() {
             acc[j as usize] += v * f;
@@ -70,12 +80,17 @@ fn profile_of(wave: &[f64], z0: f64, dz: f64, ground: f64) -> Option<Vec<f64>> {
 }
 
 fn normalised(mut v: Vec<f64>) -> Option<Vec<f64>> {
+    normalise(&mut v).then_some(v)
+}
+
+/// Scale `v` to unit sum; false (unchanged) without a positive finite sum.
+fn normalise(v: &mut [f64]) -> bool {
     let s: f64 = v.iter().sum();
     if !(s > 0.0 && s.is_finite()) {
-        return None;
+        return false;
     }
     v.iter_mut().for_each(|x| *x /= s);
-    Some(v)
+    true
 }
 
 /// Slope group of a case.
@@ -202,8 +217,16 @@ pub struct AfterPulse<'a> {
     shots: std::cell::OnceCell<Vec<Option<Prepared>>>,
 }
 
-/// A shot's real profile, its pulsed parts and its slope group.
-type Prepared = (Vec<f64>, WaveParts, usize);
+/// A shot prepared for the effects that act after the pulse.
+struct Prepared {
+    /// Its real profile.
+    real: Vec<f64>,
+    /// Its pulsed parts, the base model's after-pulse effects applied.
+    parts: WaveParts,
+    group: usize,
+    /// Where each bin of the parts lands on the height grid ([`grid_place`]).
+    places: Vec<(f64, f64)>,
+}
 
 impl<'a> AfterPulse<'a> {
     pub fn new(cases: &'a [&'a ShotCase], base: &Model) -> AfterPulse<'a> {
@@ -220,7 +243,11 @@ impl<'a> AfterPulse<'a> {
                 let real = real_profile(c, site, vo)?;
                 let mut parts = pulsed_parts(c.sim.dz, site, base, c.real.pulse.as_deref());
                 base.apply_after_pulse(&mut parts);
-                Some((real, parts, group(c)))
+                // As profile_of places bin k of the composed waveform.
+                let places = (0..parts.canopy.len())
+                    .map(|k| grid_place(parts.z0 - k as f64 * parts.dz - parts.ground_z))
+                    .collect();
+                Some(Prepared { real, parts, group: group(c), places })
             })
             .collect()
     }
@@ -232,17 +259,33 @@ impl<'a> AfterPulse<'a> {
         if !same_before_pulse(&model, &self.base) {
             return sums(self.cases, &model);
         }
+        // `profile_of(composed(parts with e applied))`, bin by bin without the copies: the canopy
+        // band of e scaled, ρ·ground added, clipped at 0, placed on the grid where it was prepared.
+        let (band, rho) = (e.canopy_band(), model.weighting().1);
         let profiles: Vec<ShotProfile> = self
             .shots
             .get_or_init(|| self.prepare())
             .par_iter()
-            .filter_map(|s| {
-                let (real, parts, group) = s.as_ref()?;
-                let mut parts = parts.clone();
-                e.apply_waveform(&mut parts);
-                let m = profile_of(&composed(&parts, &model), parts.z0, parts.dz, parts.ground_z)?;
-                Some(difference(*group, real, &m))
-            })
+            .map_init(
+                || vec![0.0; PROFILE_BINS],
+                |m, s| {
+                    let p = s.as_ref()?;
+                    m.iter_mut().for_each(|v| *v = 0.0);
+                    let parts = &p.parts;
+                    for (k, (&c, &g)) in parts.canopy.iter().zip(&parts.ground).enumerate() {
+                        let c = match band {
+                            Some((lo, hi, factor)) if (lo..hi).contains(&parts.height(k)) => c * factor,
+                            _ => c,
+                        };
+                        let v = (c + rho * g).max(0.0);
+                        if v != 0.0 {
+                            add_at(m, p.places[k], v);
+                        }
+                    }
+                    normalise(m).then(|| difference(p.group, &p.real, m))
+                },
+            )
+            .flatten()
             .collect();
         profiles.iter().collect()
     }

@@ -13,7 +13,7 @@
 use std::collections::BTreeMap;
 
 use super::case::ShotCase;
-use super::chain::{null_cases, reposition, Model};
+use super::chain::{null_cases, reposition, Model, PulsedSites};
 use super::configuration::ConfigurationChoice;
 use super::fit::{evaluate, fit, geolocation, ShotGap};
 use super::gap::{Frame, GapMetrics, GapSums};
@@ -409,10 +409,11 @@ pub struct State {
 
 impl State {
     /// The chosen configuration without effects: what the first effects are tried on.
-    pub fn configured(choice: &ConfigurationChoice) -> State {
+    /// `pulsed`: the chosen configuration's pulsed parts, which its models use.
+    pub fn configured(choice: &ConfigurationChoice, pulsed: &PulsedSites) -> State {
         State {
-            full: Model::configured(choice.chosen),
-            folds: choice.fold_chosen.map(Model::configured),
+            full: Model::configured(choice.chosen).with_pulsed(pulsed),
+            folds: choice.fold_chosen.map(|c| Model::configured(c).with_pulsed(pulsed)),
             gaps: choice.gaps.clone(),
         }
     }
@@ -472,8 +473,14 @@ pub struct Ranking {
 
 /// Rank `names` on the chosen configuration, then climb the ladder. `on_step` is told each
 /// effect tried.
-pub fn rank(folds: &Folds, choice: &ConfigurationChoice, names: &[&str], on_step: &dyn Fn(&str)) -> Ranking {
-    let nominal = State::configured(choice);
+pub fn rank(
+    folds: &Folds,
+    choice: &ConfigurationChoice,
+    pulsed: &PulsedSites,
+    names: &[&str],
+    on_step: &dyn Fn(&str),
+) -> Ranking {
+    let nominal = State::configured(choice, pulsed);
     let effects = rank_effects(folds, &nominal, names, on_step);
     let unexplained = !explained(&effects);
     let ambiguous_with = near_ties(folds, &nominal.gaps, &effects);

@@ -14,7 +14,7 @@
 use rayon::prelude::*;
 
 use super::case::{set_nominal_noise, ShotCase, SITE_STEP_M};
-use super::chain::{reposition, twin_case, Configuration, Model, Scratch};
+use super::chain::{reposition, twin_case, Configuration, Model, PulsedSites, Scratch};
 use super::rank::{named_first, rank_effects, Folds, Ranking, State};
 use crate::kernels::scenario::effects::{Effect, GeoLevel};
 use crate::kernels::scenario::rng::{derive_seed, Stream};
@@ -177,6 +177,7 @@ pub fn leading(ranking: &Ranking) -> Vec<Effect> {
 pub fn run(
     cases: &[ShotCase],
     configuration: Configuration,
+    pulsed: &PulsedSites,
     ranking: &Ranking,
     names: &[&str],
     twins: usize,
@@ -184,7 +185,7 @@ pub fn run(
 ) -> SelfTest {
     let refs: Vec<&ShotCase> = cases.iter().collect();
     // The real shots' positions under the chosen configuration: where their twins are made.
-    let placed = reposition(&refs, &Model::configured(configuration));
+    let placed = reposition(&refs, &Model::configured(configuration).with_pulsed(pulsed));
     let reference_dz = median(cases.iter().filter_map(|c| c.real.collocation_dz).collect());
     let hypotheses: Vec<Option<Effect>> = leading(ranking).into_iter().map(Some).chain([None]).collect();
     let plantings = hypotheses
@@ -199,7 +200,7 @@ pub fn run(
                 .map(|r| {
                     on_step(&format!("self-test: {label} planted, twin set {} of {twins}", r + 1));
                     let set = twin_set(cases, &truth, reference_dz, &format!("{label} {r}"));
-                    diagnose_twins(set, configuration, names)
+                    diagnose_twins(set, configuration, pulsed, names)
                 })
                 .collect();
             Planting { effect, named }
@@ -210,11 +211,16 @@ pub fn run(
 
 /// The effect a set of twins is named first for, ranked as the real shots are (their noise level
 /// and ground mismatches assessed anew) on the configuration given.
-fn diagnose_twins(mut twins: Vec<ShotCase>, configuration: Configuration, names: &[&str]) -> Option<String> {
+fn diagnose_twins(
+    mut twins: Vec<ShotCase>,
+    configuration: Configuration,
+    pulsed: &PulsedSites,
+    names: &[&str],
+) -> Option<String> {
     set_nominal_noise(&mut twins);
     super::flag_ground_mismatches(&mut twins);
     let folds = Folds::new(&twins);
-    let state = State::configured(&super::configuration::fixed(&folds, configuration));
+    let state = State::configured(&super::configuration::fixed(&folds, configuration), pulsed);
     let trials = rank_effects(&folds, &state, names, &|_| ());
     named_first(&trials).map(|t| t.effect.name().to_string())
 }

@@ -413,12 +413,20 @@ impl Effect {
         }
     }
 
+    /// The band of heights above ground [lo, hi) (m) whose canopy energy this effect scales, and
+    /// the factor (`canopy_change`, `occlusion`); `None` for the other effects.
+    pub fn canopy_band(&self) -> Option<(f64, f64, f64)> {
+        match *self {
+            Effect::CanopyChange { height_m, fraction } => Some((height_m, f64::INFINITY, 1.0 - fraction)),
+            Effect::Occlusion { height_m, gain } => Some((OCCLUSION_FLOOR_M, height_m, 1.0 + gain)),
+            _ => None,
+        }
+    }
+
     /// Change the canopy part of a simulated waveform by height above ground.
     pub fn apply_waveform(&self, w: &mut WaveParts) {
-        let (lo, hi, factor) = match *self {
-            Effect::CanopyChange { height_m, fraction } => (height_m, f64::INFINITY, 1.0 - fraction),
-            Effect::Occlusion { height_m, gain } => (OCCLUSION_FLOOR_M, height_m, 1.0 + gain),
-            _ => return,
+        let Some((lo, hi, factor)) = self.canopy_band() else {
+            return;
         };
         for k in 0..w.canopy.len() {
             let h = w.height(k);
