@@ -372,3 +372,33 @@ fn simulate_on_a_dataset_never_writes_into_runs_sim_table() {
     ]);
     assert!(ok && out.contains("\n1"), "{out} {err}");
 }
+
+#[test]
+fn a_granule_repeating_the_shot_numbers_of_another_granule_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    // Another granule name, other content (one waveform sample changed), the same shot numbers.
+    let copy = tmp.path().join("GEDI01_B_2019109080338_O01980_T05337_02_003_01_sub.h5");
+    std::fs::copy(data(L1B), &copy).unwrap();
+    {
+        let f = hdf5::File::open_rw(&copy).unwrap();
+        let ds = f.dataset("BEAM0001/rxwaveform").unwrap();
+        let mut v: Vec<f32> = ds.read_raw().unwrap();
+        v[0] += 1.0;
+        ds.write_raw(&v).unwrap();
+    }
+    let ds = tmp.path().join("ds");
+    let (ok, _, err) = gedisim(&["ingest", "gedi", "--out", s(&ds), "--l1b", s(&data(L1B))]);
+    assert!(ok, "{err}");
+    let rows = |ds: &Path| common::files_with_suffix(&ds.join("shots"), ".parquet").len();
+    let (ok, _, err) = gedisim(&["ingest", "gedi", "--out", s(&ds), "--l1b", s(&copy)]);
+    refused(ok, &err, &[s(&copy), "shot_number", "GEDI01_B_2019108080338_O01964", "unique across GEDI"]);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert_eq!(rows(&ds), 1, "the dataset keeps only the first granule");
+    // Both in one call, into a new dataset: the second to be written is refused.
+    let both = tmp.path().join("both");
+    let (ok, _, err) = gedisim(&["ingest", "gedi", "--out", s(&both), "--l1b", s(&data(L1B)), s(&copy)]);
+    refused(ok, &err, &["shot_number", "unique across GEDI"]);
+    // Re-ingesting the first granule itself (unchanged, or changed) is not a conflict with itself.
+    let (ok, _, err) = gedisim(&["ingest", "gedi", "--out", s(&ds), "--l1b", s(&data(L1B))]);
+    assert!(ok, "{err}");
+}

@@ -406,13 +406,16 @@ fn correlation(case: &ShotCase, model: &Model, wave: &[f64], z0: f64, dz: f64, r
 /// interpolation; 0 outside it.
 pub(super) fn value_at(wave: &[f64], z0: f64, dz: f64, z: f64) -> f64 {
     let p = (z0 - z) / dz;
-    let i = p.floor();
-    if i >= 0.0 && (i as usize) + 1 < wave.len() {
-        let (i, t) = (i as usize, p - i);
-        (1.0 - t) * wave[i] + t * wave[i + 1]
-    } else {
-        0.0
+    // For p ≥ 0 its floor is its truncation (`as`, without the libm call `floor` is on x86-64's
+    // baseline); p < 0 and NaN lie outside.
+    if p >= 0.0 {
+        let i = p as usize;
+        if i < wave.len().saturating_sub(1) {
+            let t = p - i as f64;
+            return (1.0 - t) * wave[i] + t * wave[i + 1];
+        }
     }
+    0.0
 }
 
 /// Pearson r of the pairs (x, y); NaN with fewer than `min_n` pairs or without spread.

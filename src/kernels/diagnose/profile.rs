@@ -33,8 +33,23 @@ pub fn add_at_height(acc: &mut [f64], h: f64, v: f64) {
 /// outside the grid) and the upper one's weight.
 fn grid_place(h: f64) -> (f64, f64) {
     let p = (h - PROFILE_MIN_M) / PROFILE_BIN_M - 0.5;
-    let i = p.floor();
+    let i = floor(p);
     (i, p - i)
+}
+
+/// `p.floor()` without the libm call it is on x86-64's baseline (no rounding instruction): the
+/// truncation, one lower for a negative non-integer; exact (|p| < 2⁵² is truncated exactly).
+fn floor(p: f64) -> f64 {
+    if p.abs() < 4.0e15 {
+        let t = p as i64 as f64;
+        if t > p {
+            t - 1.0
+        } else {
+            t
+        }
+    } else {
+        p.floor()
+    }
 }
 
 /// [`add_at_height`] at a place [`grid_place`] gave.
@@ -224,8 +239,11 @@ struct Prepared {
     /// Its pulsed parts, the base model's after-pulse effects applied.
     parts: WaveParts,
     group: usize,
-    /// Where each bin of the parts lands on the height grid ([`grid_place`]).
-    places: Vec<(f64, f64)>,
+    /// The bins of the parts that land on the height grid, and where: the index of the lower bin
+    /// centre plus one (in a grid padded by one bin on each side), its weight and the upper one's
+    /// ([`grid_place`]).
+    bins: std::ops::Range<usize>,
+    places: Vec<(usize, f64, f64)>,
 }
 
 impl<'a> AfterPulse<'a> {
@@ -243,11 +261,19 @@ impl<'a> AfterPulse<'a> {
                 let real = real_profile(c, site, vo)?;
                 let mut parts = pulsed_parts(c.sim.dz, site, base, c.real.pulse.as_deref());
                 base.apply_after_pulse(&mut parts);
-                // As profile_of places bin k of the composed waveform.
-                let places = (0..parts.canopy.len())
-                    .map(|k| grid_place(parts.z0 - k as f64 * parts.dz - parts.ground_z))
+                // As profile_of places bin k of the composed waveform: the lower centre i and
+                // i + 1 land on the grid for −1 ≤ i < PROFILE_BINS.
+                let place = |k: usize| grid_place(parts.z0 - k as f64 * parts.dz - parts.ground_z);
+                let on_grid = |k: &usize| (-1.0..PROFILE_BINS as f64).contains(&place(*k).0);
+                let first = (0..parts.canopy.len()).find(on_grid).unwrap_or(0);
+                let end = (first..parts.canopy.len()).rev().find(on_grid).map_or(first, |k| k + 1);
+                let places = (first..end)
+                    .map(|k| {
+                        let (i, w) = place(k);
+                        ((i + 1.0) as usize, 1.0 - w, w)
+                    })
                     .collect();
-                Some(Prepared { real, parts, group: group(c), places })
+                Some(Prepared { real, parts, group: group(c), bins: first..end, places })
             })
             .collect()
     }
@@ -267,21 +293,24 @@ impl<'a> AfterPulse<'a> {
             .get_or_init(|| self.prepare())
             .par_iter()
             .map_init(
-                || vec![0.0; PROFILE_BINS],
-                |m, s| {
+                || vec![0.0; PROFILE_BINS + 2],
+                |padded, s| {
                     let p = s.as_ref()?;
-                    m.iter_mut().for_each(|v| *v = 0.0);
+                    padded.iter_mut().for_each(|v| *v = 0.0);
                     let parts = &p.parts;
-                    for (k, (&c, &g)) in parts.canopy.iter().zip(&parts.ground).enumerate() {
+                    let (canopy, ground) = (&parts.canopy[p.bins.clone()], &parts.ground[p.bins.clone()]);
+                    for (j, ((&c, &g), &(i, a, w))) in canopy.iter().zip(ground).zip(&p.places).enumerate() {
                         let c = match band {
-                            Some((lo, hi, factor)) if (lo..hi).contains(&parts.height(k)) => c * factor,
+                            Some((lo, hi, factor)) if (lo..hi).contains(&parts.height(p.bins.start + j)) => c * factor,
                             _ => c,
                         };
                         let v = (c + rho * g).max(0.0);
                         if v != 0.0 {
-                            add_at(m, p.places[k], v);
+                            padded[i] += v * a;
+                            padded[i + 1] += v * w;
                         }
                     }
+                    let m = &mut padded[1..=PROFILE_BINS];
                     normalise(m).then(|| difference(p.group, &p.real, m))
                 },
             )

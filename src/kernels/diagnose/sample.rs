@@ -9,7 +9,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use crate::kernels::scenario::rng::derive_seed;
 
 /// Shots ranked by default (`--ranked-shots`): the tracks drawn until they hold this many.
-pub const RANKED_SHOTS: usize = 1500;
+pub const RANKED_SHOTS: usize = 1000;
 
 /// The tracks whose shots are ranked, from the number of shots of each: every track when they hold
 /// at most `max` shots (or `max` is 0), else tracks in an order fixed by a hash of their names —

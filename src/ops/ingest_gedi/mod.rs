@@ -412,6 +412,74 @@ impl ShotsSeen {
     }
 }
 
+/// The shot numbers of the dataset's granules and of those this call writes: a shot number is
+/// unique across GEDI (it encodes the orbit, beam and shot, docs/gedi-products.md §1), so one
+/// seen in two granules is a copy under another name or a broken file, and would put one shot in
+/// two collocation segments, which `run` cannot write (docs/robustness.md).
+struct ShotOwners {
+    /// (shot number, index in `keys`) of every shot the dataset holds, sorted.
+    stored: Vec<(u64, usize)>,
+    keys: Vec<String>,
+    /// Shots written by this call so far, by granule key.
+    claimed: std::sync::Mutex<HashMap<u64, String>>,
+}
+
+impl ShotOwners {
+    /// The shots of every file of the dataset's `shots/` table (one per granule key).
+    fn read(shots_dir: &Path) -> Result<ShotOwners> {
+        let mut stored = Vec::new();
+        let mut keys = Vec::new();
+        for f in crate::dataset::table_files(shots_dir).map_err(|e| Error::file(shots_dir, e))? {
+            let k = keys.len();
+            keys.push(f.file_stem().and_then(|s| s.to_str()).unwrap_or_default().to_string());
+            crate::dataset::read::for_each_batch(&f, Some(&["shot_number"]), None, |c| {
+                stored.extend(c.u64s("shot_number")?.values().iter().map(|&s| (s, k)));
+                Ok(())
+            })?;
+        }
+        stored.sort_unstable();
+        Ok(ShotOwners { stored, keys, claimed: Default::default() })
+    }
+
+    /// Claim the shots of a batch of granule `key`'s rows; refuse one another granule holds
+    /// (its own earlier rows are replaced by this ingest).
+    fn claim(&self, pair: &GranulePair, key: &str, batch: &RecordBatch) -> Result<()> {
+        let Some(sn) = batch.column_by_name("shot_number") else {
+            return Ok(());
+        };
+        use arrow::array::AsArray;
+        let sn = sn.as_primitive::<arrow::datatypes::UInt64Type>();
+        let path = pair.l1b.as_deref().or(pair.l2a.as_deref()).unwrap_or(Path::new(&pair.granule));
+        let refuse = |shot: u64, other: &str| {
+            Err(Error::field(
+                path,
+                "shot_number",
+                format!(
+                    "shot {shot} is also in granule {other}: a shot number is unique across GEDI (a copy of \
+                     that granule, or a broken file)"
+                ),
+            ))
+        };
+        let mut claimed = self.claimed.lock().unwrap_or_else(|e| e.into_inner());
+        for &shot in sn.values().iter() {
+            let from = self.stored.partition_point(|&(s, _)| s < shot);
+            if let Some(&(_, k)) =
+                self.stored[from..].iter().take_while(|(s, _)| *s == shot).find(|(_, k)| self.keys[*k] != key)
+            {
+                return refuse(shot, &self.keys[k]);
+            }
+            match claimed.get(&shot) {
+                Some(other) if other != key => return refuse(shot, other),
+                Some(_) => {}
+                None => {
+                    claimed.insert(shot, key.to_string());
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 fn duplicate_check(path: Option<&Path>, beam: &str, shots: &[u64]) -> Result<()> {
     let mut sorted = shots.to_vec();
     sorted.sort_unstable();
@@ -764,6 +832,7 @@ pub fn ingest_into_dataset(
         }
     }
     let duplicate = copies_of_other_granules(&pairs, &keyed, &recorded)?;
+    let owners = ShotOwners::read(&shots_dir)?;
     let results = pairs
         .par_iter()
         .zip(keyed)
@@ -804,6 +873,7 @@ pub fn ingest_into_dataset(
             let mut seen = ShotsSeen::default();
             let beams = read_granule(pair, opts, &mut |b| {
                 seen.check(pair, &b)?;
+                owners.claim(pair, &key, &b)?;
                 writer.write(&b)
             })?;
             writer.finish()?;
