@@ -391,7 +391,7 @@ fn a_granule_repeating_the_shot_numbers_of_another_granule_is_refused() {
     assert!(ok, "{err}");
     let rows = |ds: &Path| common::files_with_suffix(&ds.join("shots"), ".parquet").len();
     let (ok, _, err) = gedisim(&["ingest", "gedi", "--out", s(&ds), "--l1b", s(&copy)]);
-    refused(ok, &err, &[s(&copy), "shot_number", "GEDI01_B_2019108080338_O01964", "unique across GEDI"]);
+    refused(ok, &err, &[s(&copy), "shot_number", "granule 2019108080338_O01964", "unique across GEDI"]);
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert_eq!(rows(&ds), 1, "the dataset keeps only the first granule");
     // Both in one call, into a new dataset: the second to be written is refused.
