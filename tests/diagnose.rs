@@ -5,7 +5,8 @@
 //! effect.
 //!
 //! World suites: each test builds and diagnoses whole worlds (≈ 9 minutes together on 2 cores), so
-//! `cargo test` leaves them out and `.ci/run` runs them (`cargo test -- --ignored`).
+//! `cargo test` leaves them out and `.ci/run` runs them (`cargo test -- --ignored`). The last test
+//! (the ranked sample, with one effect and no self-test) takes seconds and runs with `cargo test`.
 
 mod common;
 
@@ -265,4 +266,33 @@ fn per_shot_geolocation_on_long_tracks_is_named_and_its_control_is_not() {
     let c = diagnose_world(&tmp.path().join("control"), "none", &["--als", scene, "--seed", "22"]);
     check_contract(&c);
     assert_eq!(c["unexplained"], true, "{:#}", c["effects"][0]);
+}
+
+/// Not a world suite (seconds): a dataset of more shots than `--ranked-shots` is ranked on whole
+/// tracks drawn up to that many, and `where` keeps every shot (docs/diagnosis.md, "Shots ranked").
+#[test]
+fn the_effects_are_ranked_on_whole_tracks_up_to_ranked_shots_and_where_keeps_every_shot() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = tmp.path().join("world");
+    let (ok, _, err) = gedisim(&["scenario", "--effect", "none", "--out", world.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    let (g, a, out) = (world.join("gedi"), world.join("als"), tmp.path().join("diagnosis"));
+    let (g, a, o) = (g.to_str().unwrap(), a.to_str().unwrap(), out.to_str().unwrap());
+    let args = ["diagnose", "--als", a, "--l1b", g, "--l2a", g, "--out", o, "--twins", "0", "--effects", "datum"];
+    let (ok, stdout, err) = gedisim(&[&args[..], &["--ranked-shots", "30"]].concat());
+    assert!(ok, "{err}");
+    let d: Value = serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap()).unwrap();
+    let shots = &d["shots"];
+    let n = |v: &Value| v.as_u64().unwrap();
+    let (used, ranked) = (n(&shots["used"]), n(&shots["ranked"]));
+    assert_eq!(n(&shots["ranked_limit"]), 30);
+    assert!(ranked >= 30 && ranked < used, "{shots}");
+    assert_eq!(n(&d["baseline"]["n_shots"]), used, "where measures every shot");
+    assert!(n(&shots["ranked_tracks"]) < n(&d["baseline"]["n_tracks"]), "{shots} {}", d["baseline"]);
+    assert!(stdout.contains(&format!("use the {ranked} shots of")) && stdout.contains("--ranked-shots"), "{stdout}");
+    // Another limit is another diagnosis (its key differs): 0 ranks every shot.
+    let (ok, _, err) = gedisim(&[&args[..], &["--ranked-shots", "0"]].concat());
+    assert!(ok, "{err}");
+    let d: Value = serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap()).unwrap();
+    assert_eq!(n(&d["shots"]["ranked"]), n(&d["shots"]["used"]), "0: every shot ranked");
 }
