@@ -312,13 +312,7 @@ fn composed_after_pulse(parts: &WaveParts, model: &Model) -> Vec<f64> {
     let rho = model.weighting().1;
     (parts.canopy.iter().zip(&parts.ground).enumerate())
         .map(|(k, (&c, &g))| {
-            let c = match bands.as_slice() {
-                [] => c,
-                bands => {
-                    let h = parts.height(k);
-                    bands.iter().fold(c, |c, &(lo, hi, f)| if (lo..hi).contains(&h) { c * f } else { c })
-                }
-            };
+            let c = if bands.is_empty() { c } else { Effect::scaled_in_bands(c, parts.height(k), &bands) };
             (c + rho * g).max(0.0)
         })
         .collect()

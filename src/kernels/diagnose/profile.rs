@@ -288,6 +288,7 @@ impl<'a> AfterPulse<'a> {
         // `profile_of(composed(parts with e applied))`, bin by bin without the copies: the canopy
         // band of e scaled, ρ·ground added, clipped at 0, placed on the grid where it was prepared.
         let (band, rho) = (e.canopy_band(), model.weighting().1);
+        let bands = band.as_slice();
         let profiles: Vec<ShotProfile> = self
             .shots
             .get_or_init(|| self.prepare())
@@ -300,9 +301,10 @@ impl<'a> AfterPulse<'a> {
                     let parts = &p.parts;
                     let (canopy, ground) = (&parts.canopy[p.bins.clone()], &parts.ground[p.bins.clone()]);
                     for (j, ((&c, &g), &(i, a, w))) in canopy.iter().zip(ground).zip(&p.places).enumerate() {
-                        let c = match band {
-                            Some((lo, hi, factor)) if (lo..hi).contains(&parts.height(p.bins.start + j)) => c * factor,
-                            _ => c,
+                        let c = if bands.is_empty() {
+                            c
+                        } else {
+                            Effect::scaled_in_bands(c, parts.height(p.bins.start + j), bands)
                         };
                         let v = (c + rho * g).max(0.0);
                         if v != 0.0 {

@@ -423,6 +423,12 @@ impl Effect {
         }
     }
 
+    /// Canopy energy `c` at height `h` above ground scaled by every band (`canopy_band`) it lies
+    /// in, in their order: what [`Effect::apply_waveform`] of each does to one bin.
+    pub fn scaled_in_bands(c: f64, h: f64, bands: &[(f64, f64, f64)]) -> f64 {
+        bands.iter().fold(c, |c, &(lo, hi, factor)| if (lo..hi).contains(&h) { c * factor } else { c })
+    }
+
     /// Change the canopy part of a simulated waveform by height above ground.
     pub fn apply_waveform(&self, w: &mut WaveParts) {
         let Some((lo, hi, factor)) = self.canopy_band() else {
