@@ -402,3 +402,32 @@ fn a_granule_repeating_the_shot_numbers_of_another_granule_is_refused() {
     let (ok, _, err) = gedisim(&["ingest", "gedi", "--out", s(&ds), "--l1b", s(&data(L1B))]);
     assert!(ok, "{err}");
 }
+
+#[test]
+fn a_las_whose_header_bounds_miss_its_points_is_said_in_direct_mode() {
+    let tmp = tempfile::tempdir().unwrap();
+    let tile = tmp.path().join("moved.las");
+    grid_tile(&tile, 1, 1);
+    // The header's x bounds 10 km east of the points (700 000–700 040 m): max X at byte 179, min X at 187.
+    let mut bytes = std::fs::read(&tile).unwrap();
+    for at in [179, 187] {
+        let v = f64::from_le_bytes(bytes[at..at + 8].try_into().unwrap()) + 10_000.0;
+        bytes[at..at + 8].copy_from_slice(&v.to_le_bytes());
+    }
+    std::fs::write(&tile, bytes).unwrap();
+    let simulate = |x: f64| {
+        let csv = tmp.path().join("plots.csv");
+        std::fs::write(&csv, format!("id,x,y\np,{x},6600020\n")).unwrap();
+        let out = tmp.path().join("out.parquet");
+        gedisim(&["simulate", "--als", s(&tile), "--footprints", s(&csv), "--out", s(&out)])
+    };
+    // Where the points are: outside the header, said (it was a silent no_points).
+    let (ok, _, err) = simulate(700_020.0);
+    assert!(ok, "{err}");
+    assert!(err.contains("warning") && err.contains("outside every --als file's header bounds"), "{err}");
+    // Where the header says: the file is read, and its points found beyond its header.
+    let (ok, _, err) = simulate(710_020.0);
+    assert!(ok, "{err}");
+    assert!(err.contains(s(&tile)) && err.contains("beyond the header's bounds"), "{err}");
+    assert!(!err.contains("outside every"), "{err}");
+}

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 use std::time::Instant;
-use tracing::info;
+use tracing::{info, warn};
 
 use clap::Args;
 
@@ -149,6 +149,14 @@ pub fn simulate(a: SimulateArgs) -> Result<()> {
         info!("{p}");
     }
     info!("{} footprints simulated, {} skipped (see the status column) → {}", r.simulated, r.skipped, r.out.display());
+    if r.outside_files > 0 {
+        warn!(
+            "{} footprint(s) lie outside every --als file's header bounds (status no_points unless a neighbouring \
+             file's points reach them): if the points are there, a header's bounds are wrong; `gedisim ingest als` \
+             takes the points' own extent",
+            r.outside_files
+        );
+    }
     if let Some(c) = &r.copc {
         info!("COPC: {c}, {} points within the footprints' read radius", c.points_kept);
     }

@@ -68,6 +68,9 @@ pub struct SimulateReport {
     pub placement: Option<String>,
     /// Direct mode from COPC tiles: what their reads decoded, summed.
     pub copc: Option<CopcRead>,
+    /// Direct mode: footprints whose centre no file's header bounds hold (their status is
+    /// `no_points`, or the points of a neighbouring file).
+    pub outside_files: usize,
 }
 
 /// The LAS/LAZ files of direct mode (folders expanded), each opened once: its header facts and, for
@@ -111,14 +114,23 @@ impl AlsInputs {
         self.files.iter().all(|(_, t, _)| t.is_some())
     }
 
+    /// The first file whose header bounds hold (x, y).
+    fn file_holding(&self, x: f64, y: f64) -> Option<usize> {
+        let holds = |b: &[f64; 6]| (b[0]..=b[3]).contains(&x) && (b[1]..=b[4]).contains(&y);
+        self.files.iter().position(|(_, _, h)| holds(&h.bounds))
+    }
+
+    /// How many of `footprints` no file's header bounds hold.
+    pub fn outside(&self, footprints: &[Footprint]) -> usize {
+        footprints.iter().filter(|f| self.file_holding(f.x, f.y).is_none()).count()
+    }
+
     /// Footprint indices grouped by the first file whose extent holds their centre (then those
     /// no file holds), in footprint order within a group.
     fn group_by_tile(&self, footprints: &[Footprint]) -> Vec<Vec<usize>> {
         let mut groups = vec![Vec::new(); self.files.len() + 1];
         for (i, f) in footprints.iter().enumerate() {
-            let holds = |b: &[f64; 6]| (b[0]..=b[3]).contains(&f.x) && (b[1]..=b[4]).contains(&f.y);
-            let g = self.files.iter().position(|(_, _, h)| holds(&h.bounds)).unwrap_or(self.files.len());
-            groups[g].push(i);
+            groups[self.file_holding(f.x, f.y).unwrap_or(self.files.len())].push(i);
         }
         groups.retain(|g| !g.is_empty());
         groups
@@ -151,7 +163,11 @@ impl AlsInputs {
                     read.add(&CopcRead { nodes_in_tile: 0, points_in_tile: 0, ..r });
                     p
                 }
-                None => crate::io::las::read_points(f)?,
+                None => {
+                    let p = crate::io::las::read_points(f)?;
+                    warn_beyond_bounds(f, &p, &b);
+                    p
+                }
             };
             if drop_classes {
                 p.permute(&kept_by_ingest(&p));
@@ -179,6 +195,30 @@ impl AlsInputs {
             }
         }
         total
+    }
+}
+
+/// How far (m) points may lie outside their file's header bounds before it is said.
+const BOUNDS_SLACK_M: f64 = 1.0;
+
+/// Warn when the points of `file` reach beyond its header `bounds` (a header that was not
+/// rewritten after its points were moved): direct mode finds a file's points by its header, so
+/// footprints there would come out `no_points`; `ingest als` takes the points' own extent.
+fn warn_beyond_bounds(file: &Path, p: &AlsPoints, bounds: &[f64; 6]) {
+    let extent = |v: &[f64]| v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+    let ((x0, x1), (y0, y1)) = (extent(&p.x), extent(&p.y));
+    let beyond = [bounds[0] - x0, x1 - bounds[3], bounds[1] - y0, y1 - bounds[4]].into_iter().fold(0f64, f64::max);
+    if beyond > BOUNDS_SLACK_M {
+        tracing::warn!(
+            "{}: bounds: points reach {beyond:.1} m beyond the header's bounds (x {x0:.1}–{x1:.1}, y {y0:.1}–{y1:.1}; \
+             header x {:.1}–{:.1}, y {:.1}–{:.1}): footprints there may come out no_points; rewrite the header, or \
+             `gedisim ingest als` (it takes the points' extent)",
+            file.display(),
+            bounds[0],
+            bounds[3],
+            bounds[1],
+            bounds[4]
+        );
     }
 }
 
@@ -268,6 +308,7 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
     let profile = opts.profile;
     let mut copc = None;
     let mut placement = None;
+    let mut outside_files = 0;
     let ((simulated, skipped), out) = match &opts.source {
         Source::Dataset { dataset, footprints, out } => {
             let ds = Dataset::open(dataset)?;
@@ -337,12 +378,13 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
             let (footprints, how) = place_footprints(&table, opts.footprints_crs, inputs.epsg, footprints)?;
             placement = Some(how);
             let drop_classes = profile == Profile::Default && !keep_all_classes;
+            outside_files = inputs.outside(&footprints);
             let (counts, read) = simulate_direct(&inputs, &footprints, &cfg, profile, drop_classes, out, progress)?;
             copc = read;
             (counts, out.clone())
         }
     };
-    Ok(SimulateReport { simulated, skipped, out, placement, copc })
+    Ok(SimulateReport { simulated, skipped, out, placement, copc, outside_files })
 }
 
 /// Give every shot footprint its recorded pulse and every other footprint (no shot, or a shot
