@@ -650,14 +650,13 @@ pub fn diagnose_dataset(
     let mut files = write_tables(&d, out)?;
     files.extend(write_figures(&d, out)?);
     let names = files.iter().filter_map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned())).collect();
-    let mut json = DiagnosisJson {
+    let json = DiagnosisJson {
         summary: summary_lines(&d),
         dataset: Some(ds.root().canonicalize().unwrap_or_else(|_| ds.root().to_path_buf()).display().to_string()),
         inputs_key: Some(key),
         files: names,
-        ..DiagnosisJson::of(&d, report.shots_read, &report.dropped)
+        ..DiagnosisJson::of(&d, report.shots_read, &report.dropped, opts.ranked_shots)
     };
-    json.shots.ranked_limit = opts.ranked_shots;
     // diagnosis.json last: a diagnosis interrupted before it is never reused.
     let text = serde_json::to_string_pretty(&json).map_err(|e| Error::file(&path, e))?;
     crate::dataset::write_atomic(&path, text.as_bytes())?;

@@ -580,8 +580,9 @@ impl ConfigurationJson {
 }
 
 impl DiagnosisJson {
-    /// The file of diagnosis `d` of `shots_read` shots, `dropped` (reason, count) before it.
-    pub fn of(d: &Diagnosis, shots_read: usize, dropped: &[(String, usize)]) -> DiagnosisJson {
+    /// The file of diagnosis `d` of `shots_read` shots, `dropped` (reason, count) before it, its
+    /// effects ranked on tracks drawn up to `ranked_limit` shots.
+    pub fn of(d: &Diagnosis, shots_read: usize, dropped: &[(String, usize)], ranked_limit: usize) -> DiagnosisJson {
         let w = &d.where_;
         let mean = |f: fn(&super::locate::PercentileGap) -> f64| {
             finite(w.percentiles.iter().map(f).sum::<f64>() / N_PCT as f64)
@@ -664,7 +665,7 @@ impl DiagnosisJson {
                 used: d.n_located,
                 ranked: d.n_shots,
                 ranked_tracks: d.n_tracks,
-                ranked_limit: 0,
+                ranked_limit,
                 re_placed_per_hypothesis: d.n_replaceable,
                 pairs_ground_mismatch: d.mismatched,
                 dropped: dropped.iter().map(|(reason, n)| DroppedJson { reason: reason.clone(), n: *n }).collect(),
