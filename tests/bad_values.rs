@@ -194,12 +194,18 @@ fn a_tile_with_a_vertical_crs_only_is_refused_at_ingest_naming_the_tile() {
     assert!(ok, "{err}");
 }
 
+/// A dataset `<dir>/ds` holding the bundled tile.
+fn tile_dataset(dir: &Path) -> PathBuf {
+    let ds = dir.join("ds");
+    let (ok, _, err) = gedisim(&["ingest", "als", "--out", s(&ds), s(&data(TILE))]);
+    assert!(ok, "{err}");
+    ds
+}
+
 #[test]
 fn query_and_simulation_outputs_never_land_in_a_dataset_table() {
     let tmp = tempfile::tempdir().unwrap();
-    let ds = tmp.path().join("ds");
-    let (ok, _, err) = gedisim(&["ingest", "als", "--out", s(&ds), s(&data(TILE))]);
-    assert!(ok, "{err}");
+    let ds = tile_dataset(tmp.path());
     let count = || gedisim(&["sql", "--dataset", s(&ds), "--format", "csv", "select count(*) as n from tiles"]).1;
     let before = count();
     // `sql --out` into a table folder used to add its rows to the table.
@@ -314,9 +320,7 @@ fn returns_numbered_beyond_their_pulse_are_warned_of_and_still_cover_the_footpri
 #[test]
 fn a_stray_file_in_a_table_folder_is_named() {
     let tmp = tempfile::tempdir().unwrap();
-    let ds = tmp.path().join("ds");
-    let (ok, _, err) = gedisim(&["ingest", "als", "--out", s(&ds), s(&data(TILE))]);
-    assert!(ok, "{err}");
+    let ds = tile_dataset(tmp.path());
     let junk = ds.join("tiles/junk.parquet");
     std::fs::write(&junk, b"PAR1\n").unwrap();
     let (ok, _, err) = gedisim(&["sql", "--dataset", s(&ds), "select count(*) from tiles"]);
@@ -351,9 +355,7 @@ fn dataset_paths_with_glob_or_control_characters() {
 #[test]
 fn simulate_on_a_dataset_never_writes_into_runs_sim_table() {
     let tmp = tempfile::tempdir().unwrap();
-    let ds = tmp.path().join("ds");
-    let (ok, _, err) = gedisim(&["ingest", "als", "--out", s(&ds), s(&data(TILE))]);
-    assert!(ok, "{err}");
+    let ds = tile_dataset(tmp.path());
     // Named like a granule's `sim/` file, as a user may name a plot list: it used to replace that file.
     let csv = tmp.path().join("GEDI02_A_2019108080338_O01964_T05337_02_001_01_sub.csv");
     std::fs::write(&csv, "id,x,y\np1,1,2\n").unwrap();

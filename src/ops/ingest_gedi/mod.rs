@@ -377,52 +377,21 @@ struct Row {
     xy: Option<(f64, f64, XySource)>,
 }
 
-/// The shot numbers of one granule's beams read so far: a shot number is unique in a granule
-/// (docs/gedi-products.md §1), and one seen in two beams would put one shot in two collocation
-/// segments, which `run` cannot write (docs/robustness.md).
-#[derive(Default)]
-struct ShotsSeen(HashMap<u64, String>);
-
-impl ShotsSeen {
-    /// Refuse a batch of `shots` rows holding a shot number already seen in another beam.
-    fn check(&mut self, pair: &GranulePair, batch: &RecordBatch) -> Result<()> {
-        let path = pair.l1b.as_deref().or(pair.l2a.as_deref()).unwrap_or(Path::new(&pair.granule));
-        let (Some(sn), Some(beam)) = (batch.column_by_name("shot_number"), batch.column_by_name("beam")) else {
-            return Ok(());
-        };
-        use arrow::array::AsArray;
-        let (sn, beam) = (sn.as_primitive::<arrow::datatypes::UInt64Type>(), beam.as_string::<i32>());
-        for i in 0..batch.num_rows() {
-            let b = beam.value(i);
-            match self.0.get(&sn.value(i)) {
-                Some(first) if first != b => {
-                    return Err(Error::field(
-                        path,
-                        "shot_number",
-                        format!("shot {} is in {first} and in {b}: a shot number is unique in a granule", sn.value(i)),
-                    ))
-                }
-                Some(_) => {}
-                None => {
-                    self.0.insert(sn.value(i), b.to_string());
-                }
-            }
-        }
-        Ok(())
-    }
-}
-
 /// The shot numbers of the dataset's granules and of those this call writes: a shot number is
 /// unique across GEDI (it encodes the orbit, beam and shot, docs/gedi-products.md §1), so one
-/// seen in two granules is a copy under another name or a broken file, and would put one shot in
-/// two collocation segments, which `run` cannot write (docs/robustness.md).
+/// seen in two beams of a granule, or in two granules (a copy under another name), is a broken
+/// file, and would put one shot in two collocation segments, which `run` cannot write
+/// (docs/robustness.md).
 struct ShotOwners {
     /// (shot number, index in `keys`) of every shot the dataset holds, sorted.
     stored: Vec<(u64, usize)>,
     keys: Vec<String>,
-    /// Shots written by this call so far, by granule key.
-    claimed: std::sync::Mutex<HashMap<u64, String>>,
+    /// Shots written by this call so far: their granule key and beam.
+    claimed: std::sync::Mutex<HashMap<u64, Owner>>,
 }
+
+/// The granule key and beam of a shot.
+type Owner = (Arc<str>, Arc<str>);
 
 impl ShotOwners {
     /// The shots of every file of the dataset's `shots/` table (one per granule key).
@@ -441,38 +410,45 @@ impl ShotOwners {
         Ok(ShotOwners { stored, keys, claimed: Default::default() })
     }
 
-    /// Claim the shots of a batch of granule `key`'s rows; refuse one another granule holds
-    /// (its own earlier rows are replaced by this ingest).
-    fn claim(&self, pair: &GranulePair, key: &str, batch: &RecordBatch) -> Result<()> {
-        let Some(sn) = batch.column_by_name("shot_number") else {
+    /// Claim the shots of a batch of granule `key`'s rows; refuse one that another beam of the
+    /// granule or another granule holds (the granule's own earlier rows are replaced by this
+    /// ingest).
+    fn claim(&self, pair: &GranulePair, key: &Arc<str>, batch: &RecordBatch) -> Result<()> {
+        let (Some(sn), Some(beams)) = (batch.column_by_name("shot_number"), batch.column_by_name("beam")) else {
             return Ok(());
         };
         use arrow::array::AsArray;
-        let sn = sn.as_primitive::<arrow::datatypes::UInt64Type>();
+        let (sn, beams) = (sn.as_primitive::<arrow::datatypes::UInt64Type>(), beams.as_string::<i32>());
         let path = pair.l1b.as_deref().or(pair.l2a.as_deref()).unwrap_or(Path::new(&pair.granule));
-        let refuse = |shot: u64, other: &str| {
-            Err(Error::field(
-                path,
-                "shot_number",
-                format!(
-                    "shot {shot} is also in granule {other}: a shot number is unique across GEDI (a copy of \
-                     that granule, or a broken file)"
-                ),
+        let refuse = |why: String| Err(Error::field(path, "shot_number", why));
+        let in_granule = |shot: u64, other: &str| {
+            refuse(format!(
+                "shot {shot} is also in granule {other}: a shot number is unique across GEDI (a copy of that \
+                 granule, or a broken file)"
             ))
         };
         let mut claimed = self.claimed.lock().unwrap_or_else(|e| e.into_inner());
-        for &shot in sn.values().iter() {
+        let mut beam: Arc<str> = Arc::from("");
+        for (i, &shot) in sn.values().iter().enumerate() {
+            if *beam != *beams.value(i) {
+                beam = Arc::from(beams.value(i));
+            }
             let from = self.stored.partition_point(|&(s, _)| s < shot);
             if let Some(&(_, k)) =
-                self.stored[from..].iter().take_while(|(s, _)| *s == shot).find(|(_, k)| self.keys[*k] != key)
+                self.stored[from..].iter().take_while(|(s, _)| *s == shot).find(|(_, k)| *self.keys[*k] != **key)
             {
-                return refuse(shot, &self.keys[k]);
+                return in_granule(shot, &self.keys[k]);
             }
             match claimed.get(&shot) {
-                Some(other) if other != key => return refuse(shot, other),
+                Some((other, _)) if other != key => return in_granule(shot, other),
+                Some((_, first)) if *first != beam => {
+                    return refuse(format!(
+                        "shot {shot} is in {first} and in {beam}: a shot number is unique in a granule"
+                    ))
+                }
                 Some(_) => {}
                 None => {
-                    claimed.insert(shot, key.to_string());
+                    claimed.insert(shot, (key.clone(), beam.clone()));
                 }
             }
         }
@@ -870,10 +846,9 @@ pub fn ingest_into_dataset(
             metadata.insert("gedisim:vertical_reference".to_string(), VERTICAL_DATUM.to_string());
             let props = dataset::writer_properties(&metadata, 1 << 16);
             let mut writer = AtomicParquet::create(&shots_dir.join(format!("{key}.parquet")), schema, props)?;
-            let mut seen = ShotsSeen::default();
+            let owner: Arc<str> = Arc::from(key.as_str());
             let beams = read_granule(pair, opts, &mut |b| {
-                seen.check(pair, &b)?;
-                owners.claim(pair, &key, &b)?;
+                owners.claim(pair, &owner, &b)?;
                 writer.write(&b)
             })?;
             writer.finish()?;
