@@ -433,3 +433,101 @@ fn a_las_whose_header_bounds_miss_its_points_is_said_in_direct_mode() {
     assert!(err.contains(s(&tile)) && err.contains("beyond the header's bounds"), "{err}");
     assert!(!err.contains("outside every"), "{err}");
 }
+
+/// Run the binary with `args` until `enough` is true of the stdout lines read so far, then its peak
+/// resident memory (VmHWM, bytes) while still running; the process is killed afterwards. None if
+/// its output ended first. The reading is bounded by a guard (a build that gathers instead of
+/// streaming prints nothing until the end), which is no timing assertion: 10 minutes.
+fn peak_memory_while_streaming(args: &[&str], mut enough: impl FnMut(&[String]) -> bool) -> Option<u64> {
+    use std::io::BufRead;
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_gedisim"))
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("run gedisim");
+    let stdout = child.stdout.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stdout).lines() {
+            if tx.send(line.unwrap_or_default()).is_err() {
+                break;
+            }
+        }
+    });
+    let mut lines = Vec::new();
+    let mut peak = None;
+    while let Ok(line) = rx.recv_timeout(std::time::Duration::from_secs(600)) {
+        lines.push(line);
+        if enough(&lines) {
+            let status = std::fs::read_to_string(format!("/proc/{}/status", child.id())).unwrap();
+            let kb = status.lines().find_map(|l| l.strip_prefix("VmHWM:")).unwrap();
+            peak = Some(kb.trim().trim_end_matches("kB").trim().parse::<u64>().unwrap() * 1024);
+            break;
+        }
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+    peak
+}
+
+#[test]
+fn sql_results_come_row_by_row_and_a_printed_table_is_bounded_by_the_memory_limit() {
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tile_dataset(tmp.path());
+    let cross = "select a.x, b.y from als a cross join als b";
+    // A table is printed only whole: past half of --memory-limit it is refused in one line (the
+    // result used to be gathered without bound, past 5 GB under a 1 GB limit).
+    let (ok, out, err) = gedisim(&["sql", "--dataset", s(&ds), "--memory-limit", "64M", cross]);
+    refused(ok, &err, &["Resources exhausted", "--memory-limit", "--format csv"]);
+    assert!(out.is_empty(), "{out}");
+    // CSV comes row by row: a million rows of a result of billions are out while the process holds
+    // little memory.
+    let peak = peak_memory_while_streaming(
+        &["sql", "--dataset", s(&ds), "--memory-limit", "64M", "--format", "csv", cross],
+        |lines| lines.len() > 1_000_000,
+    )
+    .expect("rows as they come");
+    assert!(peak < 400 << 20, "peak {} MB", peak >> 20);
+    // --out writes the one result as it comes; a second result is refused and nothing is left.
+    let csv = tmp.path().join("two.csv");
+    let (ok, _, err) = gedisim(&["sql", "--dataset", s(&ds), "--out", s(&csv), "select 1 as a; select 2 as b"]);
+    refused(ok, &err, &["two.csv", "a second statement gives a result"]);
+    assert!(std::fs::read_dir(tmp.path()).unwrap().all(|e| !e.unwrap().file_name().to_string_lossy().contains("two")));
+    let parquet = tmp.path().join("pairs.parquet");
+    let (ok, _, err) = gedisim(&["sql", "--dataset", s(&ds), "--out", s(&parquet), &format!("{cross} limit 3000000")]);
+    assert!(ok, "{err}");
+    use parquet::file::reader::FileReader;
+    let reader = parquet::file::reader::SerializedFileReader::new(std::fs::File::open(&parquet).unwrap()).unwrap();
+    assert_eq!(reader.metadata().file_metadata().num_rows(), 3_000_000);
+}
+
+#[test]
+fn sql_refuses_an_expression_too_deep_to_plan_and_parses_statements_one_at_a_time() {
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tile_dataset(tmp.path());
+    let file = tmp.path().join("q.sql");
+    let run = |text: String| {
+        std::fs::write(&file, text).unwrap();
+        gedisim(&["sql", "--dataset", s(&ds), "--format", "csv", "-f", s(&file)])
+    };
+    // 400 KB of `1+1+…` and 10,000 OR terms used to abort the process with a stack overflow.
+    let terms = |n: usize, term: &str, op: &str| vec![term; n].join(op);
+    let (ok, out, err) = run(format!("select {};", terms(200_000, "1", "+")));
+    refused(ok, &err, &["statement 1", "nests deeper than 256", "x IN (…)"]);
+    assert!(out.is_empty(), "{out}");
+    let (ok, _, err) =
+        run(format!("select 1 as a; select count(*) from als where {};", terms(10_000, "x = 0", " or ")));
+    refused(ok, &err, &["statement 2", "nests deeper than 256"]);
+    // The deepest allowed still runs.
+    let (ok, out, err) = run(format!("select {} as s;", terms(256, "1", "+")));
+    assert!(ok && out.lines().nth(1) == Some("256"), "{out} {err}");
+    // Statements are parsed one at a time and dropped once run: 30,000 of them (they used to be
+    // parsed all at once, ≈ 14 KB each).
+    std::fs::write(&file, "select 1 as one;\n".repeat(30_000)).unwrap();
+    let peak = peak_memory_while_streaming(&["sql", "--dataset", s(&ds), "--format", "csv", "-f", s(&file)], |lines| {
+        lines.len() > 25_000 * 3
+    })
+    .expect("every result printed");
+    assert!(peak < 300 << 20, "peak {} MB", peak >> 20);
+}

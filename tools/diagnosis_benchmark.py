@@ -3,7 +3,7 @@
 
 Each world folder holds `truth.json` (both generators write `effects: [{name, params}]`,
 `datum_dz_m` and per-shot true/reported positions) and `als/` + `gedi/`. For each world the
-diagnosis is run with the whole chain into `<world>/diag` unless `diag/diagnosis.json` exists.
+diagnosis is run with the whole chain into `<world>/diag` (`--diag NAME`: another folder) unless its `diagnosis.json` exists.
 It is then scored against the truth:
 - the simulator configuration chosen (weighting + pulse), which is never an effect;
 - which effect comes first (or `unexplained`), and whether the diagnosis calls it ambiguous;
@@ -16,7 +16,7 @@ It is then scored against the truth:
   over those of ≥ 20 shots.
 
 Usage:
-    python3 tools/diagnosis_benchmark.py --gedisim target/release/gedisim WORLD... [--json out.json]
+    python3 tools/diagnosis_benchmark.py --gedisim target/debug/gedisim [--twins N] [--diag NAME] WORLD... [--json out.json]
 Prints one line per world, then the summary per generator. Asserts nothing.
 """
 
@@ -64,8 +64,8 @@ def true_offsets(truth):
     return out
 
 
-def collocation_errors(world, truth):
-    path = world / "diag" / "dataset" / "offsets" / "offsets.parquet"
+def collocation_errors(world, truth, diag_name):
+    path = world / diag_name / "dataset" / "offsets" / "offsets.parquet"
     if not path.exists():
         return []
     t = pq.read_table(path).to_pylist()
@@ -89,7 +89,7 @@ def is_configuration(e):
     return e["name"] == "weighting" and p.get("method", "ratio") != "ratio" and p.get("rho_ground_over_veg", 1.0) == 1.0
 
 
-def score(world, truth, d):
+def score(world, truth, d, diag_name):
     planted = [e["name"] for e in truth["effects"] if e["name"] != "none" and not is_configuration(e)]
     effects = d["effects"]
     first = None if d["unexplained"] else effects[0]["name"]
@@ -129,7 +129,7 @@ def score(world, truth, d):
             if isinstance(want, (int, float)) and isinstance(got, (int, float)) and want != nominal:
                 row["param_rel_err"] = abs(got - want) / abs(want - nominal)
                 row["param"] = (got, want)
-    row["collocation"] = collocation_errors(world, truth)
+    row["collocation"] = collocation_errors(world, truth, diag_name)
     return row
 
 
@@ -150,25 +150,27 @@ def main():
     ap.add_argument("--gedisim", default="gedisim")
     ap.add_argument("--json")
     ap.add_argument("--twins", help="twin sets per planted hypothesis of the self-test (default: gedisim's)")
+    ap.add_argument("--diag", default="diag", help="folder of each world's diagnosis (default diag)")
     ap.add_argument("worlds", nargs="+", type=Path)
     a = ap.parse_args()
     rows = []
     for w in a.worlds:
         truth = json.loads((w / "truth.json").read_text())
-        diag = w / "diag" / "diagnosis.json"
+        out = w / a.diag
+        diag = out / "diagnosis.json"
         if not diag.exists():
             t0 = time.time()
             cmd = [a.gedisim, "diagnose", "--als", str(w / "als"), "--l1b", str(w / "gedi"), "--l2a", str(w / "gedi"),
-                   "--out", str(w / "diag")] + (["--twins", a.twins] if a.twins else [])
+                   "--out", str(out)] + (["--twins", a.twins] if a.twins else [])
             r = subprocess.run(cmd, capture_output=True, text=True)
             if r.returncode != 0:
                 print(f"{w.name}: diagnose failed: {r.stderr.strip().splitlines()[-1:]}", file=sys.stderr)
                 continue
-            (w / "diag" / "summary.txt").write_text(r.stdout)  # the summary as a scientist reads it
-            (w / "diag" / "seconds.txt").write_text(f"{time.time() - t0:.1f}\n")
+            (out / "summary.txt").write_text(r.stdout)  # the summary as a scientist reads it
+            (out / "seconds.txt").write_text(f"{time.time() - t0:.1f}\n")
             print(f"{w.name}: diagnosed in {time.time() - t0:.0f} s", file=sys.stderr)
-        row = score(w, truth, json.loads(diag.read_text()))
-        seconds = w / "diag" / "seconds.txt"
+        row = score(w, truth, json.loads(diag.read_text()), a.diag)
+        seconds = out / "seconds.txt"
         row["seconds"] = float(seconds.read_text()) if seconds.exists() else None
         rows.append(row)
         col = row["collocation"]

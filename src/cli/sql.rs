@@ -106,24 +106,25 @@ pub fn sql(a: SqlArgs) -> Result<()> {
     if interactive {
         let format = gedisim::ops::sql::result_format(None, format)?;
         let session = gedisim::ops::sql::SqlSession::open(&a.dataset, &limits, &engine)?;
-        return repl(&session, format);
+        return repl(&session, format, &limits);
     }
-    gedisim::ops::sql::sql(&a.dataset, &query, a.out.as_deref(), format, &limits, &engine, &mut |text| {
-        println!("{text}")
-    })
+    let mut stdout = std::io::stdout().lock();
+    gedisim::ops::sql::sql(&a.dataset, &query, a.out.as_deref(), format, &limits, &engine, &mut stdout)
 }
 
 /// The interactive mode: lines gathered until they end a statement with `;` (not one inside a string or
 /// comment), then run; errors printed and the session goes on; `\q`, `quit`, `exit` or the end of input ends it.
-fn repl(session: &gedisim::ops::sql::SqlSession, format: gedisim::ops::sql::SqlFormat) -> Result<()> {
+fn repl(
+    session: &gedisim::ops::sql::SqlSession,
+    format: gedisim::ops::sql::SqlFormat,
+    limits: &gedisim::ops::sql::SessionLimits,
+) -> Result<()> {
     use std::io::{BufRead, Write};
     tracing::info!(
         "gedisim sql: statements end with `;`, `\\q` quits; tables: SHOW TABLES; functions: gedisim sql --help"
     );
-    let mut print = |batches: gedisim::ops::sql::StatementResult| -> Result<()> {
-        println!("{}", gedisim::ops::sql::render(&batches, format)?);
-        Ok(())
-    };
+    let mut stdout = std::io::stdout();
+    let mut print = gedisim::ops::sql::Printer::new(&mut stdout, format, limits);
     let mut buffer = String::new();
     let prompt = |more: bool| {
         eprint!("{}", if more { "     -> " } else { "gedisim> " });

@@ -21,7 +21,7 @@ pub mod strata;
 
 use std::collections::HashMap;
 use std::fs::File;
-use std::io::{Read, Write};
+use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -324,7 +324,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 
 /// End a write to the temporary `tmp`: rename it onto `dest` when `written` is `Ok`, remove it
 /// otherwise (and when the rename fails), so that neither a partial file nor a temporary remains.
-fn place(tmp: &Path, dest: &Path, written: Result<()>) -> Result<()> {
+pub(crate) fn place(tmp: &Path, dest: &Path, written: Result<()>) -> Result<()> {
     let placed = written.and_then(|_| rename_into_place(tmp, dest));
     if placed.is_err() {
         let _ = std::fs::remove_file(tmp);
@@ -410,115 +410,6 @@ pub fn content_hash(path: &Path) -> Result<String> {
         hasher.update(&buf[..n]);
     }
     Ok(hex::encode(hasher.finalize()))
-}
-
-/// A file format of query results.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ResultFormat {
-    /// CSV with a header; list and struct cells as JSON text.
-    Csv,
-    /// One JSON array of objects, every column in every object (`null` included).
-    Json,
-    Parquet,
-}
-
-impl ResultFormat {
-    /// Its name (`csv`, `json`, `parquet`), also the file extension.
-    pub fn name(self) -> &'static str {
-        match self {
-            ResultFormat::Csv => "csv",
-            ResultFormat::Json => "json",
-            ResultFormat::Parquet => "parquet",
-        }
-    }
-
-    /// The format `path`'s extension names, if any.
-    pub fn of_file(path: &Path) -> Option<ResultFormat> {
-        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
-        [ResultFormat::Csv, ResultFormat::Json, ResultFormat::Parquet].into_iter().find(|f| f.name() == ext)
-    }
-}
-
-/// Write query results to `out` in `format` (atomically).
-pub fn write_result(out: &Path, batches: &[RecordBatch], format: ResultFormat) -> Result<()> {
-    if out.is_dir() {
-        return Err(Error::file(out, "is a directory: give a .csv, .json or .parquet file name"));
-    }
-    writable_name(out)?;
-    if format == ResultFormat::Parquet {
-        let schema = batches.first().map_or_else(|| Arc::new(arrow::datatypes::Schema::empty()), |b| b.schema());
-        return write_parquet(out, schema, batches, &HashMap::new()).map(|_| ());
-    }
-    let tmp = tmp_path(out);
-    let written = (|| {
-        let file = File::create(&tmp).map_err(|e| Error::file(&tmp, format!("cannot create: {e}")))?;
-        let mut file = write_text(out, file, batches, format)?;
-        file.flush().map_err(|e| Error::file(&tmp, e))?;
-        file.sync_all().map_err(|e| Error::file(&tmp, e))
-    })();
-    place(&tmp, out, written)
-}
-
-/// Query results as CSV or JSON text (not Parquet) to `w`, which is given back; `out` names it in errors.
-pub fn write_text<W: Write>(out: &Path, w: W, batches: &[RecordBatch], format: ResultFormat) -> Result<W> {
-    let failed = |e: arrow::error::ArrowError| Error::table(out, e);
-    match format {
-        ResultFormat::Csv => {
-            let mut writer = arrow::csv::Writer::new(w);
-            for b in batches {
-                writer.write(&nested_as_json(out, b)?).map_err(failed)?;
-            }
-            Ok(writer.into_inner())
-        }
-        ResultFormat::Json => {
-            let mut writer = arrow::json::WriterBuilder::new()
-                .with_explicit_nulls(true)
-                .build::<_, arrow::json::writer::JsonArray>(w);
-            for b in batches {
-                writer.write(b).map_err(failed)?;
-            }
-            writer.finish().map_err(failed)?;
-            Ok(writer.into_inner())
-        }
-        ResultFormat::Parquet => Err(Error::file(out, "Parquet is not text: write it to a .parquet file")),
-    }
-}
-
-/// `batch` with each list, map or struct column replaced by its cells as JSON text (null stays null).
-fn nested_as_json(out: &Path, batch: &RecordBatch) -> Result<RecordBatch> {
-    let schema = batch.schema();
-    if !schema.fields().iter().any(|f| f.data_type().is_nested()) {
-        return Ok(batch.clone());
-    }
-    let mut fields = Vec::new();
-    let mut columns = Vec::new();
-    for (field, column) in schema.fields().iter().zip(batch.columns()) {
-        if !field.data_type().is_nested() {
-            fields.push(field.as_ref().clone());
-            columns.push(column.clone());
-            continue;
-        }
-        // Each cell through arrow's JSON writer: one line `{"v": <cell>}` per row (`{}` for a null).
-        let one =
-            arrow::datatypes::Schema::new(vec![arrow::datatypes::Field::new("v", field.data_type().clone(), true)]);
-        let one = RecordBatch::try_new(Arc::new(one), vec![column.clone()])
-            .map_err(|e| Error::field(out, field.name(), e))?;
-        let mut lines = arrow::json::LineDelimitedWriter::new(Vec::new());
-        lines.write(&one).and_then(|_| lines.finish()).map_err(|e| Error::field(out, field.name(), e))?;
-        let text = lines.into_inner();
-        let cells = text
-            .split(|b| *b == b'\n')
-            .filter(|l| !l.is_empty())
-            .map(|l| {
-                let row: serde_json::Value =
-                    serde_json::from_slice(l).map_err(|e| Error::field(out, field.name(), e))?;
-                Ok(row.get("v").map(|v| v.to_string()))
-            })
-            .collect::<Result<arrow::array::StringArray>>()?;
-        fields.push(arrow::datatypes::Field::new(field.name(), arrow::datatypes::DataType::Utf8, true));
-        columns.push(Arc::new(cells));
-    }
-    RecordBatch::try_new(Arc::new(arrow::datatypes::Schema::new(fields)), columns).map_err(|e| Error::table(out, e))
 }
 
 /// A Parquet row selection of the sorted row indices `rows` of a file of `total` rows
