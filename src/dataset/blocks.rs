@@ -1,6 +1,7 @@
 //! Footprints simulated against the `als/` table as a stream of blocks: footprints grouped by
-//! [`BLOCK_M`] square, each block's ALS points (within the footprint radius) read while the block
-//! before is simulated. Memory is bounded by one block, never by the table. `simulate --dataset`,
+//! [`BLOCK_M`] square (at most [`BLOCK_FOOTPRINTS`] a block), each block's ALS points (within the
+//! footprint radius) read while the block before is simulated. Memory is bounded by one block,
+//! never by the table or the number of footprints. `simulate --dataset`,
 //! `run` and the SQL table function `gedi_simulate` read through it.
 
 use crate::dataset::als::{cell_key, AlsTable, BBox};
@@ -14,6 +15,11 @@ use crate::kernels::sim::{self, AlsPoints, Footprint, SimConfig, Weighting};
 /// points (plus the footprint radius around it) are read at once, so memory is bounded by the
 /// block, and the next block is read while one is simulated.
 pub const BLOCK_M: f64 = 200.0;
+
+/// The most footprints of a block: a square holding more (a dense plot grid, or a million
+/// footprints on one tile) is cut into blocks of this many, in cell order, so that memory holds
+/// their waveforms (≈ 70 KB a footprint), never a square's whole.
+pub const BLOCK_FOOTPRINTS: usize = 1024;
 
 /// The simulation of footprints against a dataset's `als/` table as a stream of blocks
 /// ([`BLOCK_M`] squares of footprints, row-major): each block reads only the points within the
@@ -106,8 +112,9 @@ impl SimulatedBlock {
     }
 }
 
-/// Footprints grouped by [`BLOCK_M`] square, blocks in row-major order (footprints without a
-/// finite position form a block of their own, simulated as skipped).
+/// Footprints grouped by [`BLOCK_M`] square, blocks in row-major order, at most
+/// [`BLOCK_FOOTPRINTS`] each (footprints without a finite position form blocks of their own,
+/// simulated as skipped).
 pub fn blocks<T>(mut footprints: Vec<(Footprint, T)>) -> Vec<Vec<(Footprint, T)>> {
     let key = |f: &Footprint| {
         if f.x.is_finite() && f.y.is_finite() {
@@ -121,11 +128,37 @@ pub fn blocks<T>(mut footprints: Vec<(Footprint, T)>) -> Vec<Vec<(Footprint, T)>
     let mut last = None;
     for (f, t) in footprints {
         let k = key(&f);
-        if out.is_empty() || k != last {
+        if out.last().is_none_or(|b| b.len() >= BLOCK_FOOTPRINTS) || k != last {
             out.push(Vec::new());
             last = k;
         }
         out.last_mut().expect("a block").push((f, t));
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_crowded_square_is_cut_into_blocks_of_at_most_block_footprints_in_the_same_order() {
+        // 2,500 footprints in one 200 m square, 10 in the next square east, and one without a position.
+        let mut fps: Vec<(Footprint, usize)> = (0..2500)
+            .map(|i| (Footprint::at(format!("a{i}"), 10.0 + (i % 50) as f64 * 3.0, 10.0 + (i / 50) as f64 * 3.0), i))
+            .collect();
+        fps.extend((0..10).map(|i| (Footprint::at(format!("b{i}"), 250.0 + i as f64, 50.0), 2500 + i)));
+        fps.push((Footprint::at("nowhere", f64::NAN, 0.0), 9999));
+        let cut = blocks(fps.clone());
+        let sizes: Vec<usize> = cut.iter().map(Vec::len).collect();
+        assert_eq!(sizes, vec![1, 1024, 1024, 452, 10]);
+        // The order is that of the squares, uncut.
+        let mut whole = fps;
+        whole.sort_by_key(|(f, _)| {
+            let key = f.x.is_finite().then(|| ((f.y / BLOCK_M).floor() as i64, (f.x / BLOCK_M).floor() as i64));
+            (key, cell_key(f.x, f.y))
+        });
+        let order: Vec<usize> = cut.iter().flatten().map(|(_, i)| *i).collect();
+        assert_eq!(order, whole.iter().map(|(_, i)| *i).collect::<Vec<_>>());
+    }
 }

@@ -63,6 +63,50 @@ pub mod tables {
     pub const REPORT: &str = "report";
 }
 
+/// The schema gedisim writes for the table `name`, if it is one of its tables (not `report/`).
+pub fn table_schema(name: &str) -> Option<SchemaRef> {
+    Some(match name {
+        tables::ALS => als::als_schema(),
+        tables::TILES => als::tiles_schema(),
+        tables::SHOTS => shots::shots_schema(0),
+        tables::GRANULES => shots::granules_schema(),
+        tables::SIM | tables::SIMULATED => sim::sim_schema(),
+        tables::STRATA => strata::strata_schema(),
+        tables::RESULTS => results::results_schema(),
+        tables::OFFSETS => offsets::offsets_schema(),
+        _ => return None,
+    })
+}
+
+/// Refuse the first of `files` of table `name` that is a readable Parquet file but not one of the
+/// table's: it holds a column the table does not have, or one of the table's with another type (a
+/// user's own file put in the folder by hand, whose rows a query would otherwise count among the
+/// table's and whose columns it would add). A file lacking some of the table's columns passes (an
+/// earlier gedisim's, before a column was added); an unreadable file is left to the reader that
+/// meets it. docs/robustness.md.
+pub fn foreign_file(name: &str, files: &[PathBuf]) -> Result<()> {
+    let Some(table) = table_schema(name) else { return Ok(()) };
+    let not_ours = "not a file of this table (a table folder holds only gedisim's own files); move it out";
+    for f in files {
+        let Ok(file) = File::open(f) else { continue };
+        let Ok(meta) = parquet::arrow::arrow_reader::ArrowReaderMetadata::load(&file, Default::default()) else {
+            continue;
+        };
+        for theirs in meta.schema().fields() {
+            let column = theirs.name();
+            let why = match table.field_with_name(column) {
+                Err(_) => format!("no such column in the `{name}` table: {not_ours}"),
+                Ok(ours) if !theirs.data_type().equals_datatype(ours.data_type()) => {
+                    format!("{} where the `{name}` table has {}: {not_ours}", theirs.data_type(), ours.data_type())
+                }
+                Ok(_) => continue,
+            };
+            return Err(Error::field(f, column, why));
+        }
+    }
+    Ok(())
+}
+
 /// Refuse a dataset path the SQL engine cannot address: its object store rejects control
 /// characters (a newline) in a path, so `sql` and `report` would fail after `run` had worked.
 fn addressable(root: &Path) -> Result<()> {

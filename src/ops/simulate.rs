@@ -412,12 +412,20 @@ fn kept_by_ingest(p: &AlsPoints) -> Vec<u32> {
     (0..p.len() as u32).filter(|&i| !DROPPED_CLASSES.contains(&p.classification[i as usize])).collect()
 }
 
+/// Footprints simulated at a time in direct mode: their rows are written before the next are
+/// simulated, so memory holds one chunk's waveforms (≈ 70 KB a footprint), not every footprint's.
+const DIRECT_CHUNK: usize = 1024;
+
+/// Rows of a `sim` file's row group (three per footprint): what the Parquet writer holds.
+const SIM_ROW_GROUP_ROWS: usize = 1 << 14;
+
 /// Direct mode: simulate `footprints` on the points of `inputs` (without the classes the ingest
-/// drops if `drop_classes`) and write the `sim` rows to `out` (atomically), in footprint order.
-/// COPC tiles are taken a tile at a time (the footprints whose centre a tile holds, with the
-/// points of every tile around them), so that memory holds one tile's windows, not all of them;
-/// other files are read once, whole. Returns the numbers of footprints simulated and skipped, and
-/// what the COPC reads decoded.
+/// drops if `drop_classes`) and write the `sim` rows to `out` (atomically) as they come, a chunk of
+/// footprints at a time. COPC tiles are taken a tile at a time (the footprints whose centre a tile
+/// holds, with the points of every tile around them), so that memory holds one tile's windows, not
+/// all of them: the rows come tile after tile, in footprint order within a tile. Other files are
+/// read once, whole, and the rows come in footprint order. Returns the numbers of footprints
+/// simulated and skipped, and what the COPC reads decoded.
 pub fn simulate_direct(
     inputs: &AlsInputs,
     footprints: &[Footprint],
@@ -430,28 +438,29 @@ pub fn simulate_direct(
     let groups =
         if inputs.all_copc() { inputs.group_by_tile(footprints) } else { vec![(0..footprints.len()).collect()] };
     let mut read = CopcRead::default();
-    let mut results: Vec<Option<std::result::Result<sim::SimulatedFootprint, sim::SkipReason>>> =
-        vec![None; footprints.len()];
+    let props = dataset::writer_properties(&sim_metadata(profile), SIM_ROW_GROUP_ROWS);
+    let mut writer = AtomicParquet::create(out, sim_schema(), props)?;
+    let (mut ok, mut skipped) = (0, 0);
     progress.start(Step::Simulate, footprints.len() as u64);
     for group in groups {
         let fps: Vec<Footprint> = group.iter().map(|&i| footprints[i].clone()).collect();
         let points = inputs.read_around(&fps, cfg, drop_classes, &mut read)?;
-        for (i, r) in group.iter().zip(sim::simulate_owned(points, &fps, cfg)?) {
-            results[*i] = Some(r);
-        }
-        progress.advance(fps.len() as u64);
+        sim::simulate_in_chunks(std::borrow::Cow::Owned(points), &fps, cfg, DIRECT_CHUNK, &mut |start, results| {
+            let n_ok = results.iter().filter(|r| r.is_ok()).count();
+            ok += n_ok;
+            skipped += results.len() - n_ok;
+            writer.write(&sim_batch(&fps[start..start + results.len()], &results, &Weighting::ALL, &[])?)?;
+            progress.advance(results.len() as u64);
+            Ok(())
+        })?;
     }
     progress.finish();
-    let results: Vec<std::result::Result<sim::SimulatedFootprint, sim::SkipReason>> =
-        results.into_iter().map(|r| r.expect("every footprint is in a group")).collect();
-    let ok = results.iter().filter(|r| r.is_ok()).count();
-    let batch = sim_batch(footprints, &results, &Weighting::ALL, &[])?;
-    dataset::write_parquet(out, sim_schema(), &[batch], &sim_metadata(profile))?;
+    writer.finish()?;
     let copc = inputs.copc_totals().map(|mut t| {
         t.add(&read);
         t
     });
-    Ok(((ok, results.len() - ok), copc))
+    Ok(((ok, skipped), copc))
 }
 
 /// Simulate `footprints` (each with the collocation offset already applied to it, if any) on the
@@ -481,7 +490,8 @@ pub fn simulate_on_dataset_with(
 ) -> Result<(usize, usize)> {
     let mut metadata = sim_metadata(profile);
     metadata.extend(extra.iter().map(|(k, v)| (k.clone(), v.clone())));
-    let mut writer = AtomicParquet::create(dest, sim_schema(), dataset::writer_properties(&metadata, 1 << 14))?;
+    let mut writer =
+        AtomicParquet::create(dest, sim_schema(), dataset::writer_properties(&metadata, SIM_ROW_GROUP_ROWS))?;
     let (mut ok, mut skipped) = (0, 0);
     for block in BlockSimulation::new(ds, footprints, cfg.clone())? {
         let block = block?;

@@ -114,6 +114,7 @@ pub async fn session_on(ds: &Dataset, limits: &SessionLimits, engine: &Engine) -
         }
         let files = ds.visible_files(&name).map_err(|e| Error::file(&dir, e))?;
         if !files.is_empty() {
+            dataset::foreign_file(&name, &files)?;
             register_table(&ctx, &name, &files, read_only).await?;
         }
     }
@@ -304,10 +305,18 @@ pub async fn register_table(ctx: &SessionContext, name: &str, files: &[PathBuf],
     register_listing(ctx, name, dir, urls, read_only).await.map_err(|e| unreadable_file(files).unwrap_or(e))
 }
 
+/// The table file of `ds` that a query failing with `e` could not read, as its error, when `e` is a
+/// Parquet error (a stray file in a table folder); `None` otherwise, and the caller says `e`.
+pub fn unreadable_cause(ds: &Dataset, e: &datafusion::error::DataFusionError) -> Option<Error> {
+    let parquet = matches!(e.find_root(), datafusion::error::DataFusionError::ParquetError(_))
+        || e.to_string().contains("Parquet error");
+    parquet.then(|| unreadable_table_file(ds)).flatten()
+}
+
 /// The first file of a table of `ds` that is not a readable Parquet file, as its error (see
 /// [`unreadable_file`]): what a query's Parquet error is about. Reads every table file's footer, so
 /// it is called only once a statement has failed.
-pub fn unreadable_table_file(ds: &Dataset) -> Option<Error> {
+fn unreadable_table_file(ds: &Dataset) -> Option<Error> {
     let mut dirs: Vec<PathBuf> = std::fs::read_dir(ds.root()).ok()?.flatten().map(|e| e.path()).collect();
     dirs.sort();
     dirs.iter()

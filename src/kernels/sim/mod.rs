@@ -305,6 +305,24 @@ fn simulate_points(
     footprints: &[Footprint],
     cfg: &SimConfig,
 ) -> Result<Vec<std::result::Result<SimulatedFootprint, SkipReason>>> {
+    let mut all = Vec::with_capacity(footprints.len());
+    simulate_in_chunks(points, footprints, cfg, footprints.len().max(1), &mut |_, results| {
+        all.extend(results);
+        Ok(())
+    })?;
+    Ok(all)
+}
+
+/// [`simulate_owned`] handing the results to `on_chunk` `chunk` footprints at a time, in footprint
+/// order, with the index of each chunk's first footprint: the points are indexed once, and memory
+/// holds one chunk's waveforms, not every footprint's. The results are those of [`simulate`].
+pub fn simulate_in_chunks(
+    points: std::borrow::Cow<AlsPoints>,
+    footprints: &[Footprint],
+    cfg: &SimConfig,
+    chunk: usize,
+    on_chunk: &mut dyn FnMut(usize, Vec<Outcome>) -> Result<()>,
+) -> Result<()> {
     let n = points.len();
     let lens = [
         points.y.len(),
@@ -324,28 +342,13 @@ fn simulate_points(
     let sim: fn(&Job) -> Outcome =
         if cfg.quirks.f32_sums { simulate_footprint::<f32> } else { simulate_footprint::<f64> };
     let by_pulse = cfg.counts_pulses();
-    let run = |fp: &Footprint, pts: &AlsPoints, pulses: Option<&PulseIndex>, cand: Vec<u32>| {
-        if !(fp.x.is_finite() && fp.y.is_finite()) {
-            return Err(SkipReason::NoPoints);
-        }
-        sim(&Job { points: pts, pulses, candidates: &cand, footprint: fp, cfg, half })
-    };
     let pulses_of = |pts: &AlsPoints| by_pulse.then(|| PulseIndex::build(pts, half));
-    Ok(if cfg.quirks.batch_grid {
+    // The candidates of a footprint, from an index over the points built once.
+    let (points, index) = if cfg.quirks.batch_grid {
         let centres: Vec<(f64, f64)> =
             footprints.iter().map(|f| (f.x, f.y)).filter(|c| c.0.is_finite() && c.1.is_finite()).collect();
         let octree = Octree::build(&points, &centres, max_sep);
-        let pulses = pulses_of(&points);
-        footprints
-            .par_iter()
-            .map(|fp| {
-                let mut cand = Vec::new();
-                if let Some(o) = &octree {
-                    o.candidates(fp.x, fp.y, half, &mut cand);
-                }
-                run(fp, &points, pulses.as_ref(), cand)
-            })
-            .collect()
+        (points, Index::Octree(octree))
     } else {
         let grid = CellGrid::build(&points, INDEX_CELL);
         let sorted = match points {
@@ -355,20 +358,39 @@ fn simulate_points(
                 p
             }
         };
-        let pulses = pulses_of(&sorted);
-        footprints
+        (std::borrow::Cow::Owned(sorted), Index::Grid(grid))
+    };
+    let pulses = pulses_of(&points);
+    for (k, fps) in footprints.chunks(chunk.max(1)).enumerate() {
+        let results = fps
             .par_iter()
             .map(|fp| {
+                if !(fp.x.is_finite() && fp.y.is_finite()) {
+                    return Err(SkipReason::NoPoints);
+                }
                 let mut cand = Vec::new();
-                grid.candidates(fp.x, fp.y, half, &mut cand);
-                run(fp, &sorted, pulses.as_ref(), cand)
+                match &index {
+                    Index::Octree(Some(o)) => o.candidates(fp.x, fp.y, half, &mut cand),
+                    Index::Octree(None) => {}
+                    Index::Grid(g) => g.candidates(fp.x, fp.y, half, &mut cand),
+                }
+                sim(&Job { points: &points, pulses: pulses.as_ref(), candidates: &cand, footprint: fp, cfg, half })
             })
-            .collect()
-    })
+            .collect();
+        on_chunk(k * chunk.max(1), results)?;
+    }
+    Ok(())
+}
+
+/// The index the candidates of a footprint come from: the reference's octree over the batch's
+/// footprints ([`Profile::Gedirat`]) or a grid of cells (the points sorted by cell).
+enum Index {
+    Octree(Option<Octree>),
+    Grid(CellGrid),
 }
 
 /// Result of one footprint.
-type Outcome = std::result::Result<SimulatedFootprint, SkipReason>;
+pub type Outcome = std::result::Result<SimulatedFootprint, SkipReason>;
 
 /// Inputs of one footprint's simulation.
 struct Job<'a> {

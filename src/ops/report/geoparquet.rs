@@ -85,7 +85,14 @@ pub async fn export(ds: &Dataset, table: &str, out: &Path, crs: GeoCrs) -> Resul
         }
     }
     let ctx = crate::sql::session(ds).await?;
-    let df = ctx.sql(&sql).await.map_err(|e| Error::field(ds.root().join(table), "GeoParquet export", e))?;
+    // A table file that cannot be read is named (a stray file in a table folder), not the output.
+    let read_err = |e: datafusion::error::DataFusionError, or: &dyn Fn(datafusion::error::DataFusionError) -> Error| {
+        crate::sql::unreadable_cause(ds, &e).unwrap_or_else(|| or(e))
+    };
+    let df = ctx
+        .sql(&sql)
+        .await
+        .map_err(|e| read_err(e, &|e| Error::field(ds.root().join(table), "GeoParquet export", e)))?;
     let in_schema: SchemaRef = super::plain_schema(df.schema().as_arrow());
     let keep: Vec<usize> =
         (0..in_schema.fields().len()).filter(|&i| !in_schema.field(i).name().starts_with("__")).collect();
@@ -97,10 +104,10 @@ pub async fn export(ds: &Dataset, table: &str, out: &Path, crs: GeoCrs) -> Resul
     // The `geo` key goes to the file's key-value metadata (not the Arrow schema's, which would repeat it).
     let schema = Arc::new(Schema::new(fields));
     let mut writer = AtomicParquet::create(out, schema.clone(), dataset::writer_properties(&meta, 1 << 16))?;
-    let mut stream = df.execute_stream().await.map_err(|e| Error::table(out, e))?;
+    let mut stream = df.execute_stream().await.map_err(|e| read_err(e, &|e| Error::table(out, e)))?;
     let mut rows = 0u64;
     while let Some(batch) = stream.next().await {
-        let batch = super::plain_batch(&batch.map_err(|e| Error::table(out, e))?, &in_schema)?;
+        let batch = super::plain_batch(&batch.map_err(|e| read_err(e, &|e| Error::table(out, e)))?, &in_schema)?;
         let lon = column_f64(&batch, "__lon", out)?;
         let lat = column_f64(&batch, "__lat", out)?;
         let n = batch.num_rows();

@@ -87,9 +87,7 @@ impl SqlSession {
     /// The error of a failed statement; a Parquet error names the table file that cannot be read,
     /// if one cannot (a stray file in a table folder).
     fn failed(&self, e: datafusion::error::DataFusionError) -> Error {
-        let parquet = matches!(e.find_root(), datafusion::error::DataFusionError::ParquetError(_))
-            || e.to_string().contains("Parquet error");
-        match self.ds.as_ref().filter(|_| parquet).and_then(crate::sql::unreadable_table_file) {
+        match self.ds.as_ref().and_then(|ds| crate::sql::unreadable_cause(ds, &e)) {
             Some(named) => named,
             None => sql_err(e),
         }
@@ -318,7 +316,9 @@ impl ResultSink for Printer<'_> {
         match self.text.take() {
             Some(text) => {
                 let out = text.finish()?;
-                writeln!(out).map_err(stdout_err)?;
+                if self.format == SqlFormat::File(ResultFormat::Json) {
+                    writeln!(out).map_err(stdout_err)?; // a JSON array ends without one; CSV lines do
+                }
                 self.out = Some(out);
             }
             None => {
