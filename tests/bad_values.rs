@@ -215,6 +215,11 @@ fn query_and_simulation_outputs_never_land_in_a_dataset_table() {
     let (ok, _, err) = gedisim(&["sql", "--dataset", s(&ds), "--out", s(&dup), "select * from tiles"]);
     refused(ok, &err, &["--out", "`tiles` table", "write elsewhere"]);
     assert!(!dup.exists());
+    // Also a table folder the dataset does not have yet (`results/` before the first run): it used
+    // to fail on the temporary file's name.
+    let early = ds.join("results/dup.parquet");
+    let (ok, _, err) = gedisim(&["sql", "--dataset", s(&ds), "--out", s(&early), "select * from tiles"]);
+    refused(ok, &err, &["results/dup.parquet: --out", "`results` table", "write elsewhere"]);
     assert_eq!(count(), before);
     // Likewise a simulation's output, and a relative path from inside the folder.
     let csv = tmp.path().join("plots.csv");

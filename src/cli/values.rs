@@ -8,7 +8,7 @@ fn metres_in(s: &str, max: f64) -> Result<f64, String> {
     if v.is_finite() && v > 0.0 && v <= max {
         Ok(v)
     } else {
-        Err(format!("{v} m: give a finite σ above 0 and at most {max} m"))
+        Err(format!("{} m: give a finite σ above 0 and at most {max} m", s.trim()))
     }
 }
 
@@ -36,7 +36,7 @@ pub fn geoid_offset(s: &str) -> Result<f64, String> {
     if v.is_finite() && v.abs() <= MAX_GEOID_OFFSET_M {
         Ok(v)
     } else {
-        Err(format!("{v} m: a geoid offset is finite and within ±{MAX_GEOID_OFFSET_M} m"))
+        Err(format!("{} m: a geoid offset is finite and within ±{MAX_GEOID_OFFSET_M} m", s.trim()))
     }
 }
 

@@ -277,7 +277,7 @@ impl AtomicParquet {
     pub fn create(dest: &Path, schema: SchemaRef, props: WriterProperties) -> Result<Self> {
         writable_name(dest)?;
         let tmp = tmp_path(dest);
-        let file = File::create(&tmp).map_err(|e| Error::file(&tmp, format!("cannot create: {e}")))?;
+        let file = File::create(&tmp).map_err(|e| Error::file(dest, format!("cannot create: {e}")))?;
         let writer = ArrowWriter::try_new(file, schema, Some(props)).map_err(|e| {
             let _ = std::fs::remove_file(&tmp);
             Error::table(dest, e)
@@ -363,7 +363,7 @@ pub fn write_parquet(
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     writable_name(path)?;
     let tmp = tmp_path(path);
-    place(&tmp, path, std::fs::write(&tmp, bytes).map_err(|e| Error::file(&tmp, format!("cannot write: {e}"))))
+    place(&tmp, path, std::fs::write(&tmp, bytes).map_err(|e| Error::file(path, format!("cannot write: {e}"))))
 }
 
 /// End a write to the temporary `tmp`: rename it onto `dest` when `written` is `Ok`, remove it
@@ -401,7 +401,13 @@ pub fn writable_name(dest: &Path) -> Result<()> {
 /// table. docs/robustness.md.
 pub fn outside_tables(out: &Path) -> Result<()> {
     let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let Ok(parent) = parent.canonicalize() else { return Ok(()) };
+    // A table folder not created yet (`results/` before the first run) is one all the same.
+    let resolved = parent.canonicalize().ok().or_else(|| {
+        let name = parent.file_name()?;
+        let above = parent.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        Some(above.canonicalize().ok()?.join(name))
+    });
+    let Some(parent) = resolved else { return Ok(()) };
     let (Some(table), Some(root)) = (parent.file_name().and_then(|n| n.to_str()), parent.parent()) else {
         return Ok(());
     };

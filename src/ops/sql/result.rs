@@ -116,7 +116,7 @@ impl ResultFile {
             return AtomicParquet::create(out, schema.clone(), props).map(ResultFile::Parquet);
         }
         let path = crate::dataset::tmp_path(out);
-        let file = File::create(&path).map_err(|e| Error::file(&path, format!("cannot create: {e}")))?;
+        let file = File::create(&path).map_err(|e| Error::file(out, format!("cannot create: {e}")))?;
         let tmp = Temporary(Some(path));
         let writer = TextWriter::new(out, BufWriter::new(file), schema, format)?;
         Ok(ResultFile::Text { writer, tmp, dest: out.to_path_buf() })
