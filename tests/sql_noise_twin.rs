@@ -25,8 +25,8 @@ fn sim_wave() -> Vec<f32> {
         .collect()
 }
 
-/// A dataset with table `sim(id, wave, z0, dz, seed)`: rows 0, 1 the same waveform (seeds 41, 42),
-/// row 2 empty, row 3 null.
+/// A dataset with a table `waves(id, wave, z0, dz, seed)` (not one of gedisim's tables, whose files
+/// hold only their own columns): rows 0, 1 the same waveform (seeds 41, 42), row 2 empty, row 3 null.
 fn dataset() -> (tempfile::TempDir, Dataset) {
     let tmp = tempfile::tempdir().unwrap();
     let ds = Dataset::create(tmp.path()).unwrap();
@@ -54,7 +54,7 @@ fn dataset() -> (tempfile::TempDir, Dataset) {
         ],
     )
     .unwrap();
-    dataset::write_parquet(&ds.table_file("sim", "test").unwrap(), schema, &[batch], &Default::default()).unwrap();
+    dataset::write_parquet(&ds.table_file("waves", "test").unwrap(), schema, &[batch], &Default::default()).unwrap();
     (tmp, ds)
 }
 
@@ -69,7 +69,7 @@ fn query(ds: &Dataset, sql: &str) -> Vec<RecordBatch> {
 /// Twin then L2A a1 on it, in one query; `twin` is the twin call with `seed` as its seed.
 fn twin_then_l2a(twin: &str) -> String {
     format!(
-        "with t as (select id, {twin} as tw from sim) \
+        "with t as (select id, {twin} as tw from waves) \
          select id, tw, gedi_l2a(tw['rxwaveform'], tw['noise_mean'], tw['noise_stddev'], 1, \
                                  tw['elevation_bin0'], tw['elevation_lastbin']) as l2a \
          from t order by id"
@@ -159,7 +159,7 @@ fn shot_twin_bad_parameters_give_reasons() {
         ),
     ];
     for (call, reason) in cases {
-        let r = reasons(&query(&ds, &format!("select {call} as tw from sim order by id"))[0], "tw");
+        let r = reasons(&query(&ds, &format!("select {call} as tw from waves order by id"))[0], "tw");
         assert!(r[0].as_deref().is_some_and(|s| s.contains(reason)), "{call}: {r:?}");
     }
     // σ = 0: the twin is made (noise-free); L2A then reports the invalid noise, no panic.
@@ -180,7 +180,8 @@ fn link_margin_twin_in_sql_is_the_kernel() {
     let l2a = b.column_by_name("l2a").unwrap().as_struct();
     let elev = l2a.column_by_name("elev_lowestmode").unwrap().as_primitive::<Float64Type>();
     assert!((elev.value(0) - (Z0 - GROUND_BIN * DZ)).abs() < 0.3, "{}", elev.value(0));
-    let r = reasons(&query(&ds, "select gedi_link_margin_twin(wave, z0, dz, 5.0, 1.0, seed) as tw from sim")[0], "tw");
+    let r =
+        reasons(&query(&ds, "select gedi_link_margin_twin(wave, z0, dz, 5.0, 1.0, seed) as tw from waves")[0], "tw");
     assert_eq!(r[0].as_deref(), Some("invalid value for cover"));
 }
 

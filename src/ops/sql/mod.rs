@@ -133,18 +133,15 @@ impl SqlSession {
     pub fn run(&self, sql: &str, sink: &mut dyn ResultSink) -> Result<()> {
         use datafusion::sql::sqlparser::tokenizer::Token;
         let dialect = datafusion::sql::sqlparser::dialect::GenericDialect {};
-        let parse_err = |e: datafusion::error::DataFusionError| {
-            Error::Usage(format!("SQL: {}", crate::error::one_line(&e.to_string())))
-        };
         let mut parser =
-            datafusion::sql::parser::DFParserBuilder::new(sql).with_dialect(&dialect).build().map_err(parse_err)?;
+            datafusion::sql::parser::DFParserBuilder::new(sql).with_dialect(&dialect).build().map_err(sql_err)?;
         let mut ran = 0;
         loop {
             while parser.parser.consume_token(&Token::SemiColon) {}
             if parser.parser.peek_token() == Token::EOF {
                 break;
             }
-            let statement = parser.parse_statement().map_err(parse_err)?;
+            let statement = parser.parse_statement().map_err(sql_err)?;
             let next = parser.parser.peek_token();
             if !matches!(next.token, Token::SemiColon | Token::EOF) {
                 return Err(Error::Usage(format!(
@@ -154,13 +151,13 @@ impl SqlSession {
                     next.span.start
                 )));
             }
-            if let Some(depth) = too_deep(&statement) {
+            if too_deep(&statement) {
                 // Dropping it would recurse as deep as it nests, which is what overflows: it is
                 // left to the end of the process (its memory is that of its text).
                 std::mem::forget(statement);
                 return Err(Error::Usage(format!(
-                    "SQL: statement {}: an expression nests deeper than {depth} levels (each operator of \
-                     `a + b + …` or `… OR …` is one): split it, or give a list of values as `x IN (…)`",
+                    "SQL: statement {}: an expression nests deeper than {MAX_EXPRESSION_DEPTH} levels (each \
+                     operator of `a + b + …` or `… OR …` is one): split it, or give a list of values as `x IN (…)`",
                     ran + 1
                 )));
             }
@@ -208,9 +205,9 @@ impl SqlSession {
     }
 }
 
-/// The depth limit a statement's expressions pass, if they do ([`MAX_EXPRESSION_DEPTH`]). The walk
-/// stops there, so it never recurses deeper itself.
-fn too_deep(statement: &Statement) -> Option<usize> {
+/// Whether an expression of `statement` nests deeper than [`MAX_EXPRESSION_DEPTH`]. The walk stops
+/// there, so it never recurses deeper itself.
+fn too_deep(statement: &Statement) -> bool {
     struct Depth(usize);
     impl Visitor for Depth {
         type Break = ();
@@ -227,16 +224,15 @@ fn too_deep(statement: &Statement) -> Option<usize> {
             ControlFlow::Continue(())
         }
     }
-    let over = match statement {
+    match statement {
         Statement::Statement(s) => s.visit(&mut Depth(0)).is_break(),
         Statement::CopyTo(c) => match &c.source {
             datafusion::sql::parser::CopyToSource::Query(q) => q.visit(&mut Depth(0)).is_break(),
             datafusion::sql::parser::CopyToSource::Relation(_) => false,
         },
-        Statement::Explain(e) => return too_deep(&e.statement),
+        Statement::Explain(e) => too_deep(&e.statement),
         Statement::CreateExternalTable(_) | Statement::Reset(_) => false,
-    };
-    over.then_some(MAX_EXPRESSION_DEPTH)
+    }
 }
 
 /// Where [`SqlSession::run`] hands each statement's result, batch by batch as it comes.
