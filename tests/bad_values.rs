@@ -459,16 +459,21 @@ fn peak_memory_of(pid: u32) -> Option<u64> {
     Some(kb.trim().trim_end_matches("kB").trim().parse::<u64>().ok()? * 1024)
 }
 
+/// The binary started with `args`, its stdout and stderr as given.
+fn spawn(args: &[&str], stdout: std::process::Stdio, stderr: std::process::Stdio) -> std::process::Child {
+    std::process::Command::new(env!("CARGO_BIN_EXE_gedisim"))
+        .args(args)
+        .stdout(stdout)
+        .stderr(stderr)
+        .spawn()
+        .expect("run gedisim")
+}
+
 /// Run the binary with `args` to its end, its peak resident memory sampled every 20 ms (the last
 /// sample before it ended): (success, stderr, peak bytes).
 fn run_with_peak_memory(args: &[&str]) -> (bool, String, u64) {
     use std::io::Read;
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_gedisim"))
-        .args(args)
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("run gedisim");
+    let mut child = spawn(args, std::process::Stdio::null(), std::process::Stdio::piped());
     let mut stderr = child.stderr.take().unwrap();
     let reader = std::thread::spawn(move || {
         let mut text = String::new();
@@ -492,12 +497,7 @@ fn run_with_peak_memory(args: &[&str]) -> (bool, String, u64) {
 /// streaming prints nothing until the end), which is no timing assertion: 10 minutes.
 fn peak_memory_while_streaming(args: &[&str], mut enough: impl FnMut(&[String]) -> bool) -> Option<u64> {
     use std::io::BufRead;
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_gedisim"))
-        .args(args)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .expect("run gedisim");
+    let mut child = spawn(args, std::process::Stdio::piped(), std::process::Stdio::null());
     let stdout = child.stdout.take().unwrap();
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
