@@ -61,7 +61,7 @@ pub fn diagnose(a: DiagnoseArgs) -> Result<()> {
         Some(d) => DiagnoseInput::Dataset(d),
         None if a.als.is_empty() => return Err(Error::Usage("give --dataset, or --als with --l1b and --l2a".into())),
         // The first half of `gedisim run`, with the diagnosis's per-beam collocation.
-        None => DiagnoseInput::Chain(Box::new(a.chain.run_options(a.als, a.l1b, a.l2a, &a.out.join("dataset")))),
+        None => DiagnoseInput::Chain(Box::new(a.chain.run_options(a.als, a.l1b, a.l2a, &a.out.join("dataset"))?)),
     };
     let opts = gedisim::ops::diagnose::DiagnoseOptions {
         effects: a.effects,

@@ -58,6 +58,38 @@ pub struct IngestGediArgs {
     /// Fail when a shot of a paired granule is in only one of L1B and L2A (default: keep it, warn).
     #[arg(long)]
     strict_join: bool,
+    #[command(flatten)]
+    shots: ShotArgs,
+}
+
+/// Which shots of the granules an ingest keeps (docs/gedi-products.md, "Shots kept").
+#[derive(Args, Clone, Default)]
+pub struct ShotArgs {
+    /// Keep the shots within this box, degrees WGS84: west,south,east,north (default: the shots over
+    /// the dataset's ALS tiles, grown by the collocation's search and the footprint's reach).
+    #[arg(long, value_name = "W,S,E,N", allow_hyphen_values = true, conflicts_with_all = ["within", "all_shots"])]
+    pub bbox: Option<String>,
+    /// Keep the shots within the polygons of this GeoJSON file (WGS84 longitude, latitude).
+    #[arg(long, value_name = "FILE", conflicts_with = "all_shots")]
+    pub within: Option<PathBuf>,
+    /// Keep every shot of every granule.
+    #[arg(long)]
+    pub all_shots: bool,
+}
+
+impl ShotArgs {
+    pub fn choice(&self) -> Result<gedisim::ops::ingest_gedi::ShotChoice> {
+        use gedisim::ops::ingest_gedi::ShotChoice;
+        Ok(match (&self.bbox, &self.within, self.all_shots) {
+            (Some(b), _, _) => ShotChoice::Area(
+                gedisim::kernels::geo::area::ShotArea::lon_lat_box(b)
+                    .map_err(|e| Error::Usage(format!("--bbox {b}: {e}")))?,
+            ),
+            (None, Some(f), _) => ShotChoice::Within(f.clone()),
+            (None, None, true) => ShotChoice::All,
+            (None, None, false) => ShotChoice::AlsCoverage,
+        })
+    }
 }
 
 #[derive(Args)]
@@ -132,10 +164,20 @@ pub fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
         return Err(Error::Usage("give --l1b and/or --l2a files".into()));
     }
     let ds = super::reporters::writer(&a.dataset)?;
-    let (outcomes, report) =
-        gedisim::ops::ingest_gedi::ingest(&ds, &a.l1b, &a.l2a, a.epsg, a.geoid_offset, a.strict_join, &Bars::new())?;
+    let request = gedisim::ops::ingest_gedi::IngestRequest {
+        epsg: a.epsg,
+        geoid_offset: a.geoid_offset,
+        strict_join: a.strict_join,
+        shots: a.shots.choice()?,
+        als_inputs: Vec::new(),
+        margin_m: als::run_window_half(CollocateOptions::default().max_shift),
+    };
+    let (outcomes, report) = gedisim::ops::ingest_gedi::ingest(&ds, &a.l1b, &a.l2a, &request, &Bars::new())?;
     for w in report.warnings() {
         warn!("{w}");
+    }
+    if let Some(line) = report.kept_line() {
+        info!("{line}");
     }
     for o in outcomes {
         match o {

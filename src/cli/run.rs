@@ -23,20 +23,29 @@ pub struct ChainArgs {
     /// Geoid offset N (m, ellipsoid − orthometric) for every shot, instead of each shot's L1B geoid.
     #[arg(long, allow_hyphen_values = true, value_parser = super::values::geoid_offset)]
     pub geoid_offset: Option<f64>,
+    #[command(flatten)]
+    pub shots: super::ingest::ShotArgs,
 }
 
 impl ChainArgs {
     /// `run`'s options for these inputs into the dataset `out` (the rest at their defaults).
-    pub fn run_options(self, als: Vec<PathBuf>, l1b: Vec<PathBuf>, l2a: Vec<PathBuf>, out: &Path) -> RunOptions {
-        RunOptions {
+    pub fn run_options(
+        self,
+        als: Vec<PathBuf>,
+        l1b: Vec<PathBuf>,
+        l2a: Vec<PathBuf>,
+        out: &Path,
+    ) -> Result<RunOptions> {
+        Ok(RunOptions {
             als,
             l1b,
             l2a,
             landcover: self.landcover,
             epsg: self.epsg,
             geoid_offset: self.geoid_offset,
+            shots: self.shots.choice()?,
             ..RunOptions::new(out)
-        }
+        })
     }
 }
 
@@ -84,7 +93,7 @@ pub struct RunArgs {
 
 pub fn run_command(a: RunArgs) -> Result<()> {
     use gedisim::ops::collocate::CollocateOptions;
-    let base = a.chain.run_options(a.als, a.l1b, a.l2a, &a.dataset);
+    let base = a.chain.run_options(a.als, a.l1b, a.l2a, &a.dataset)?;
     let opts = RunOptions {
         collocate: CollocateOptions {
             level: collocate_level(a.level),
@@ -170,6 +179,7 @@ pub fn run_json(r: &gedisim::ops::run::RunReport) -> serde_json::Value {
         "gedi": {
             "granules_ingested": c.granules_new,
             "shots_ingested": c.shots_ingested,
+            "shots_outside_area": r.shots_outside_area,
             "granules_already_ingested": c.granules_already
         },
         "collocation": r.collocation.as_ref().map(|c| serde_json::json!({
@@ -196,6 +206,9 @@ pub fn print_ingest_and_collocation(r: &gedisim::ops::run::RunReport) {
             "GEDI: {} granules ingested ({} shots), {} already ingested",
             c.granules_new, c.shots_ingested, c.granules_already
         );
+    }
+    if let Some(line) = &r.shots_kept {
+        info!("     {line}");
     }
     if !r.tiles.is_empty() {
         info!(

@@ -81,6 +81,16 @@ pub fn read_window(path: &Path) -> Result<Option<ReadWindow>> {
     window_of(path, &kv)
 }
 
+/// The header extent an `als/` file records (`gedisim:tile_extent`), if it records one.
+pub fn tile_extent(path: &Path) -> Option<BBox> {
+    let kv = super::read::key_value_metadata(path)?;
+    let v: Vec<f64> = kv.get(meta::TILE_EXTENT)?.split_whitespace().filter_map(|v| v.parse().ok()).collect();
+    match v[..] {
+        [x0, y0, x1, y1] if x0 <= x1 && y0 <= y1 => Some([x0, y0, x1, y1]),
+        _ => None,
+    }
+}
+
 fn window_of(path: &Path, kv: &HashMap<String, String>) -> Result<Option<ReadWindow>> {
     let Some(text) = kv.get(meta::READ_CELLS) else { return Ok(None) };
     let cells = Cells::parse(text, MAX_WINDOW_CELLS)

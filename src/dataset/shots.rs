@@ -222,6 +222,8 @@ pub fn granules_schema() -> SchemaRef {
         Field::new("l2a_path", DataType::Utf8, true),
         Field::new("l2a_hash", DataType::Utf8, true),
         Field::new("n_shots", DataType::UInt64, false),
+        Field::new("shot_area", DataType::Utf8, true),
+        Field::new("shots_outside_area", DataType::UInt64, true),
     ]))
 }
 

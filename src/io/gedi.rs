@@ -4,6 +4,7 @@
 //! **1-based**; L2A `geolocation/rh_aN` is integer centimetres while root `rh` is metres; V1 has no
 //! `land_cover_data/leaf_off_flag`.
 
+use std::ops::Range;
 use std::path::Path;
 
 use hdf5::types::{FixedAscii, FixedUnicode, H5Type, TypeDescriptor, VarLenAscii, VarLenUnicode};
@@ -78,7 +79,7 @@ impl<'a> Granule<'a> {
             return Ok(None);
         }
         let group = self.file.group(name).map_err(|e| Error::field(self.path, name, e))?;
-        let mut g = BeamGroup { path: self.path, beam: name.to_string(), group, n: 0 };
+        let mut g = BeamGroup { path: self.path, beam: name.to_string(), group, n: 0, runs: None };
         g.n = g.shot_numbers_len()?;
         Ok(Some(g))
     }
@@ -105,15 +106,41 @@ pub enum Shape {
     Flat,
 }
 
+/// Runs of consecutive shot indices of a beam, in order and disjoint: the shots a read keeps.
+pub type Runs = Vec<Range<usize>>;
+
+/// The runs of consecutive indices among sorted, distinct `indices`.
+pub fn runs_of(indices: &[usize]) -> Runs {
+    let mut runs: Runs = Vec::new();
+    for &i in indices {
+        match runs.last_mut() {
+            Some(r) if r.end == i => r.end += 1,
+            _ => runs.push(i..i + 1),
+        }
+    }
+    runs
+}
+
 /// One beam group of one file, with its shot count.
 pub struct BeamGroup<'a> {
     pub path: &'a Path,
     pub beam: String,
     pub group: Group,
+    /// Shots in the file's beam (the length of its per-shot datasets).
     pub n: usize,
+    /// The shots every per-shot read takes (`None`: all), read by hyperslab selections.
+    runs: Option<Runs>,
 }
 
 impl BeamGroup<'_> {
+    /// Take only the shots of `runs` (sorted, disjoint, non-empty ranges below [`Self::n`]) in every
+    /// later read of a per-shot dataset, waveforms included: their values come back in order, as
+    /// if the beam held only them.
+    pub fn select(&mut self, runs: Runs) {
+        debug_assert!(runs.iter().all(|r| r.start < r.end && r.end <= self.n));
+        self.runs = Some(runs);
+    }
+
     pub fn field(&self, rel: &str) -> String {
         format!("{}/{rel}", self.beam)
     }
@@ -164,18 +191,43 @@ impl BeamGroup<'_> {
         ))
     }
 
-    /// Read a numeric dataset into `Vec<T>` (row-major), converting from the file's dtype.
-    pub fn read_ds<T: Numeric>(&self, rel: &str, ds: &Dataset, shape: Shape) -> Result<Vec<T>> {
-        self.check_shape(rel, ds, shape)?;
+    /// Refuse a dataset whose dtype `T` cannot hold without loss (a float read as an integer).
+    fn check_dtype<T: Numeric>(&self, rel: &str, ds: &Dataset) -> Result<()> {
         let desc = ds.dtype().and_then(|t| t.to_descriptor()).map_err(|e| self.err(rel, e))?;
         match desc {
             TypeDescriptor::Float(_) if !T::FLOAT => {
-                return Err(self.err(rel, format!("expected an integer dtype, found {desc}")));
+                Err(self.err(rel, format!("expected an integer dtype, found {desc}")))
             }
-            TypeDescriptor::Integer(_) | TypeDescriptor::Unsigned(_) | TypeDescriptor::Float(_) => {}
-            _ => return Err(self.err(rel, format!("expected a numeric dtype, found {desc}"))),
+            TypeDescriptor::Integer(_) | TypeDescriptor::Unsigned(_) | TypeDescriptor::Float(_) => Ok(()),
+            _ => Err(self.err(rel, format!("expected a numeric dtype, found {desc}"))),
         }
-        ds.read_raw::<T>().map_err(|e| self.err(rel, e))
+    }
+
+    /// Elements `range` of a 1-D numeric dataset (one hyperslab).
+    pub fn read_range<T: Numeric>(&self, rel: &str, ds: &Dataset, range: Range<usize>) -> Result<Vec<T>> {
+        self.check_dtype::<T>(rel, ds)?;
+        ds.read_slice_1d::<T, _>(range).map(|a| a.into_raw_vec_and_offset().0).map_err(|e| self.err(rel, e))
+    }
+
+    /// Read a numeric dataset into `Vec<T>` (row-major), converting from the file's dtype; of a
+    /// per-shot dataset only the selected shots ([`Self::select`]).
+    pub fn read_ds<T: Numeric>(&self, rel: &str, ds: &Dataset, shape: Shape) -> Result<Vec<T>> {
+        self.check_shape(rel, ds, shape)?;
+        self.check_dtype::<T>(rel, ds)?;
+        let runs = match (&self.runs, shape) {
+            (Some(runs), Shape::PerShot | Shape::Rows(_)) => runs,
+            _ => return ds.read_raw::<T>().map_err(|e| self.err(rel, e)),
+        };
+        let mut out = Vec::new();
+        for r in runs {
+            // Row-major either way: a 2-D slice of whole rows is in standard layout.
+            let part = match shape {
+                Shape::Rows(_) => ds.read_slice_2d::<T, _>((r.clone(), ..)).map(|a| a.into_raw_vec_and_offset().0),
+                _ => ds.read_slice_1d::<T, _>(r.clone()).map(|a| a.into_raw_vec_and_offset().0),
+            };
+            out.extend(part.map_err(|e| self.err(rel, e))?);
+        }
+        Ok(out)
     }
 
     /// A required dataset: missing ⇒ `<file>: BEAMxxxx/<rel>: missing`.
@@ -204,9 +256,9 @@ impl BeamGroup<'_> {
         self.check_shape(rel, &ds, Shape::PerShot)?;
         let desc = ds.dtype().and_then(|t| t.to_descriptor()).map_err(|e| self.err(rel, e))?;
         match desc {
-            TypeDescriptor::Unsigned(_) => ds.read_raw::<u64>().map_err(|e| self.err(rel, e)),
+            TypeDescriptor::Unsigned(_) => self.read_ds::<u64>(rel, &ds, Shape::PerShot),
             TypeDescriptor::Integer(_) => {
-                let v = ds.read_raw::<i64>().map_err(|e| self.err(rel, e))?;
+                let v = self.read_ds::<i64>(rel, &ds, Shape::PerShot)?;
                 v.into_iter()
                     .map(|s| u64::try_from(s).map_err(|_| self.err(rel, format!("negative shot number {s}"))))
                     .collect()
@@ -216,6 +268,15 @@ impl BeamGroup<'_> {
                     .err(rel, format!("expected an integer dtype (a float cannot hold shot numbers), found {desc}")))
             }
         }
+    }
+
+    /// A required coordinate (degrees): NaN or a value beyond `limit` is an error naming the shot.
+    pub fn coordinates(&self, rel: &str, limit: f64, shot_number: &[u64]) -> Result<Vec<f64>> {
+        let v = self.require::<f64>(rel, Shape::PerShot)?;
+        if let Some((i, x)) = v.iter().enumerate().find(|(_, x)| !(x.is_finite() && x.abs() <= limit)) {
+            return Err(self.err(rel, format!("shot {}: invalid coordinate {x}", shot_number[i])));
+        }
+        Ok(v)
     }
 }
 
@@ -241,9 +302,14 @@ impl Waveforms {
     }
 }
 
-/// Read `<wave>`, `<prefix>_sample_start_index` (1-based) and `<prefix>_sample_count`; `None`
-/// when any of the three is absent (the caller decides whether that is an error). A negative
-/// count, a start index below 1 or a record past the end of `<wave>` is an error naming the shot.
+/// Read `<wave>`, `<prefix>_sample_start_index` (1-based) and `<prefix>_sample_count` of the shots
+/// the group reads (`shots`, all or the selected ones); `None` when any of the three is absent (the
+/// caller decides whether that is an error). A negative count, a start index below 1 or a record
+/// past the end of `<wave>` is an error naming the shot.
+///
+/// Of `<wave>` only the samples of those shots are read: per run of selected shots, one hyperslab
+/// from its first record's start to its last record's end (GEDI stores records in shot order, so a
+/// run's records are contiguous); every sample when the group reads every shot.
 pub fn read_waveforms(g: &BeamGroup, shots: &[u64], wave: &str, prefix: &str) -> Result<Option<Waveforms>> {
     let start_rel = format!("{prefix}_sample_start_index");
     let count_rel = format!("{prefix}_sample_count");
@@ -251,13 +317,13 @@ pub fn read_waveforms(g: &BeamGroup, shots: &[u64], wave: &str, prefix: &str) ->
         (Some(w), Some(s), Some(c)) => (w, s, c),
         _ => return Ok(None),
     };
-    let samples = g.read_ds::<f32>(wave, &w, Shape::Flat)?;
+    g.check_shape(wave, &w, Shape::Flat)?;
     // Signed reads: a negative value in a signed dataset must not convert to 0 or wrap.
     let start = g.read_ds::<i64>(&start_rel, &s, Shape::PerShot)?;
     let count = g.read_ds::<i64>(&count_rel, &c, Shape::PerShot)?;
-    let len = samples.len() as u64;
-    let mut spans = Vec::with_capacity(shots.len());
-    let (mut usable, mut non_finite) = (Vec::with_capacity(shots.len()), Vec::new());
+    let len = w.shape()[0] as u64;
+    // Each shot's record [first, first + n) in the file's flat array.
+    let mut records = Vec::with_capacity(shots.len());
     for ((&shot, &s), &c) in shots.iter().zip(&start).zip(&count) {
         if s < 1 {
             return Err(g.err(&start_rel, format!("shot {shot}: index {s}, but GEDI's start index is 1-based")));
@@ -268,13 +334,46 @@ pub fn read_waveforms(g: &BeamGroup, shots: &[u64], wave: &str, prefix: &str) ->
         let end = (s - 1).checked_add(c).filter(|&e| e <= len).ok_or_else(|| {
             g.err(&start_rel, format!("shot {shot}: start {s} + {count_rel} {c} - 1 exceeds the {wave} length {len}"))
         })?;
-        let (first, n) = ((s - 1) as usize, (end - (s - 1)) as usize);
+        records.push(((s - 1) as usize, (end - (s - 1)) as usize));
+    }
+    // The sample ranges to read: everything, or one per run of selected shots.
+    let groups: Vec<Range<usize>> = match &g.runs {
+        None => std::iter::once(0..records.len()).collect(),
+        Some(runs) => {
+            let mut at = 0;
+            runs.iter()
+                .map(|r| {
+                    at += r.len();
+                    at - r.len()..at
+                })
+                .collect()
+        }
+    };
+    let mut samples: Vec<f32> = Vec::new();
+    let mut spans = vec![(0, 0); records.len()];
+    for rows in groups {
+        let recs = &records[rows.clone()];
+        let lo = recs.iter().filter(|r| r.1 > 0).map(|r| r.0).min();
+        let hi = recs.iter().filter(|r| r.1 > 0).map(|r| r.0 + r.1).max();
+        let (Some(lo), Some(hi)) = (lo, hi) else { continue };
+        let part = if lo == 0 && hi as u64 == len {
+            g.read_ds::<f32>(wave, &w, Shape::Flat)?
+        } else {
+            g.read_range::<f32>(wave, &w, lo..hi)?
+        };
+        let base = samples.len();
+        samples.extend(part);
+        for (span, &(first, n)) in spans[rows].iter_mut().zip(recs) {
+            *span = if n > 0 { (base + first - lo, n) } else { (base, 0) };
+        }
+    }
+    let (mut usable, mut non_finite) = (Vec::with_capacity(shots.len()), Vec::new());
+    for (&shot, &(first, n)) in shots.iter().zip(&spans) {
         let finite = samples[first..first + n].iter().all(|v| v.is_finite());
         if !finite {
             non_finite.push(shot);
         }
         usable.push(finite && n > 0);
-        spans.push((first, n));
     }
     Ok(Some(Waveforms { samples, spans, non_finite, usable }))
 }
@@ -306,13 +405,7 @@ pub fn read_l1b(g: &BeamGroup) -> Result<L1bBeam> {
         g.require_dataset(rel)?;
     }
     // The coordinates are required: NaN or out-of-range values are an error naming the field.
-    let coord = |rel: &str, limit: f64| -> Result<Vec<f64>> {
-        let v = g.require::<f64>(rel, PerShot)?;
-        if let Some((i, x)) = v.iter().enumerate().find(|(_, x)| !(x.is_finite() && x.abs() <= limit)) {
-            return Err(g.err(rel, format!("shot {}: invalid coordinate {x}", shot_number[i])));
-        }
-        Ok(v)
-    };
+    let coord = |rel: &str, limit: f64| g.coordinates(rel, limit, &shot_number);
     Ok(L1bBeam {
         delta_time: g.optional("delta_time", PerShot)?,
         rx: read_waveforms(g, &shot_number, "rxwaveform", "rx")?.ok_or_else(|| g.err("rxwaveform", "missing"))?,
@@ -330,6 +423,52 @@ pub fn read_l1b(g: &BeamGroup) -> Result<L1bBeam> {
         geoid: g.optional("geophys_corr/geoid", PerShot)?,
         shot_number,
     })
+}
+
+/// The cheap per-shot datasets that place the shots of an L1B beam (read for every shot, before
+/// the rest is read for the shots kept): shot numbers and the bin0/lastbin coordinates.
+pub struct L1bPlaces {
+    pub shot_number: Vec<u64>,
+    pub lat_bin0: Vec<f64>,
+    pub lon_bin0: Vec<f64>,
+    pub lat_lastbin: Vec<f64>,
+    pub lon_lastbin: Vec<f64>,
+}
+
+pub fn read_l1b_places(g: &BeamGroup) -> Result<L1bPlaces> {
+    let shot_number = g.shot_numbers()?;
+    let coord = |rel: &str, limit: f64| g.coordinates(rel, limit, &shot_number);
+    Ok(L1bPlaces {
+        lat_bin0: coord("geolocation/latitude_bin0", 90.0)?,
+        lon_bin0: coord("geolocation/longitude_bin0", 360.0)?,
+        lat_lastbin: coord("geolocation/latitude_lastbin", 90.0)?,
+        lon_lastbin: coord("geolocation/longitude_lastbin", 360.0)?,
+        shot_number,
+    })
+}
+
+/// The cheap per-shot datasets that place the shots of an L2A beam: shot numbers and the lowest
+/// mode's coordinates (optional).
+pub struct L2aPlaces {
+    pub shot_number: Vec<u64>,
+    pub lat_lowestmode: Option<Vec<f64>>,
+    pub lon_lowestmode: Option<Vec<f64>>,
+}
+
+pub fn read_l2a_places(g: &BeamGroup) -> Result<L2aPlaces> {
+    use Shape::PerShot;
+    Ok(L2aPlaces {
+        shot_number: g.shot_numbers()?,
+        lat_lowestmode: g.optional("lat_lowestmode", PerShot)?,
+        lon_lowestmode: g.optional("lon_lowestmode", PerShot)?,
+    })
+}
+
+/// The lowest mode (lat, lon) of a shot when both are valid coordinates.
+pub fn valid_lowestmode(lat: Option<f64>, lon: Option<f64>) -> Option<(f64, f64)> {
+    let (lat, lon) = (lat?, lon?);
+    let valid = lat.is_finite() && lon.is_finite() && lat.abs() <= 90.0 && lon.abs() <= 360.0;
+    valid.then_some((lat, lon))
 }
 
 /// One algorithm's per-shot outputs (each optional).
@@ -414,10 +553,7 @@ pub fn read_l2a(g: &BeamGroup) -> Result<L2aBeam> {
 impl L2aBeam {
     /// The lowest-mode (lat, lon) of shot `i` when both are valid coordinates.
     pub fn lowestmode(&self, i: usize) -> Option<(f64, f64)> {
-        let lat = self.lat_lowestmode.as_ref()?[i];
-        let lon = self.lon_lowestmode.as_ref()?[i];
-        let valid = lat.is_finite() && lon.is_finite() && lat.abs() <= 90.0 && lon.abs() <= 360.0;
-        valid.then_some((lat, lon))
+        valid_lowestmode(self.lat_lowestmode.as_ref().map(|v| v[i]), self.lon_lowestmode.as_ref().map(|v| v[i]))
     }
 }
 

@@ -90,18 +90,41 @@ impl<S> Beam<S> {
     }
 }
 
-/// Granule-level identification written to `METADATA/DatasetIdentification`.
+/// Granule-level identification written to `METADATA/DatasetIdentification`, and how datasets are stored.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GranuleMeta {
     /// `PGEVersion` attribute ("005" for V2 L1B).
     pub pge_version: String,
     /// `VersionID` attribute ("002" for V2).
     pub version_id: String,
+    /// Contiguous (the default: small fixtures) or chunked and compressed as NASA's granules are.
+    pub storage: Storage,
 }
 
 impl Default for GranuleMeta {
     fn default() -> Self {
-        GranuleMeta { pge_version: "005".into(), version_id: "002".into() }
+        GranuleMeta { pge_version: "005".into(), version_id: "002".into(), storage: Storage::default() }
+    }
+}
+
+/// How each dataset is stored: contiguous, or in chunks compressed by gzip (deflate).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Storage {
+    /// Rows per chunk of a per-shot dataset (`None`: contiguous, no compression).
+    pub shot_chunk: Option<usize>,
+    /// Samples per chunk of a flat waveform array (`rxwaveform`, `txwaveform`).
+    pub sample_chunk: usize,
+    /// gzip level (0–9).
+    pub gzip: u8,
+}
+
+impl Storage {
+    /// The layout of the real V1 subsets (tests/data/gedi: h5py's `chunks`, `compression_opts`),
+    /// whose subsetter kept NASA's chunk shapes: per-shot datasets in chunks of 554,085 rows,
+    /// `rxwaveform` in chunks of 14,200 samples (12,800 for `txwaveform`; one size serves both here),
+    /// gzip level 4.
+    pub fn nasa() -> Storage {
+        Storage { shot_chunk: Some(554_085), sample_chunk: 14_200, gzip: 4 }
     }
 }
 
@@ -127,7 +150,7 @@ fn write_granule<S>(
     for beam in beams {
         let mut sets = datasets(path, beam)?;
         sets.extend(beam.extra.iter().cloned());
-        write_beam(path, &file, &beam.name, &sets)?;
+        write_beam(path, &file, &beam.name, &sets, meta.storage)?;
     }
     Ok(())
 }
@@ -319,7 +342,7 @@ pub fn write_str_attr(loc: &Location, name: &str, value: &str) -> hdf5::Result<(
     loc.new_attr::<VarLenUnicode>().shape(()).create(name)?.write_scalar(&v)
 }
 
-fn write_beam(path: &Path, file: &File, name: &str, sets: &[ExtraDataset]) -> Result<()> {
+fn write_beam(path: &Path, file: &File, name: &str, sets: &[ExtraDataset], storage: Storage) -> Result<()> {
     let beam_type = BeamType::from_name(name)
         .ok_or_else(|| Error::field(path, name, "not a GEDI beam name (BEAM0000..BEAM1011)"))?;
     let group = file.create_group(name).map_err(h5err(path, name))?;
@@ -329,16 +352,43 @@ fn write_beam(path: &Path, file: &File, name: &str, sets: &[ExtraDataset]) -> Re
         if d.row_len == 0 || d.values.len() % d.row_len != 0 {
             return Err(Error::field(path, &field, format!("{} values are not rows of {}", d.values.len(), d.row_len)));
         }
-        write_values(&group, &d.path, &d.values, d.row_len).map_err(|e| Error::field(path, &field, e))?;
+        // The flat waveform arrays are chunked by samples, every other dataset by shots.
+        let flat = ["rxwaveform", "txwaveform"].contains(&d.path.as_str());
+        let chunk = storage.shot_chunk.map(|c| if flat { storage.sample_chunk } else { c });
+        write_stored(&group, &d.path, &d.values, d.row_len, chunk.map(|c| (c, storage.gzip)))
+            .map_err(|e| Error::field(path, &field, e))?;
     }
     Ok(())
 }
 
-/// Write one dataset (creating intermediate groups), 1-D when `row_len == 1`, else N×row_len.
+/// Write one dataset (creating intermediate groups), 1-D when `row_len == 1`, else N×row_len;
+/// contiguous.
 pub fn write_values(root: &Group, rel: &str, values: &Values, row_len: usize) -> hdf5::Result<()> {
-    fn typed<T: H5Type>(parent: &Group, name: &str, data: &[T], row_len: usize) -> hdf5::Result<()> {
+    write_stored(root, rel, values, row_len, None)
+}
+
+/// [`write_values`], in chunks of `(rows, gzip level)` when given (a chunk is never longer than the
+/// dataset; an empty dataset stays contiguous).
+fn write_stored(
+    root: &Group,
+    rel: &str,
+    values: &Values,
+    row_len: usize,
+    chunk: Option<(usize, u8)>,
+) -> hdf5::Result<()> {
+    fn typed<T: H5Type>(
+        parent: &Group,
+        name: &str,
+        data: &[T],
+        row_len: usize,
+        chunk: Option<(usize, u8)>,
+    ) -> hdf5::Result<()> {
         let rows = data.len() / row_len.max(1);
-        let builder = parent.new_dataset::<T>();
+        let mut builder = parent.new_dataset::<T>();
+        if let Some((c, level)) = chunk.filter(|_| rows > 0) {
+            builder = builder.chunk(if row_len == 1 { vec![c.min(rows)] } else { vec![c.min(rows), row_len] });
+            builder = builder.deflate(level);
+        }
         let ds = if row_len == 1 {
             builder.shape(rows).create(name)?
         } else {
@@ -351,15 +401,15 @@ pub fn write_values(root: &Group, rel: &str, values: &Values, row_len: usize) ->
     }
     let (parent, name) = parent_group(root, rel)?;
     match values {
-        Values::U8(v) => typed(&parent, name, v, row_len),
-        Values::I8(v) => typed(&parent, name, v, row_len),
-        Values::U16(v) => typed(&parent, name, v, row_len),
-        Values::I16(v) => typed(&parent, name, v, row_len),
-        Values::U32(v) => typed(&parent, name, v, row_len),
-        Values::U64(v) => typed(&parent, name, v, row_len),
-        Values::I64(v) => typed(&parent, name, v, row_len),
-        Values::F32(v) => typed(&parent, name, v, row_len),
-        Values::F64(v) => typed(&parent, name, v, row_len),
+        Values::U8(v) => typed(&parent, name, v, row_len, chunk),
+        Values::I8(v) => typed(&parent, name, v, row_len, chunk),
+        Values::U16(v) => typed(&parent, name, v, row_len, chunk),
+        Values::I16(v) => typed(&parent, name, v, row_len, chunk),
+        Values::U32(v) => typed(&parent, name, v, row_len, chunk),
+        Values::U64(v) => typed(&parent, name, v, row_len, chunk),
+        Values::I64(v) => typed(&parent, name, v, row_len, chunk),
+        Values::F32(v) => typed(&parent, name, v, row_len, chunk),
+        Values::F64(v) => typed(&parent, name, v, row_len, chunk),
     }
 }
 

@@ -13,6 +13,7 @@ pub mod las;
 pub mod pulse;
 pub mod source;
 pub mod store;
+pub mod within;
 
 use std::path::{Path, PathBuf};
 

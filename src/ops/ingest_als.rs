@@ -345,6 +345,9 @@ impl Target<'_> {
         if let Some(wkt) = &header.crs_wkt {
             m.insert(meta::CRS_WKT.to_string(), wkt.clone());
         }
+        // Every tile's header extent (a window's metadata repeats it): the GEDI ingest's default area.
+        let b = header.bounds;
+        m.insert(meta::TILE_EXTENT.to_string(), format!("{} {} {} {}", b[0], b[1], b[3], b[4]));
         m.extend(window.map(ReadWindow::metadata).into_iter().flatten());
         m
     }

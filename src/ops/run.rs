@@ -75,6 +75,8 @@ pub struct RunOptions {
     pub als_window: Option<f64>,
     /// The study's bounds.
     pub rules: StudyRules,
+    /// The shots of new granules kept (default: those over the dataset's and `als`'s tiles).
+    pub shots: gedi::ShotChoice,
     /// Where the collocation and the simulation run: here, or each as one plan on a Ballista cluster
     /// (a partition per granule to collocate, per group of a granule's blocks to simulate).
     pub engine: Engine,
@@ -94,6 +96,7 @@ impl RunOptions {
             collocate: CollocateOptions::default(),
             als_window: None,
             rules: StudyRules::default(),
+            shots: gedi::ShotChoice::AlsCoverage,
             engine: Engine::Local,
         }
     }
@@ -131,6 +134,10 @@ pub struct RunReport {
     pub ingested: Vec<GranuleOutcome>,
     /// Warnings (GEDI joins, foreign files in `sim/`).
     pub warnings: Vec<String>,
+    /// What the GEDI ingest kept and left out ([`gedi::IngestReport::kept_line`]), and how many
+    /// shots it left out.
+    pub shots_kept: Option<String>,
+    pub shots_outside_area: usize,
     pub strata: Option<StrataReport>,
     /// The collocation of the granules that needed one (`None`: none did).
     pub collocation: Option<CollocateReport>,
@@ -274,7 +281,17 @@ fn ingest_gedi(
     if opts.l1b.is_empty() && opts.l2a.is_empty() {
         return Ok(());
     }
-    let (outcomes, ingest) = gedi::ingest(ds, &opts.l1b, &opts.l2a, epsg, opts.geoid_offset, false, progress)?;
+    let request = gedi::IngestRequest {
+        epsg,
+        geoid_offset: opts.geoid_offset,
+        strict_join: false,
+        shots: opts.shots.clone(),
+        als_inputs: opts.als.clone(),
+        margin_m: opts.als_window.unwrap_or_else(|| als::run_window_half(opts.collocate.max_shift)),
+    };
+    let (outcomes, ingest) = gedi::ingest(ds, &opts.l1b, &opts.l2a, &request, progress)?;
+    report.shots_kept = ingest.kept_line();
+    report.shots_outside_area = ingest.outside_area();
     report.warnings.extend(ingest.warnings());
     report.ingested = outcomes;
     Ok(())
@@ -300,7 +317,11 @@ fn list_granules(ds: &Dataset) -> Result<Vec<GranuleFile>> {
         let key = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         let record = ds.root().join(tables::GRANULES).join(format!("{key}.parquet"));
         let inputs = match gedi::previous_hashes(&record)? {
-            Some((a, b)) => format!("l1b={} l2a={}", a.unwrap_or_default(), b.unwrap_or_default()),
+            Some((a, b)) => {
+                let area = gedi::previous_area(&record)?.filter(|a| a != "all");
+                let area = area.map(|a| format!(" area={a}")).unwrap_or_default();
+                format!("l1b={} l2a={}{area}", a.unwrap_or_default(), b.unwrap_or_default())
+            }
             None => {
                 let m = std::fs::metadata(&path).map_err(|e| Error::file(&path, e))?;
                 let t = m

@@ -101,3 +101,20 @@ impl gedisim::ops::progress::Progress for Recorder {
     }
     fn finish(&self) {}
 }
+
+/// A `tiles/` file of the dataset holding only the extents `[xmin, ymin, xmax, ymax]` of tiles (what
+/// the default area of `ingest gedi` reads).
+pub fn write_tile_extents(ds: &gedisim::dataset::Dataset, extents: &[[f64; 4]]) {
+    use arrow::array::{ArrayRef, Float64Array, RecordBatch};
+    use arrow::datatypes::{DataType, Field, Schema};
+    use std::sync::Arc;
+    let names = ["xmin", "ymin", "xmax", "ymax"];
+    let schema =
+        Arc::new(Schema::new(names.iter().map(|n| Field::new(*n, DataType::Float64, false)).collect::<Vec<_>>()));
+    let cols: Vec<ArrayRef> = (0..4)
+        .map(|i| Arc::new(Float64Array::from(extents.iter().map(|e| e[i]).collect::<Vec<_>>())) as ArrayRef)
+        .collect();
+    let b = RecordBatch::try_new(schema.clone(), cols).unwrap();
+    let file = ds.table_file("tiles", "extents").unwrap();
+    gedisim::dataset::write_parquet(&file, schema, &[b], &Default::default()).unwrap();
+}

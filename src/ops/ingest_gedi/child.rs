@@ -106,14 +106,21 @@ pub fn read(
     let first = pair.l1b.as_deref().or(pair.l2a.as_deref()).unwrap_or(Path::new(""));
     let request = serde_json::to_string(&Request { pair: pair.clone(), opts: opts.clone() })
         .map_err(|e| Error::file(first, format!("a path gedisim cannot pass to its granule reader: {e}")))?;
+    // The request goes through stdin: an area of thousands of tiles exceeds one argument's length.
     let mut child = Command::new(&reader.exe)
-        .args([COMMAND, &request])
-        .stdin(Stdio::null())
+        .args([COMMAND, "-"])
+        .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .map_err(|e| Error::file(&reader.exe, format!("starting the granule reader: {e}")))?;
     let (stdout, mut stderr) = (child.stdout.take().expect("piped"), child.stderr.take().expect("piped"));
+    // Written beside the frames' reading; a child that dies first closes the pipe, and its failure
+    // is told below from its status and stderr.
+    let mut stdin = child.stdin.take().expect("piped");
+    let writer = std::thread::spawn(move || {
+        let _ = stdin.write_all(request.as_bytes());
+    });
     // Drained beside the frames, so that a child writing to stderr never blocks.
     let errors = std::thread::spawn(move || {
         let mut s = String::new();
@@ -124,6 +131,7 @@ pub fn read(
     let watch = Watch::new(reader.stall_limit, Arc::clone(&child));
     let received = receive(BufReader::new(Watched { inner: stdout, watch: &watch }), sink);
     let stalled = watch.stop();
+    let _ = writer.join();
     let mut child = child.lock().unwrap_or_else(|e| e.into_inner());
     if received.is_err() {
         let _ = child.kill();

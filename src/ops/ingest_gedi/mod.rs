@@ -24,10 +24,15 @@ use crate::dataset::shots::{granules_schema, shots_schema, VERTICAL_DATUM};
 use crate::error::{Error, Result};
 use crate::io::gedi::{open_product, read_l1b, read_l2a, L1bBeam, L2aBeam, Product};
 use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
+use crate::kernels::geo::area::ShotArea;
 use crate::kernels::geo::projection::Projector;
 use crate::ops::progress::{Progress, Step};
 
 pub mod child;
+mod coverage;
+mod select;
+
+pub use coverage::ShotChoice;
 
 /// Maximum rows per emitted batch (a beam larger than this is split).
 pub const BATCH_ROWS: usize = 8192;
@@ -42,11 +47,14 @@ pub struct GediOptions {
     pub geoid_offset: Option<f64>,
     /// Reject (error) a shot present in only one of a paired L1B/L2A granule instead of keeping it.
     pub strict_join: bool,
+    /// The shots kept; the others are counted, not read ([`select`]).
+    #[serde(default)]
+    pub area: ShotArea,
 }
 
 impl Default for GediOptions {
     fn default() -> Self {
-        GediOptions { epsg: 2154, geoid_offset: None, strict_join: false }
+        GediOptions { epsg: 2154, geoid_offset: None, strict_join: false, area: ShotArea::All }
     }
 }
 
@@ -87,6 +95,8 @@ pub struct BeamReport {
     /// L1B shots whose `rxwaveform` or `txwaveform` record holds NaN or infinite samples (that
     /// waveform kept null).
     pub non_finite_waveform: Vec<u64>,
+    /// Shots left out: outside the ingest's [`ShotArea`] (not read beyond their position).
+    pub outside_area: usize,
 }
 
 impl BeamReport {
@@ -145,12 +155,33 @@ pub struct IngestReport {
     pub beams: Vec<BeamReport>,
     /// File-level notes, e.g. an L1B file with no L2A partner file.
     pub notes: Vec<String>,
+    /// What the shots kept are ([`ShotArea::describe`]).
+    pub area: String,
 }
 
 impl IngestReport {
     /// Total rows written.
     pub fn rows(&self) -> usize {
         self.beams.iter().map(BeamReport::rows).sum()
+    }
+
+    /// Shots left out, outside the area.
+    pub fn outside_area(&self) -> usize {
+        self.beams.iter().map(|b| b.outside_area).sum()
+    }
+
+    /// What was kept and what left out, in one line (`None` when every shot was kept by choice).
+    pub fn kept_line(&self) -> Option<String> {
+        let (rows, outside, all) = (self.rows(), self.outside_area(), ShotArea::All.describe());
+        match (outside, self.area.strip_prefix(&all)) {
+            (0, Some("")) => None,
+            (0, Some(why)) => Some(format!("{rows} shot(s) kept: every shot{why}")),
+            _ => Some(format!(
+                "{rows} shot(s) kept within {}; {outside} outside it left out (read for their position only; \
+                 --all-shots keeps every shot)",
+                self.area
+            )),
+        }
     }
 
     /// Every warning line (file-level notes first).
@@ -180,7 +211,7 @@ pub fn read_gedi(l1b: &[PathBuf], l2a: &[PathBuf], opts: &GediOptions) -> Result
             Ok((batches, beams))
         })
         .collect::<Result<Vec<_>>>()?;
-    let mut report = IngestReport { beams: Vec::new(), notes };
+    let mut report = IngestReport { beams: Vec::new(), notes, area: opts.area.describe() };
     let mut all = Vec::new();
     for (batches, beams) in parts {
         all.extend(batches);
@@ -197,7 +228,7 @@ pub fn ingest_gedi(
     mut sink: impl FnMut(RecordBatch) -> Result<()>,
 ) -> Result<IngestReport> {
     let (pairs, notes) = pair_granules(l1b, l2a)?;
-    let mut report = IngestReport { beams: Vec::new(), notes };
+    let mut report = IngestReport { beams: Vec::new(), notes, area: opts.area.describe() };
     for pair in &pairs {
         report.beams.extend(read_granule(pair, opts, &mut sink)?);
     }
@@ -312,9 +343,6 @@ pub fn read_granule_in_process(
             let path = l1b.as_ref().or(l2a.as_ref()).map(|f| f.path).unwrap_or(Path::new(""));
             Error::field(path, &beam, "not one of the eight GEDI beams (BEAM0000..BEAM1011)")
         })?;
-        // Read one side, then the other: only this beam is in memory.
-        let l1b_beam = l1b.as_ref().map(|f| f.beam(&beam)).transpose()?.flatten().map(|g| read_l1b(&g)).transpose()?;
-        let l2a_beam = l2a.as_ref().map(|f| f.beam(&beam)).transpose()?.flatten().map(|g| read_l2a(&g)).transpose()?;
         let mut report = BeamReport {
             granule: pair.granule.clone(),
             beam: beam.clone(),
@@ -322,6 +350,22 @@ pub fn read_granule_in_process(
             l2a_file: pair.l2a.clone(),
             ..Default::default()
         };
+        let mut g1 = l1b.as_ref().map(|f| f.beam(&beam)).transpose()?.flatten();
+        let mut g2 = l2a.as_ref().map(|f| f.beam(&beam)).transpose()?.flatten();
+        if !opts.area.is_all() {
+            // Every shot placed from its cheap datasets; the rest read for the shots kept only.
+            let kept = select::kept(pair, &beam, g1.as_ref(), g2.as_ref(), &opts.area, &projector)?;
+            report.outside_area = kept.outside;
+            if kept.inside == 0 {
+                reports.push(report);
+                continue;
+            }
+            g1.iter_mut().for_each(|g| g.select(kept.l1b.clone()));
+            g2.iter_mut().for_each(|g| g.select(kept.l2a.clone()));
+        }
+        // Read one side, then the other: only this beam's shots (kept) are in memory.
+        let l1b_beam = g1.as_ref().map(read_l1b).transpose()?;
+        let l2a_beam = g2.as_ref().map(read_l2a).transpose()?;
         if let Some(b) = &l1b_beam {
             report.non_finite_waveform =
                 b.rx.non_finite.iter().chain(b.tx.iter().flat_map(|t| &t.non_finite)).copied().collect();
@@ -366,6 +410,17 @@ impl XySource {
             XySource::LowestMode => "lowestmode",
             XySource::BinMean => "bin_mean",
         }
+    }
+}
+
+/// Where a shot is (lat, lon, source): its valid L2A lowest mode, else the mean of its L1B bin0 and
+/// lastbin (`[lat_bin0, lon_bin0, lat_lastbin, lon_lastbin]`); the same rule places rows and
+/// chooses the shots kept ([`select`]).
+fn position(lowest: Option<(f64, f64)>, bins: Option<[f64; 4]>) -> Option<(f64, f64, XySource)> {
+    match (lowest, bins) {
+        (Some((lat, lon)), _) => Some((lat, lon, XySource::LowestMode)),
+        (None, Some([lat0, lon0, lat1, lon1])) => Some(((lat0 + lat1) / 2.0, (lon0 + lon1) / 2.0, XySource::BinMean)),
+        (None, None) => None,
     }
 }
 
@@ -514,18 +569,14 @@ fn join(
             }
             _ => None,
         };
-        let (lat, lon, source, field) = match (lowest, l1b.zip(i1)) {
-            (Some((lat, lon)), _) => (lat, lon, XySource::LowestMode, "lat_lowestmode"),
-            (None, Some((b, i))) => (
-                (b.lat_bin0[i] + b.lat_lastbin[i]) / 2.0,
-                (b.lon_bin0[i] + b.lon_lastbin[i]) / 2.0,
-                XySource::BinMean,
-                "geolocation/latitude_bin0",
-            ),
-            (None, None) => {
-                rows.push(Row { shot_number, l1b: i1, l2a: i2, xy: None });
-                continue;
-            }
+        let bins = l1b.zip(i1).map(|(b, i)| [b.lat_bin0[i], b.lon_bin0[i], b.lat_lastbin[i], b.lon_lastbin[i]]);
+        let Some((lat, lon, source)) = position(lowest, bins) else {
+            rows.push(Row { shot_number, l1b: i1, l2a: i2, xy: None });
+            continue;
+        };
+        let field = match source {
+            XySource::LowestMode => "lat_lowestmode",
+            XySource::BinMean => "geolocation/latitude_bin0",
         };
         let (x, y) = projector.project(lon, lat).map_err(|e| {
             let path = if matches!(source, XySource::LowestMode) { pair.l2a.as_deref() } else { pair.l1b.as_deref() };
@@ -725,17 +776,31 @@ pub enum GranuleOutcome {
     AlreadyIngested { granule: String },
 }
 
+/// What `gedisim ingest gedi` (and `run`) is asked beyond the files.
+#[derive(Debug, Clone, Default)]
+pub struct IngestRequest {
+    /// Projected CRS of `x`, `y` (`None`: the dataset's ALS CRS, else [`DEFAULT_EPSG`], said in a note).
+    pub epsg: Option<u32>,
+    /// Geoid offset N (m) for every shot instead of each shot's L1B geoid.
+    pub geoid_offset: Option<f64>,
+    /// Fail on a shot in only one of a paired L1B/L2A.
+    pub strict_join: bool,
+    /// The shots kept.
+    pub shots: ShotChoice,
+    /// ALS files about to be ingested (`run`): their header extents join the dataset's coverage.
+    pub als_inputs: Vec<PathBuf>,
+    /// Margin (m) around each tile extent: the collocation's search and the footprint's reach
+    /// ([`crate::ops::ingest_als::run_window_half`]).
+    pub margin_m: f64,
+}
+
 /// `gedisim ingest gedi`: the granules of `l1b` and `l2a` (files, or folders expanded) into
-/// `dataset`, projected to `epsg` (`None`: the dataset's ALS CRS, else [`DEFAULT_EPSG`], said in a
-/// note), as one
-/// [`Step::IngestGedi`] counted in granules.
+/// `dataset`, the shots of `request.shots` kept, as one [`Step::IngestGedi`] counted in granules.
 pub fn ingest(
     dataset: &crate::dataset::Dataset,
     l1b: &[PathBuf],
     l2a: &[PathBuf],
-    epsg: Option<u32>,
-    geoid_offset: Option<f64>,
-    strict_join: bool,
+    request: &IngestRequest,
     progress: &dyn Progress,
 ) -> Result<(Vec<GranuleOutcome>, IngestReport)> {
     let l1b = expand_granule_inputs(l1b, "GEDI01_B")?;
@@ -744,8 +809,8 @@ pub fn ingest(
         return Err(Error::Usage("--l1b/--l2a: no GEDI01_B or GEDI02_A .h5 file found in the inputs".into()));
     }
     let existing = crate::dataset::dataset_epsg(dataset)?;
-    let (given, had_crs) = (epsg.is_some(), existing.is_some());
-    let epsg = match (epsg, existing) {
+    let (given, had_crs) = (request.epsg.is_some(), existing.is_some());
+    let epsg = match (request.epsg, existing) {
         (Some(given), Some(ds)) if given != ds => {
             return Err(Error::field(
                 dataset.root(),
@@ -756,11 +821,15 @@ pub fn ingest(
         (Some(e), _) | (None, Some(e)) => e,
         (None, None) => DEFAULT_EPSG,
     };
-    let opts = GediOptions { epsg, geoid_offset, strict_join };
+    let (area, called) = request.shots.area(dataset, &request.als_inputs, request.margin_m)?;
+    let opts = GediOptions { epsg, geoid_offset: request.geoid_offset, strict_join: request.strict_join, area };
     progress.start(Step::IngestGedi, pair_granules(&l1b, &l2a)?.0.len() as u64);
     let r = ingest_into_dataset(dataset, &l1b, &l2a, &opts, progress);
     progress.finish();
     let (outcomes, mut report) = r?;
+    if let Some(called) = called {
+        report.area = called;
+    }
     if !given && !had_crs {
         // Never a silent default: the shots took a CRS nobody named.
         report.notes.push(format!(
@@ -801,11 +870,13 @@ pub fn ingest_into_dataset(
         })
         .collect::<Result<Vec<_>>>()?;
     // What each granule's record says, read once: (L1B hash, L2A hash) by granule key.
-    let mut recorded = HashMap::new();
+    let (mut recorded, mut recorded_area) = (HashMap::new(), HashMap::new());
     for record in dataset::table_files(&granules_dir).map_err(|e| Error::file(&granules_dir, e))? {
+        let key = record.file_stem().and_then(|s| s.to_str()).unwrap_or_default().to_string();
         if let Some(hashes) = previous_hashes(&record)? {
-            recorded.insert(record.file_stem().and_then(|s| s.to_str()).unwrap_or_default().to_string(), hashes);
+            recorded.insert(key.clone(), hashes);
         }
+        recorded_area.insert(key, previous_area(&record)?);
     }
     let duplicate = copies_of_other_granules(&pairs, &keyed, &recorded)?;
     let owners = ShotOwners::read(&shots_dir)?;
@@ -836,7 +907,12 @@ pub fn ingest_into_dataset(
                     ));
                 }
             }
-            if duplicate || previous == Some((h1.clone(), h2.clone())) {
+            // Read again with another area; but a granule read whole holds every shot the default
+            // (the tiles' coverage) asks for.
+            let area_read = recorded_area.get(&key).and_then(|a: &Option<String>| a.as_deref());
+            let whole_for_tiles = matches!(opts.area, ShotArea::Tiles { .. }) && area_read == Some("all");
+            let same_area = area_read == Some(opts.area.key().as_str()) || whole_for_tiles;
+            if duplicate || (previous == Some((h1.clone(), h2.clone())) && same_area) {
                 progress.advance(1);
                 return Ok((GranuleOutcome::AlreadyIngested { granule: pair.granule.clone() }, Vec::new()));
             }
@@ -862,6 +938,8 @@ pub fn ingest_into_dataset(
                 Arc::new(StringArray::from(vec![path(&pair.l2a)])),
                 Arc::new(StringArray::from(vec![h2])),
                 Arc::new(UInt64Array::from(vec![shots as u64])),
+                Arc::new(StringArray::from(vec![opts.area.key()])),
+                Arc::new(UInt64Array::from(vec![beams.iter().map(|b| b.outside_area as u64).sum::<u64>()])),
             ];
             let batch = RecordBatch::try_new(granules_schema(), cols).map_err(|e| Error::table(&record, e))?;
             dataset::write_parquet(&record, granules_schema(), &[batch], &metadata)?;
@@ -869,7 +947,7 @@ pub fn ingest_into_dataset(
             Ok((GranuleOutcome::Ingested { granule: pair.granule.clone(), shots }, beams))
         })
         .collect::<Result<Vec<_>>>()?;
-    let mut report = IngestReport { beams: Vec::new(), notes };
+    let mut report = IngestReport { beams: Vec::new(), notes, area: opts.area.describe() };
     let mut outcomes = Vec::new();
     for (o, beams) in results {
         outcomes.push(o);
@@ -921,6 +999,23 @@ fn copies_of_other_granules(
         }
     }
     Ok(duplicate)
+}
+
+/// The [`ShotArea::key`] a granule's record says it was read with; `all` for a record written
+/// before areas (every shot was read then), `None` without a record.
+pub fn previous_area(record: &Path) -> Result<Option<String>> {
+    if !record.exists() {
+        return Ok(None);
+    }
+    let mut area = None;
+    crate::dataset::read::for_each_batch(record, None, None, |c| {
+        if area.is_none() && c.num_rows() > 0 {
+            let has = c.batch().schema().column_with_name("shot_area").is_some();
+            area = Some(if has { c.string("shot_area", 0)? } else { None }.unwrap_or_else(|| ShotArea::All.key()));
+        }
+        Ok(())
+    })?;
+    Ok(area)
 }
 
 /// The (L1B, L2A) content hashes recorded by an earlier ingest of a granule (its
