@@ -9,7 +9,7 @@
 //! fresh Gaussian noise of the record's own σ added to every sample (so that gzip meets real-like
 //! noise); its transmit record is the real one's, with noise too; L2A values vary per shot. Stored as
 //! the real subset's datasets are (`Storage::nasa`: per-shot chunks of 554,085 rows, waveform
-//! chunks of 14,200 samples, gzip 4). Shots are kept by `--bbox` (a run in the middle of every
+//! chunks of 14,200 samples, N×101 chunks of 32 × 32, gzip 4). Shots are kept by `--bbox` (a run in the middle of every
 //! beam); the small pair is written by the same generator with only those shots, under the same file
 //! names. Each ingest runs with a cold page cache when the machine allows (`/proc/sys/vm/drop_caches`),
 //! so the bytes read are those read from the disk (`/usr/bin/time` %I).

@@ -127,7 +127,11 @@ fn a_granule_read_by_area_gives_the_rows_of_the_small_granule_of_its_shots() {
     assert_eq!(small_outside, 0);
     assert_eq!(small.num_rows(), 2 * 123);
     // Chunks of 97 shots and 997 samples cut across the runs; NASA's layout has one chunk per beam.
-    let layouts = [Storage::default(), Storage { shot_chunk: Some(97), sample_chunk: 997, gzip: 4 }, Storage::nasa()];
+    let layouts = [
+        Storage::default(),
+        Storage { shot_chunk: Some(97), sample_chunk: 997, row_chunk: 13, gzip: 4 },
+        Storage::nasa(),
+    ];
     for (i, storage) in layouts.into_iter().enumerate() {
         let (f1, f2) = write_pair(&dir.path().join(format!("full{i}")), n, |_| true, storage);
         let (kept, outside) = read(&f1, &f2, area.clone());

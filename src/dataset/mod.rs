@@ -462,6 +462,35 @@ pub fn content_hash(path: &Path) -> Result<String> {
     Ok(hex::encode(hasher.finalize()))
 }
 
+/// Files up to this size are keyed by [`content_hash`] in [`granule_hash`]; larger ones by samples.
+pub const WHOLE_HASH_MAX_BYTES: u64 = 256 << 20;
+
+/// The content key of a GEDI granule file: [`content_hash`] up to [`WHOLE_HASH_MAX_BYTES`]; above,
+/// `sampled:` and the SHA-256 of its length and of 32 blocks of 1 MiB spread evenly from its first
+/// byte to its last (a full-size granule of 5 GB is read for its kept shots only; hashing it whole
+/// would read all of it: docs/gedi-products.md §6). A renamed copy has the same key; a change that
+/// keeps the length and touches no sampled block goes unseen (ingest it under a new name).
+pub fn granule_hash(path: &Path) -> Result<String> {
+    use std::io::{Seek, SeekFrom};
+    let len = std::fs::metadata(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?.len();
+    if len <= WHOLE_HASH_MAX_BYTES {
+        return content_hash(path);
+    }
+    let mut file = File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
+    let (block, blocks) = (1u64 << 20, 32u64);
+    let mut hasher = Sha256::new();
+    hasher.update(len.to_le_bytes());
+    let mut buf = vec![0u8; block as usize];
+    for i in 0..blocks {
+        let at = i * (len - block) / (blocks - 1);
+        file.seek(SeekFrom::Start(at))
+            .and_then(|_| file.read_exact(&mut buf))
+            .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
+        hasher.update(&buf);
+    }
+    Ok(format!("sampled:{}", hex::encode(hasher.finalize())))
+}
+
 /// A Parquet row selection of the sorted row indices `rows` of a file of `total` rows
 /// (consecutive rows merged into one range).
 pub fn row_selection(rows: &[usize], total: usize) -> parquet::arrow::arrow_reader::RowSelection {

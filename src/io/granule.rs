@@ -114,17 +114,19 @@ pub struct Storage {
     pub shot_chunk: Option<usize>,
     /// Samples per chunk of a flat waveform array (`rxwaveform`, `txwaveform`).
     pub sample_chunk: usize,
+    /// Rows and columns per chunk of an N×k dataset (`rh`, `geolocation/rh_aN`).
+    pub row_chunk: usize,
     /// gzip level (0–9).
     pub gzip: u8,
 }
 
 impl Storage {
     /// The layout of the real V1 subsets (tests/data/gedi: h5py's `chunks`, `compression_opts`),
-    /// whose subsetter kept NASA's chunk shapes: per-shot datasets in chunks of 554,085 rows,
-    /// `rxwaveform` in chunks of 14,200 samples (12,800 for `txwaveform`; one size serves both here),
-    /// gzip level 4.
+    /// whose subsetter kept NASA's chunk shapes: per-shot datasets in chunks of 554,085 rows (L1B;
+    /// 100,000 in L2A), `rxwaveform` in chunks of 14,200 samples (12,800 for `txwaveform`; one size
+    /// serves both here), N×101 datasets in chunks of 32 × 32 (`rh`; 46 × 46 for `rh_aN`), gzip 4.
     pub fn nasa() -> Storage {
-        Storage { shot_chunk: Some(554_085), sample_chunk: 14_200, gzip: 4 }
+        Storage { shot_chunk: Some(554_085), sample_chunk: 14_200, row_chunk: 32, gzip: 4 }
     }
 }
 
@@ -354,7 +356,11 @@ fn write_beam(path: &Path, file: &File, name: &str, sets: &[ExtraDataset], stora
         }
         // The flat waveform arrays are chunked by samples, every other dataset by shots.
         let flat = ["rxwaveform", "txwaveform"].contains(&d.path.as_str());
-        let chunk = storage.shot_chunk.map(|c| if flat { storage.sample_chunk } else { c });
+        let chunk = storage.shot_chunk.map(|c| match (flat, d.row_len) {
+            (true, _) => [storage.sample_chunk, 1],
+            (false, 1) => [c, 1],
+            (false, _) => [storage.row_chunk, storage.row_chunk],
+        });
         write_stored(&group, &d.path, &d.values, d.row_len, chunk.map(|c| (c, storage.gzip)))
             .map_err(|e| Error::field(path, &field, e))?;
     }
@@ -367,26 +373,26 @@ pub fn write_values(root: &Group, rel: &str, values: &Values, row_len: usize) ->
     write_stored(root, rel, values, row_len, None)
 }
 
-/// [`write_values`], in chunks of `(rows, gzip level)` when given (a chunk is never longer than the
-/// dataset; an empty dataset stays contiguous).
+/// [`write_values`], in chunks of `([rows, columns], gzip level)` when given (a chunk is never
+/// larger than the dataset; an empty dataset stays contiguous).
 fn write_stored(
     root: &Group,
     rel: &str,
     values: &Values,
     row_len: usize,
-    chunk: Option<(usize, u8)>,
+    chunk: Option<([usize; 2], u8)>,
 ) -> hdf5::Result<()> {
     fn typed<T: H5Type>(
         parent: &Group,
         name: &str,
         data: &[T],
         row_len: usize,
-        chunk: Option<(usize, u8)>,
+        chunk: Option<([usize; 2], u8)>,
     ) -> hdf5::Result<()> {
         let rows = data.len() / row_len.max(1);
         let mut builder = parent.new_dataset::<T>();
-        if let Some((c, level)) = chunk.filter(|_| rows > 0) {
-            builder = builder.chunk(if row_len == 1 { vec![c.min(rows)] } else { vec![c.min(rows), row_len] });
+        if let Some(([r, c], level)) = chunk.filter(|_| rows > 0) {
+            builder = builder.chunk(if row_len == 1 { vec![r.min(rows)] } else { vec![r.min(rows), c.min(row_len)] });
             builder = builder.deflate(level);
         }
         let ds = if row_len == 1 {

@@ -861,7 +861,7 @@ pub fn ingest_into_dataset(
     let shots_dir = dataset.table_dir(tables::SHOTS)?;
     let granules_dir = dataset.table_dir(tables::GRANULES)?;
     // Content first: copies of a granule under other names are found before anything is written.
-    let hash = |p: &Option<PathBuf>| p.as_deref().map(dataset::content_hash).transpose();
+    let hash = |p: &Option<PathBuf>| p.as_deref().map(dataset::granule_hash).transpose();
     let keyed = pairs
         .par_iter()
         .map(|pair| {
