@@ -53,7 +53,7 @@ pub fn read_within(path: &Path) -> Result<ShotArea> {
         Ok(())
     };
     match &geojson {
-        GeoJson::Geometry(g) => add(&g.clone())?,
+        GeoJson::Geometry(g) => add(g)?,
         GeoJson::Feature(f) => f.geometry.iter().try_for_each(&mut add)?,
         GeoJson::FeatureCollection(c) => c.features.iter().flat_map(|f| f.geometry.iter()).try_for_each(&mut add)?,
     }
