@@ -39,6 +39,7 @@ for path in geo_files:
     assert t.schema.field("bbox").type.num_fields == 4
     n = duckdb.sql(f"select count(*), count(geometry) from read_parquet('{path}')").fetchall()[0]
     assert n[0] == t.num_rows, (path, n, t.num_rows)
+    assert t.num_rows > 0, f"{path}: no rows to check"
     g = geopandas.read_parquet(path)
     assert len(g) == t.num_rows, (path, len(g), t.num_rows)
     assert g.crs is not None and g.crs.to_string() in ("OGC:CRS84", "EPSG:4326"), g.crs
