@@ -83,7 +83,11 @@ pub fn read_window(path: &Path) -> Result<Option<ReadWindow>> {
 
 /// The header extent an `als/` file records (`gedisim:tile_extent`), if it records one.
 pub fn tile_extent(path: &Path) -> Option<BBox> {
-    let kv = super::read::key_value_metadata(path)?;
+    extent_of(&super::read::key_value_metadata(path)?)
+}
+
+/// The `gedisim:tile_extent` value of a file's metadata, when it is four ordered numbers.
+fn extent_of(kv: &HashMap<String, String>) -> Option<BBox> {
     let v: Vec<f64> = kv.get(meta::TILE_EXTENT)?.split_whitespace().filter_map(|v| v.parse().ok()).collect();
     match v[..] {
         [x0, y0, x1, y1] if x0 <= x1 && y0 <= y1 => Some([x0, y0, x1, y1]),
@@ -95,13 +99,9 @@ fn window_of(path: &Path, kv: &HashMap<String, String>) -> Result<Option<ReadWin
     let Some(text) = kv.get(meta::READ_CELLS) else { return Ok(None) };
     let cells = Cells::parse(text, MAX_WINDOW_CELLS)
         .ok_or_else(|| Error::field(path, meta::READ_CELLS, "not a list of cells (row:col0-col1,…;…)"))?;
-    let extent: Vec<f64> = kv
-        .get(meta::TILE_EXTENT)
-        .map(|t| t.split_whitespace().filter_map(|v| v.parse().ok()).collect())
-        .unwrap_or_default();
-    match extent[..] {
-        [x0, y0, x1, y1] if x0 <= x1 && y0 <= y1 => Ok(Some(ReadWindow { cells, extent: [x0, y0, x1, y1] })),
-        _ => Err(Error::field(path, meta::TILE_EXTENT, "missing or not four numbers xmin ymin xmax ymax")),
+    match extent_of(kv) {
+        Some(extent) => Ok(Some(ReadWindow { cells, extent })),
+        None => Err(Error::field(path, meta::TILE_EXTENT, "missing or not four numbers xmin ymin xmax ymax")),
     }
 }
 

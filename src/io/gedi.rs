@@ -221,11 +221,13 @@ impl BeamGroup<'_> {
         let mut out = Vec::new();
         for r in runs {
             // Row-major either way: a 2-D slice of whole rows is in standard layout.
-            let part = match shape {
-                Shape::Rows(_) => ds.read_slice_2d::<T, _>((r.clone(), ..)).map(|a| a.into_raw_vec_and_offset().0),
-                _ => ds.read_slice_1d::<T, _>(r.clone()).map(|a| a.into_raw_vec_and_offset().0),
-            };
-            out.extend(part.map_err(|e| self.err(rel, e))?);
+            out.extend(match shape {
+                Shape::Rows(_) => ds
+                    .read_slice_2d::<T, _>((r.clone(), ..))
+                    .map(|a| a.into_raw_vec_and_offset().0)
+                    .map_err(|e| self.err(rel, e))?,
+                _ => self.read_range(rel, ds, r.clone())?,
+            });
         }
         Ok(out)
     }
@@ -356,13 +358,8 @@ pub fn read_waveforms(g: &BeamGroup, shots: &[u64], wave: &str, prefix: &str) ->
         let lo = recs.iter().filter(|r| r.1 > 0).map(|r| r.0).min();
         let hi = recs.iter().filter(|r| r.1 > 0).map(|r| r.0 + r.1).max();
         let (Some(lo), Some(hi)) = (lo, hi) else { continue };
-        let part = if lo == 0 && hi as u64 == len {
-            g.read_ds::<f32>(wave, &w, Shape::Flat)?
-        } else {
-            g.read_range::<f32>(wave, &w, lo..hi)?
-        };
         let base = samples.len();
-        samples.extend(part);
+        samples.extend(g.read_range::<f32>(wave, &w, lo..hi)?);
         for (span, &(first, n)) in spans[rows].iter_mut().zip(recs) {
             *span = if n > 0 { (base + first - lo, n) } else { (base, 0) };
         }

@@ -316,10 +316,9 @@ fn list_granules(ds: &Dataset) -> Result<Vec<GranuleFile>> {
     for path in files {
         let key = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         let record = ds.root().join(tables::GRANULES).join(format!("{key}.parquet"));
-        let inputs = match gedi::previous_hashes(&record)? {
-            Some((a, b)) => {
-                let area = gedi::previous_area(&record)?.filter(|a| a != "all");
-                let area = area.map(|a| format!(" area={a}")).unwrap_or_default();
+        let inputs = match gedi::previous_record(&record)? {
+            Some(((a, b), area)) => {
+                let area = if area == "all" { String::new() } else { format!(" area={area}") };
                 format!("l1b={} l2a={}{area}", a.unwrap_or_default(), b.unwrap_or_default())
             }
             None => {

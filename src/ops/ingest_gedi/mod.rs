@@ -873,10 +873,10 @@ pub fn ingest_into_dataset(
     let (mut recorded, mut recorded_area) = (HashMap::new(), HashMap::new());
     for record in dataset::table_files(&granules_dir).map_err(|e| Error::file(&granules_dir, e))? {
         let key = record.file_stem().and_then(|s| s.to_str()).unwrap_or_default().to_string();
-        if let Some(hashes) = previous_hashes(&record)? {
+        if let Some((hashes, area)) = previous_record(&record)? {
             recorded.insert(key.clone(), hashes);
+            recorded_area.insert(key, area);
         }
-        recorded_area.insert(key, previous_area(&record)?);
     }
     let duplicate = copies_of_other_granules(&pairs, &keyed, &recorded)?;
     let owners = ShotOwners::read(&shots_dir)?;
@@ -909,7 +909,7 @@ pub fn ingest_into_dataset(
             }
             // Read again with another area; but a granule read whole holds every shot the default
             // (the tiles' coverage) asks for.
-            let area_read = recorded_area.get(&key).and_then(|a: &Option<String>| a.as_deref());
+            let area_read = recorded_area.get(&key).map(String::as_str);
             let whole_for_tiles = matches!(opts.area, ShotArea::Tiles { .. }) && area_read == Some("all");
             let same_area = area_read == Some(opts.area.key().as_str()) || whole_for_tiles;
             if duplicate || (previous == Some((h1.clone(), h2.clone())) && same_area) {
@@ -1001,35 +1001,22 @@ fn copies_of_other_granules(
     Ok(duplicate)
 }
 
-/// The [`ShotArea::key`] a granule's record says it was read with; `all` for a record written
-/// before areas (every shot was read then), `None` without a record.
-pub fn previous_area(record: &Path) -> Result<Option<String>> {
+/// What an earlier ingest of a granule recorded (its `granules/<key>.parquet`), if anything: the
+/// (L1B, L2A) content hashes and the [`ShotArea::key`] its shots were kept by (`all` in a record
+/// written before areas, when every shot was kept).
+pub fn previous_record(record: &Path) -> Result<Option<(Hashes, String)>> {
     if !record.exists() {
         return Ok(None);
     }
-    let mut area = None;
+    let mut out = None;
     crate::dataset::read::for_each_batch(record, None, None, |c| {
-        if area.is_none() && c.num_rows() > 0 {
-            let has = c.batch().schema().column_with_name("shot_area").is_some();
-            area = Some(if has { c.string("shot_area", 0)? } else { None }.unwrap_or_else(|| ShotArea::All.key()));
+        if out.is_none() && c.num_rows() > 0 {
+            let has_area = c.batch().schema().column_with_name("shot_area").is_some();
+            let area = if has_area { c.string("shot_area", 0)? } else { None };
+            let hashes = (c.string("l1b_hash", 0)?, c.string("l2a_hash", 0)?);
+            out = Some((hashes, area.unwrap_or_else(|| ShotArea::All.key())));
         }
         Ok(())
     })?;
-    Ok(area)
-}
-
-/// The (L1B, L2A) content hashes recorded by an earlier ingest of a granule (its
-/// `granules/<key>.parquet` record), if any.
-pub fn previous_hashes(record: &Path) -> Result<Option<Hashes>> {
-    if !record.exists() {
-        return Ok(None);
-    }
-    let mut hashes = None;
-    crate::dataset::read::for_each_batch(record, None, None, |c| {
-        if hashes.is_none() && c.num_rows() > 0 {
-            hashes = Some((c.string("l1b_hash", 0)?, c.string("l2a_hash", 0)?));
-        }
-        Ok(())
-    })?;
-    Ok(hashes)
+    Ok(out)
 }
