@@ -472,11 +472,11 @@ pub const WHOLE_HASH_MAX_BYTES: u64 = 256 << 20;
 /// keeps the length and touches no sampled block goes unseen (ingest it under a new name).
 pub fn granule_hash(path: &Path) -> Result<String> {
     use std::io::{Seek, SeekFrom};
-    let len = std::fs::metadata(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?.len();
+    let mut file = File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
+    let len = file.metadata().map_err(|e| Error::file(path, format!("cannot open: {e}")))?.len();
     if len <= WHOLE_HASH_MAX_BYTES {
         return content_hash(path);
     }
-    let mut file = File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
     let (block, blocks) = (1u64 << 20, 32u64);
     let mut hasher = Sha256::new();
     hasher.update(len.to_le_bytes());
@@ -517,4 +517,32 @@ pub fn list_f32() -> DataType {
 /// A builder of `list<float32>` columns.
 pub fn list_f32_builder(capacity: usize) -> ListBuilder<Float32Builder> {
     ListBuilder::with_capacity(Float32Builder::new(), capacity)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::{Seek, SeekFrom, Write};
+
+    #[test]
+    fn large_granules_are_keyed_by_samples_small_ones_whole() {
+        let dir = tempfile::tempdir().unwrap();
+        let small = dir.path().join("small.h5");
+        std::fs::write(&small, b"granule").unwrap();
+        assert_eq!(granule_hash(&small).unwrap(), content_hash(&small).unwrap());
+        // A sparse file just above the limit: nothing is written but the bytes changed below.
+        let big = dir.path().join("big.h5");
+        let f = File::create(&big).unwrap();
+        f.set_len(WHOLE_HASH_MAX_BYTES + 1).unwrap();
+        let key = granule_hash(&big).unwrap();
+        assert!(key.starts_with("sampled:"), "{key}");
+        // The last block is always sampled: a change there changes the key; the length is keyed too.
+        let mut f = std::fs::OpenOptions::new().write(true).open(&big).unwrap();
+        f.seek(SeekFrom::End(-1)).unwrap();
+        f.write_all(&[1]).unwrap();
+        let changed = granule_hash(&big).unwrap();
+        assert_ne!(changed, key);
+        f.set_len(WHOLE_HASH_MAX_BYTES + 2).unwrap();
+        assert_ne!(granule_hash(&big).unwrap(), changed);
+    }
 }
