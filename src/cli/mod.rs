@@ -8,6 +8,7 @@ mod collocate;
 mod demo;
 mod diagnose;
 mod export;
+mod granules;
 mod ingest;
 mod l2a;
 mod log;
@@ -89,6 +90,9 @@ pub enum Command {
     /// Where the sim-to-real gap lies, which unmodelled effect causes it and how far it shrinks
     /// once modelled (held-out tracks) → <out>/diagnosis.json, tables, figures (docs/diagnosis.md).
     Diagnose(DiagnoseArgs),
+    /// The GEDI L1B and L2A V2 granules that cross a dataset's ALS tiles, found through NASA's CMR
+    /// search, as CSV (docs/granules.md).
+    Granules(granules::GranulesArgs),
     /// Shell completions: `gedisim completions bash > ~/.local/share/bash-completion/completions/gedisim`.
     Completions {
         /// bash, zsh, fish, elvish or powershell.
@@ -150,6 +154,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Demo(a) => demo::demo(a),
         Command::Scenario(a) => scenario::scenario(a),
         Command::Diagnose(a) => diagnose::diagnose(a),
+        Command::Granules(a) => granules::granules(a),
         #[cfg(feature = "cluster")]
         Command::Cluster(c) => cluster::cluster(c),
         Command::Completions { shell } => {

@@ -3,8 +3,10 @@
 //! is `ops`), no Parquet tables (that is `dataset`).
 
 pub mod bundled;
+pub mod cmr;
 pub mod copc;
 pub mod csv_table;
+pub mod download;
 pub mod footprints;
 pub mod gedi;
 pub mod granule;

@@ -8,6 +8,7 @@ pub mod collocate;
 pub mod demo;
 pub mod diagnose;
 pub mod export;
+pub mod granules;
 pub mod ingest_als;
 pub mod ingest_gedi;
 pub mod ingest_strata;

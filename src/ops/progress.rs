@@ -19,6 +19,8 @@ pub enum Step {
     DiagnoseSimulate,
     /// The diagnosis fitting and scoring each effect (each named by a note).
     DiagnoseFit,
+    /// `gedisim granules --download`.
+    Download,
 }
 
 impl Step {
@@ -35,6 +37,7 @@ impl Step {
             Step::Report => "report",
             Step::DiagnoseSimulate => "diagnosis: simulating",
             Step::DiagnoseFit => "diagnosis: fitting and scoring",
+            Step::Download => "download granules",
         }
     }
 
@@ -44,6 +47,7 @@ impl Step {
             Step::Scenario | Step::Report | Step::DiagnoseFit => "",
             Step::IngestAls => "points",
             Step::IngestGedi | Step::Results => "granules",
+            Step::Download => "bytes",
             Step::Strata | Step::Collocate | Step::Simulate | Step::DiagnoseSimulate => "shots",
         }
     }

@@ -60,7 +60,7 @@ impl ShotChoice {
 
 /// The horizontal extent of each tile of the dataset: its header bounds (its `als/` file's
 /// `gedisim:tile_extent`), else (a tile ingested by an earlier version) the extent of the points written.
-fn dataset_extents(ds: &Dataset) -> Result<Vec<[f64; 4]>> {
+pub(crate) fn dataset_extents(ds: &Dataset) -> Result<Vec<[f64; 4]>> {
     let tiles_dir = ds.root().join(tables::TILES);
     let als_dir = ds.root().join(tables::ALS);
     let mut out = Vec::new();

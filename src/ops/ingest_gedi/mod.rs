@@ -29,7 +29,7 @@ use crate::kernels::geo::projection::Projector;
 use crate::ops::progress::{Progress, Step};
 
 pub mod child;
-mod coverage;
+pub(crate) mod coverage;
 mod select;
 
 pub use coverage::ShotChoice;
