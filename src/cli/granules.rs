@@ -65,12 +65,13 @@ pub fn granules(a: GranulesArgs) -> Result<()> {
         info!("{product}: {n} granules so far");
     })?;
     let [w, s, e, n] = found.bbox;
-    let count = |p: &str| found.granules.iter().filter(|g| g.short_name == p).count();
+    let [l1b, l2a] = gedisim::ops::granules::COLLECTIONS
+        .map(|(product, _)| found.granules.iter().filter(|g| g.short_name == product).count());
     let size: f64 = found.granules.iter().filter_map(|g| g.size_mb).sum();
     info!(
         "{} L1B and {} L2A granules cross the tiles (lon {w:.4}…{e:.4}, lat {s:.4}…{n:.4}), {:.1} GB announced",
-        count("GEDI01_B"),
-        count("GEDI02_A"),
+        l1b,
+        l2a,
         size / 1000.0
     );
     let text = csv_text(&found.granules)?;

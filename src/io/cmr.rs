@@ -107,15 +107,8 @@ pub fn page_url(base: &str, q: &GranuleQuery) -> Result<url::Url> {
 /// Every granule of `q` at CMR `base`, all pages; `on_page` hears the granules found so far.
 pub fn search(base: &str, q: &GranuleQuery, on_page: &dyn Fn(usize)) -> Result<Vec<Granule>> {
     let url = page_url(base, q)?;
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .map_err(|e| Error::Usage(format!("cannot start the HTTP runtime: {e}")))?;
+    let (rt, client) = super::download::http()?;
     rt.block_on(async {
-        let client = reqwest::Client::builder()
-            .user_agent(concat!("gedisim/", env!("CARGO_PKG_VERSION")))
-            .build()
-            .map_err(|e| Error::Usage(format!("cannot make an HTTP client: {e}")))?;
         let source = url.as_str().to_string();
         let (mut out, mut after) = (Vec::new(), None::<String>);
         loop {

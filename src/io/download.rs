@@ -42,6 +42,21 @@ pub fn part_path(path: &Path) -> PathBuf {
     path.with_file_name(name)
 }
 
+/// A one-thread runtime and an HTTP client (gedisim's user agent, a 30 s connect timeout): what
+/// the CMR search and the downloads run on.
+pub(crate) fn http() -> Result<(tokio::runtime::Runtime, reqwest::Client)> {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| Error::Usage(format!("cannot start the HTTP runtime: {e}")))?;
+    let client = reqwest::Client::builder()
+        .user_agent(concat!("gedisim/", env!("CARGO_PKG_VERSION")))
+        .connect_timeout(std::time::Duration::from_secs(30))
+        .build()
+        .map_err(|e| Error::Usage(format!("cannot make an HTTP client: {e}")))?;
+    Ok((rt, client))
+}
+
 /// Fetch every download, at most `parallel` at once, with `token` as the bearer; `on_bytes`
 /// hears every chunk written. Returns each file's outcome, in order; the first failure ends the
 /// run with its error (files completed stay, the failed one's `.part` stays for a resume).
@@ -51,16 +66,8 @@ pub fn fetch_all(
     parallel: usize,
     on_bytes: &(dyn Fn(u64) + Sync),
 ) -> Result<Vec<Fetched>> {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .map_err(|e| Error::Usage(format!("cannot start the HTTP runtime: {e}")))?;
+    let (rt, client) = http()?;
     rt.block_on(async {
-        let client = reqwest::Client::builder()
-            .user_agent(concat!("gedisim/", env!("CARGO_PKG_VERSION")))
-            .connect_timeout(std::time::Duration::from_secs(30))
-            .build()
-            .map_err(|e| Error::Usage(format!("cannot make an HTTP client: {e}")))?;
         let results: Vec<Result<Fetched>> = futures::stream::iter(downloads)
             .map(|d| fetch_one(&client, d, token, on_bytes))
             .buffered(parallel.max(1))
