@@ -21,6 +21,7 @@ use arrow::util::display::array_value_to_string;
 use common::{data, gedisim};
 use gedisim::dataset::Dataset;
 use gedisim::ops::report::{run_queries, QueryOutcome};
+use gedisim::ops::sql::SqlSession;
 use gedisim::sql::Engine;
 
 const BIN: &str = env!("CARGO_BIN_EXE_gedisim");
@@ -235,12 +236,8 @@ fn same_rows(what: &str, local: &[RecordBatch], cluster: &[RecordBatch]) {
 }
 
 fn query(ds: &Path, engine: &Engine, sql: &str) -> Vec<RecordBatch> {
-    let ds = Dataset::open(ds).unwrap();
-    let rt = tokio::runtime::Runtime::new().unwrap();
-    rt.block_on(async {
-        let ctx = gedisim::sql::session_on(&ds, &Default::default(), engine).await.unwrap();
-        ctx.sql(sql).await.unwrap_or_else(|e| panic!("{sql}: {e}")).collect().await.unwrap()
-    })
+    let session = SqlSession::open(ds, &Default::default(), engine).unwrap();
+    session.collect(sql).unwrap_or_else(|e| panic!("{sql}: {e}"))
 }
 
 /// Every column of every file of `table`, with its key-value metadata, by file name.

@@ -18,6 +18,8 @@ use gedisim::kernels::study::select::{Filter, StudyRules};
 use gedisim::ops::collocate::CollocateOptions;
 use gedisim::ops::progress::NoProgress;
 use gedisim::ops::run::{run_study, RunOptions, RunReport};
+use gedisim::ops::sql::SqlSession;
+use gedisim::sql::Engine;
 
 /// A small flat leaf-off tile keeps the worlds fast.
 const TILE: &str = "als/lidarforfuel_2_bas_lig.laz";
@@ -56,12 +58,8 @@ fn options(world: &Path, ds: &Path, granules: &[PathBuf]) -> RunOptions {
 }
 
 fn query(ds: &Path, sql: &str) -> Vec<RecordBatch> {
-    let ds = Dataset::open(ds).unwrap();
-    let rt = tokio::runtime::Runtime::new().unwrap();
-    rt.block_on(async {
-        let ctx = gedisim::sql::session(&ds).await.unwrap();
-        ctx.sql(sql).await.unwrap_or_else(|e| panic!("{sql}: {e}")).collect().await.unwrap()
-    })
+    let session = SqlSession::open(ds, &Default::default(), &Engine::Local).unwrap();
+    session.collect(sql).unwrap_or_else(|e| panic!("{sql}: {e}"))
 }
 
 /// (shot, weighting, algorithm) of every row of a query's result.

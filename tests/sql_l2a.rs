@@ -14,6 +14,8 @@ use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 
 use common::{data, gedisim};
 use gedisim::dataset::{self, Dataset};
+use gedisim::ops::sql::SqlSession;
+use gedisim::sql::Engine;
 
 const L1B: &str = "gedi/GEDI01_B_2019108080338_O01964_T05337_02_003_01_sub.h5";
 const L2A: &str = "gedi/GEDI02_A_2019108080338_O01964_T05337_02_001_01_sub.h5";
@@ -161,12 +163,8 @@ fn session_with(waves: Vec<Option<Vec<Option<f32>>>>, noise: &[(f64, f64)]) -> (
 }
 
 fn query(ds: &Dataset, sql: &str) -> Result<Vec<RecordBatch>, String> {
-    let rt = tokio::runtime::Runtime::new().unwrap();
-    rt.block_on(async {
-        let ctx = gedisim::sql::session(ds).await.map_err(|e| e.to_string())?;
-        let df = ctx.sql(sql).await.map_err(|e| e.to_string())?;
-        df.collect().await.map_err(|e| e.to_string())
-    })
+    let session = SqlSession::open(ds.root(), &Default::default(), &Engine::Local).map_err(|e| e.to_string())?;
+    session.collect(sql).map_err(|e| e.to_string())
 }
 
 #[test]

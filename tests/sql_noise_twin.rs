@@ -10,6 +10,8 @@ use arrow::datatypes::{DataType, Field, Float32Type, Float64Type, Schema};
 use gedisim::dataset::{self, Dataset};
 use gedisim::kernels::waveform::l2a::{AlgorithmSettings, L2aProcessor, Noise, WaveformGeolocation};
 use gedisim::kernels::waveform::noise_twin::{LinkMarginTwin, NoiseShape, ShotTwin, GEDI_BIN_M};
+use gedisim::ops::sql::SqlSession;
+use gedisim::sql::Engine;
 
 const DZ: f64 = 0.15;
 const Z0: f64 = 350.0;
@@ -59,11 +61,8 @@ fn dataset() -> (tempfile::TempDir, Dataset) {
 }
 
 fn query(ds: &Dataset, sql: &str) -> Vec<RecordBatch> {
-    let rt = tokio::runtime::Runtime::new().unwrap();
-    rt.block_on(async {
-        let ctx = gedisim::sql::session(ds).await.unwrap();
-        ctx.sql(sql).await.unwrap().collect().await.unwrap()
-    })
+    let session = SqlSession::open(ds.root(), &Default::default(), &Engine::Local).unwrap();
+    session.collect(sql).unwrap_or_else(|e| panic!("{sql}: {e}"))
 }
 
 /// Twin then L2A a1 on it, in one query; `twin` is the twin call with `seed` as its seed.

@@ -12,6 +12,8 @@ use common::data;
 use gedisim::dataset::{self, Dataset};
 use gedisim::kernels::sim::{self, Footprint, Profile, SimConfig, Weighting};
 use gedisim::ops::ingest_als::{ingest_tiles, AlsOptions};
+use gedisim::ops::sql::SqlSession;
+use gedisim::sql::Engine;
 
 /// A dataset with one real tile and a `shots` table of 12 positions on it (plus one off it).
 fn dataset() -> (tempfile::TempDir, Dataset, Vec<Footprint>) {
@@ -55,11 +57,8 @@ fn dataset() -> (tempfile::TempDir, Dataset, Vec<Footprint>) {
 fn sql_query_matches_the_direct_path_and_the_kernels() {
     let (_tmp, ds, fps) = dataset();
     let query = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/queries/simulated_rh.sql")).unwrap();
-    let rt = tokio::runtime::Runtime::new().unwrap();
-    let batches = rt.block_on(async {
-        let ctx = gedisim::sql::session(&ds).await.unwrap();
-        ctx.sql(&query).await.unwrap().collect().await.unwrap()
-    });
+    let session = SqlSession::open(ds.root(), &Default::default(), &Engine::Local).unwrap();
+    let batches = session.collect(&query).unwrap();
     let rows: usize = batches.iter().map(|b| b.num_rows()).sum();
     assert_eq!(rows, fps.len() * 3);
 

@@ -205,6 +205,29 @@ impl SqlSession {
     }
 }
 
+impl SqlSession {
+    /// Every batch of the results of `sql`'s statements, in order: what a program (a notebook, a test)
+    /// takes from a session instead of printed rows.
+    pub fn collect(&self, sql: &str) -> Result<Vec<RecordBatch>> {
+        struct Collect(Vec<RecordBatch>);
+        impl ResultSink for Collect {
+            fn start(&mut self, _: &SchemaRef) -> Result<()> {
+                Ok(())
+            }
+            fn batch(&mut self, batch: &RecordBatch) -> Result<()> {
+                self.0.push(batch.clone());
+                Ok(())
+            }
+            fn end(&mut self) -> Result<()> {
+                Ok(())
+            }
+        }
+        let mut sink = Collect(Vec::new());
+        self.run(sql, &mut sink)?;
+        Ok(sink.0)
+    }
+}
+
 /// Whether an expression of `statement` nests deeper than [`MAX_EXPRESSION_DEPTH`]. The walk stops
 /// there, so it never recurses deeper itself.
 fn too_deep(statement: &Statement) -> bool {
