@@ -296,3 +296,42 @@ fn the_effects_are_ranked_on_whole_tracks_up_to_ranked_shots_and_where_keeps_eve
     let d: Value = serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap()).unwrap();
     assert_eq!(n(&d["shots"]["ranked"]), n(&d["shots"]["used"]), "0: every shot ranked");
 }
+
+/// What `diagnose` writes into a dataset — the chain's tables, a missing `offsets/` — it writes as
+/// the dataset's one writer: while another process holds the lock it stops with one line and
+/// writes nothing; once the lock is free it collocates.
+#[test]
+fn diagnose_writes_a_dataset_only_as_its_one_writer() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = tmp.path().join("world");
+    let (ok, _, err) = gedisim(&["scenario", "--effect", "none", "--out", world.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    let (g, a) = (world.join("gedi"), world.join("als"));
+    let (g, a) = (g.to_str().unwrap(), a.to_str().unwrap());
+    let ds = tmp.path().join("ds");
+    let d = ds.to_str().unwrap();
+    for args in [&["ingest", "als", a, "--out", d][..], &["ingest", "gedi", "--l1b", g, "--l2a", g, "--out", d]] {
+        let (ok, _, err) = gedisim(args);
+        assert!(ok, "{err}");
+    }
+    let quick = ["--twins", "0", "--effects", "datum", "--ranked-shots", "30"];
+    let out = tmp.path().join("diagnosis");
+    let o = out.to_str().unwrap();
+
+    let held = gedisim::dataset::Dataset::writer(&ds).unwrap();
+    let (ok, _, err) = gedisim(&[&["diagnose", "--dataset", d, "--out", o][..], &quick].concat());
+    assert!(!ok && err.contains("another gedisim process") && err.trim().lines().count() == 1, "{err}");
+    assert!(!ds.join("offsets").exists(), "offsets/ written under another writer's lock");
+    // The whole chain into <out>/dataset, likewise.
+    let chain = tmp.path().join("chain");
+    let held_chain = gedisim::dataset::Dataset::writer(&chain.join("dataset")).unwrap();
+    let c = chain.to_str().unwrap();
+    let (ok, _, err) = gedisim(&[&["diagnose", "--als", a, "--l1b", g, "--l2a", g, "--out", c][..], &quick].concat());
+    assert!(!ok && err.contains("another gedisim process"), "{err}");
+    assert!(!chain.join("dataset/shots").exists() && !chain.join("dataset/als").exists());
+    drop((held, held_chain));
+
+    let (ok, _, err) = gedisim(&[&["diagnose", "--dataset", d, "--out", o][..], &quick].concat());
+    assert!(ok, "{err}");
+    assert!(ds.join("offsets/offsets.parquet").is_file() && out.join("diagnosis.json").is_file());
+}

@@ -144,6 +144,7 @@ fn run_keeps_exactly_what_passes_the_filters_and_the_report_contracts_hold() {
     // taller half of this tile's footprints.
     opts.rules = StudyRules { max_days_apart: 10.0, max_rh100: 30.0, ..StudyRules::default() };
     let r = run_study(&opts, &NoProgress).unwrap();
+    documented_examples_run(&ds_dir);
 
     // Counts: every candidate row is removed once or kept.
     let t = &r.totals;
@@ -247,6 +248,20 @@ fn run_keeps_exactly_what_passes_the_filters_and_the_report_contracts_hold() {
         );
         assert!((m[i] - direct).abs() < 1e-9);
         assert_eq!(mn.value(i) as usize, sel.len());
+    }
+}
+
+/// Every example `gedisim sql --help` shows runs on a dataset `run` made and returns rows: the
+/// examples name the tables' real columns.
+fn documented_examples_run(ds: &Path) {
+    let examples: Vec<String> = gedisim::sql::scalar_functions()
+        .iter()
+        .filter_map(|f| f.documentation().and_then(|d| d.sql_example.clone()))
+        .collect();
+    assert!(examples.len() >= 5, "{examples:?}");
+    for example in examples {
+        let rows: usize = query(ds, &example).iter().map(|b| b.num_rows()).sum();
+        assert!(rows > 0, "{example}: no row");
     }
 }
 

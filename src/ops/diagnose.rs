@@ -576,17 +576,25 @@ pub fn diagnose(
     progress: &dyn Progress,
 ) -> Result<DiagnoseReport> {
     let pulse = &opts.pulse;
-    let (root, chain) = match input {
-        DiagnoseInput::Dataset(root) => (root, None),
+    // What this command writes into a dataset (the chain's tables, a missing `offsets/`) it writes
+    // as the dataset's one writer: the lock is held until the diagnosis ends.
+    let (ds, chain) = match input {
+        DiagnoseInput::Dataset(root) => {
+            let ds = Dataset::open(&root)?;
+            match ds.has_table(tables::OFFSETS) {
+                true => (ds, None),
+                false => (Dataset::writer(&root)?.0, None),
+            }
+        }
         DiagnoseInput::Chain(opts) => {
             let collocate = diagnosis_collocation(pulse);
             let als_window = Some(window_half(collocate.max_shift));
             let opts = RunOptions { out: out.join("dataset"), collocate, als_window, ..*opts };
+            let (ds, _) = Dataset::writer(&opts.out)?;
             let report = crate::ops::run::ingest_and_collocate(&opts, progress)?;
-            (opts.out, Some(report))
+            (ds, Some(report))
         }
     };
-    let ds = Dataset::open(&root)?;
     let collocated = if ds.has_table(tables::OFFSETS) {
         None
     } else {

@@ -53,15 +53,15 @@ static DOCUMENTATION: LazyLock<Documentation> = LazyLock::new(|| {
             (docs/l2a.md). rh[k+1] is RH k (m above the ground found).",
         "gedi_l2a(rxwaveform, noise_mean, noise_stddev, algorithm [, elevation_bin0, elevation_lastbin])",
     )
-    .with_argument("rxwaveform", "received waveform (list of numbers, DN, 1 ns samples)")
+    .with_argument("rxwaveform", "received waveform (list of numbers, DN, 1 ns samples), e.g. shots.rx_waveform")
     .with_argument("noise_mean", "noise mean (DN), e.g. L1B noise_mean_corrected")
     .with_argument("noise_stddev", "noise standard deviation (DN), e.g. L1B noise_stddev_corrected")
     .with_argument("algorithm", "GEDI L2A algorithm setting, 1..6")
     .with_argument("elevation_bin0", "optional: elevation of the first sample (m); without it elev_lowestmode is null")
     .with_argument("elevation_lastbin", "optional: elevation of the last sample (m)")
     .with_sql_example(
-        "select shot_number, gedi_l2a(rxwaveform, noise_mean_corrected, noise_stddev_corrected, 1).rh \
-        from shots limit 3",
+        "select shot_number, gedi_l2a(rx_waveform, noise_mean_corrected, noise_stddev_corrected, 1, \
+        elevation_bin0, elevation_lastbin)['rh'] as rh from shots where rx_waveform is not null limit 3",
     )
     .build()
 });

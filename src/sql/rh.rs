@@ -52,8 +52,8 @@ static DOCUMENTATION: LazyLock<Documentation> = LazyLock::new(|| {
     .with_argument("dz", "sample spacing (m)")
     .with_argument("ground", "ground elevation the heights are measured from (m)")
     .with_sql_example(
-        "select id, gedi_rh(wave, z0, dz, als_ground)[99] as rh98 from sim where weighting = 'count' \
-        limit 3",
+        "select footprint_id, gedi_rh(wave, z0, dz, als_ground)[99] as rh98 from sim \
+        where weighting = 'count' limit 3",
     )
     .build()
 });
