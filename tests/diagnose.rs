@@ -20,12 +20,17 @@ use serde_json::Value;
 const TWINS: &str = "3";
 
 /// Build a world with `effect` and diagnose it with the whole chain (`--als --l1b --l2a`).
-fn diagnose_world(dir: &Path, effect: &str, extra: &[&str]) -> Value {
+/// `gedisim scenario --effect <effect> <extra…>` into `dir/world`, which is returned.
+fn scenario(dir: &Path, effect: &str, extra: &[&str]) -> std::path::PathBuf {
     let world = dir.join("world");
-    let mut args = vec!["scenario", "--effect", effect, "--out", world.to_str().unwrap()];
-    args.extend_from_slice(extra);
-    let (ok, _, err) = gedisim(&args);
+    let (ok, _, err) =
+        gedisim(&[&["scenario", "--effect", effect, "--out", world.to_str().unwrap()][..], extra].concat());
     assert!(ok, "{err}");
+    world
+}
+
+fn diagnose_world(dir: &Path, effect: &str, extra: &[&str]) -> Value {
+    let world = scenario(dir, effect, extra);
     let (g, a, out) = (world.join("gedi"), world.join("als"), dir.join("diagnosis"));
     let (ok, stdout, err) = gedisim(&[
         "diagnose",
@@ -273,9 +278,7 @@ fn per_shot_geolocation_on_long_tracks_is_named_and_its_control_is_not() {
 #[test]
 fn the_effects_are_ranked_on_whole_tracks_up_to_ranked_shots_and_where_keeps_every_shot() {
     let tmp = tempfile::tempdir().unwrap();
-    let world = tmp.path().join("world");
-    let (ok, _, err) = gedisim(&["scenario", "--effect", "none", "--out", world.to_str().unwrap()]);
-    assert!(ok, "{err}");
+    let world = scenario(tmp.path(), "none", &[]);
     let (g, a, out) = (world.join("gedi"), world.join("als"), tmp.path().join("diagnosis"));
     let (g, a, o) = (g.to_str().unwrap(), a.to_str().unwrap(), out.to_str().unwrap());
     let args = ["diagnose", "--als", a, "--l1b", g, "--l2a", g, "--out", o, "--twins", "0", "--effects", "datum"];
@@ -303,9 +306,7 @@ fn the_effects_are_ranked_on_whole_tracks_up_to_ranked_shots_and_where_keeps_eve
 #[test]
 fn diagnose_writes_a_dataset_only_as_its_one_writer() {
     let tmp = tempfile::tempdir().unwrap();
-    let world = tmp.path().join("world");
-    let (ok, _, err) = gedisim(&["scenario", "--effect", "none", "--out", world.to_str().unwrap()]);
-    assert!(ok, "{err}");
+    let world = scenario(tmp.path(), "none", &[]);
     let (g, a) = (world.join("gedi"), world.join("als"));
     let (g, a) = (g.to_str().unwrap(), a.to_str().unwrap());
     let ds = tmp.path().join("ds");

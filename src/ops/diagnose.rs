@@ -581,10 +581,8 @@ pub fn diagnose(
     let (ds, chain) = match input {
         DiagnoseInput::Dataset(root) => {
             let ds = Dataset::open(&root)?;
-            match ds.has_table(tables::OFFSETS) {
-                true => (ds, None),
-                false => (Dataset::writer(&root)?.0, None),
-            }
+            let ds = if ds.has_table(tables::OFFSETS) { ds } else { Dataset::writer(&root)?.0 };
+            (ds, None)
         }
         DiagnoseInput::Chain(opts) => {
             let collocate = diagnosis_collocation(pulse);

@@ -170,6 +170,27 @@ impl SqlSession {
         Ok(())
     }
 
+    /// Every batch of the results of `sql`'s statements, in order: what a program (a notebook, a test)
+    /// takes from a session instead of printed rows.
+    pub fn collect(&self, sql: &str) -> Result<Vec<RecordBatch>> {
+        struct Collect(Vec<RecordBatch>);
+        impl ResultSink for Collect {
+            fn start(&mut self, _: &SchemaRef) -> Result<()> {
+                Ok(())
+            }
+            fn batch(&mut self, batch: &RecordBatch) -> Result<()> {
+                self.0.push(batch.clone());
+                Ok(())
+            }
+            fn end(&mut self) -> Result<()> {
+                Ok(())
+            }
+        }
+        let mut sink = Collect(Vec::new());
+        self.run(sql, &mut sink)?;
+        Ok(sink.0)
+    }
+
     /// Plan, check and run one statement, its result batches handed to `sink` as they come.
     async fn execute(&self, statement: Statement, sink: &mut dyn ResultSink) -> Result<()> {
         let plan = self.ctx.state().statement_to_plan(statement).await.map_err(sql_err)?;
@@ -202,29 +223,6 @@ impl SqlSession {
             sink.end()?;
         }
         Ok(())
-    }
-}
-
-impl SqlSession {
-    /// Every batch of the results of `sql`'s statements, in order: what a program (a notebook, a test)
-    /// takes from a session instead of printed rows.
-    pub fn collect(&self, sql: &str) -> Result<Vec<RecordBatch>> {
-        struct Collect(Vec<RecordBatch>);
-        impl ResultSink for Collect {
-            fn start(&mut self, _: &SchemaRef) -> Result<()> {
-                Ok(())
-            }
-            fn batch(&mut self, batch: &RecordBatch) -> Result<()> {
-                self.0.push(batch.clone());
-                Ok(())
-            }
-            fn end(&mut self) -> Result<()> {
-                Ok(())
-            }
-        }
-        let mut sink = Collect(Vec::new());
-        self.run(sql, &mut sink)?;
-        Ok(sink.0)
     }
 }
 
