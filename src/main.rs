@@ -8,12 +8,6 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
-    // gedisim only reads granules (and writes new ones nobody else has open): HDF5's advisory file
-    // locks add nothing, and they fail on NFS/Lustre or when another process inherited the file's
-    // descriptor. Set before any thread or HDF5 call exists; the user's own setting wins.
-    if std::env::var_os("HDF5_USE_FILE_LOCKING").is_none() {
-        std::env::set_var("HDF5_USE_FILE_LOCKING", "FALSE");
-    }
     let cli = cli::Cli::parse();
     // A corrupt granule can crash the HDF5 C library: granules are read in child processes of this
     // binary, so that such a crash ends as one error line (gedisim::ops::ingest_gedi::child).

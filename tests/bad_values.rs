@@ -81,7 +81,7 @@ fn a_repeated_csv_column_is_refused_and_a_huge_field_is_not_echoed() {
 fn l1b_with_lastbin(dir: &Path, lastbin: Option<f64>) -> PathBuf {
     let path = dir.join("GEDI01_B_2019108080338_O01964_T05337_02_003_01_sub.h5");
     std::fs::copy(data(L1B), &path).unwrap();
-    let f = hdf5::File::open_rw(&path).unwrap();
+    let f = gedisim::io::gedi::without_locks().open_rw(&path).unwrap();
     let geo = f.group("BEAM0001/geolocation").unwrap();
     let top: Vec<f64> = geo.dataset("elevation_bin0").unwrap().read_raw().unwrap();
     let last = geo.dataset("elevation_lastbin").unwrap();
@@ -245,7 +245,7 @@ fn a_granule_repeating_a_shot_number_in_two_beams_is_refused_and_the_dataset_tak
     let l1b = dir.join("GEDI01_B_2019108080338_O01964_T05337_02_003_01_sub.h5");
     std::fs::copy(data(L1B), &l1b).unwrap();
     {
-        let f = hdf5::File::open_rw(&l1b).unwrap();
+        let f = gedisim::io::gedi::without_locks().open_rw(&l1b).unwrap();
         let first: Vec<u64> = f.dataset("BEAM0001/shot_number").unwrap().read_raw().unwrap();
         let ds = f.dataset("BEAM0010/shot_number").unwrap();
         let mut v: Vec<u64> = ds.read_raw().unwrap();
@@ -400,7 +400,7 @@ fn a_granule_repeating_the_shot_numbers_of_another_granule_is_refused() {
     let copy = tmp.path().join("GEDI01_B_2019109080338_O01980_T05337_02_003_01_sub.h5");
     std::fs::copy(data(L1B), &copy).unwrap();
     {
-        let f = hdf5::File::open_rw(&copy).unwrap();
+        let f = gedisim::io::gedi::without_locks().open_rw(&copy).unwrap();
         let ds = f.dataset("BEAM0001/rxwaveform").unwrap();
         let mut v: Vec<f32> = ds.read_raw().unwrap();
         v[0] += 1.0;

@@ -242,3 +242,23 @@ fn the_command_line_keeps_the_shots_over_twenty_thousand_tiles_and_says_what_it_
         common::gedisim(&[&args[..], &[common::s(ds.root()), "--bbox", "1,2,3,4", "--all-shots"]].concat());
     assert!(!ok && err.contains("cannot be used with"), "{err}");
 }
+
+/// A granule another holder has locked (a child process that inherited its descriptor, a reader on
+/// NFS) is still read: gedisim does not take HDF5's advisory locks (src/io/gedi.rs `without_locks`).
+/// CI met this race once: a test's granule held by a `gedisim` another test had just spawned.
+#[test]
+fn a_granule_locked_by_another_holder_is_still_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let (l1b, l2a) = write_pair(dir.path(), 50, |_| true, Storage::default());
+    let held: Vec<std::fs::File> = [&l1b, &l2a]
+        .into_iter()
+        .map(|p| {
+            let f = std::fs::File::open(p).unwrap();
+            f.lock().unwrap();
+            f
+        })
+        .collect();
+    let (rows, outside) = read(&l1b, &l2a, ShotArea::All);
+    assert_eq!((rows.num_rows(), outside), (2 * 50, 0));
+    drop(held);
+}

@@ -73,11 +73,11 @@ fn row_of(t: &RecordBatch, shot: u64) -> usize {
 
 /// Raw per-beam arrays straight from a file, independent of the ingest.
 fn raw<T: hdf5::H5Type>(path: &Path, ds: &str) -> Vec<T> {
-    hdf5::File::open(path).unwrap().dataset(ds).unwrap().read_raw::<T>().unwrap()
+    gedisim::io::gedi::without_locks().open(path).unwrap().dataset(ds).unwrap().read_raw::<T>().unwrap()
 }
 
 fn beams_of(path: &Path) -> Vec<String> {
-    let f = hdf5::File::open(path).unwrap();
+    let f = gedisim::io::gedi::without_locks().open(path).unwrap();
     f.member_names().unwrap().into_iter().filter(|n| n.starts_with("BEAM")).collect()
 }
 
@@ -472,7 +472,15 @@ fn fixture(drop_l2a: &[(usize, usize)]) -> Fixture {
 }
 
 fn dtype(path: &Path, ds: &str) -> TypeDescriptor {
-    hdf5::File::open(path).unwrap().dataset(ds).unwrap().dtype().unwrap().to_descriptor().unwrap()
+    gedisim::io::gedi::without_locks()
+        .open(path)
+        .unwrap()
+        .dataset(ds)
+        .unwrap()
+        .dtype()
+        .unwrap()
+        .to_descriptor()
+        .unwrap()
 }
 
 fn str_attr(loc: &hdf5::Location, name: &str) -> String {
@@ -520,14 +528,14 @@ fn v2_writer_uses_v2_dtypes() {
     ] {
         assert_eq!(dtype(&fx.l2a, ds), t, "L2A {ds}");
     }
-    let f = hdf5::File::open(&fx.l2a).unwrap();
+    let f = gedisim::io::gedi::without_locks().open(&fx.l2a).unwrap();
     assert_eq!(f.dataset("BEAM0101/rh").unwrap().shape(), vec![3, 101]);
     assert_eq!(str_attr(&f, "short_name"), "GEDI_L2A");
     assert_eq!(str_attr(&f.group("BEAM0101").unwrap(), "description"), "Full power beam");
     assert_eq!(str_attr(&f.group("BEAM0010").unwrap(), "description"), "Coverage beam");
     let ident = f.group("METADATA/DatasetIdentification").unwrap();
     assert_eq!((str_attr(&ident, "PGEVersion"), str_attr(&ident, "VersionID")), ("005".into(), "002".into()));
-    let f = hdf5::File::open(&fx.l1b).unwrap();
+    let f = gedisim::io::gedi::without_locks().open(&fx.l1b).unwrap();
     assert_eq!(str_attr(&f, "short_name"), "GEDI_L1B");
     let start: Vec<u64> = raw(&fx.l1b, "BEAM0101/rx_sample_start_index");
     assert_eq!(start, vec![1, 41, 88], "1-based, contiguous (counts 40, 47, 54)");
@@ -612,7 +620,7 @@ fn v2_round_trip() {
 fn v2_int64_shot_numbers_are_accepted() {
     let fx = fixture(&[]);
     let shots: Vec<u64> = raw(&fx.l1b, "BEAM0101/shot_number");
-    let f = hdf5::File::open_rw(&fx.l1b).unwrap();
+    let f = gedisim::io::gedi::without_locks().open_rw(&fx.l1b).unwrap();
     let g = f.group("BEAM0101").unwrap();
     g.unlink("shot_number").unwrap();
     write_values(&g, "shot_number", &Values::I64(shots.iter().map(|&s| s as i64).collect()), 1).unwrap();
@@ -628,7 +636,7 @@ fn v2_int64_shot_numbers_are_accepted() {
 // ---------------------------------------------------------------------------------------------
 
 fn open_beam(path: &Path, group: &str) -> (hdf5::File, hdf5::Group) {
-    let f = hdf5::File::open_rw(path).unwrap();
+    let f = gedisim::io::gedi::without_locks().open_rw(path).unwrap();
     let g = f.group(group).unwrap();
     (f, g)
 }

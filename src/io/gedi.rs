@@ -38,8 +38,21 @@ pub struct Granule<'a> {
     pub file: File,
 }
 
+/// Open or create HDF5 files without HDF5's advisory file locks. gedisim reads granules and writes
+/// only new ones nobody else has open, so the locks add nothing; and they fail — `unable to lock
+/// file, errno = 11` — on NFS/Lustre, or when a child process (a `gedisim` started by the same
+/// program, a notebook's subprocess) inherited the file's descriptor. `HDF5_USE_FILE_LOCKING`,
+/// when the user sets it, still wins over this (HDF5 reads it at each open). HDF5 refuses to open
+/// a file twice in one process with different locking ("file locking flag values don't match"):
+/// code beside gedisim's that opens the same granules (the tests) opens them through this too.
+pub fn without_locks() -> hdf5::FileBuilder {
+    let mut builder = File::with_options();
+    builder.with_fapl(|p| p.file_locking(false));
+    builder
+}
+
 pub fn open_product(path: &Path, product: Product) -> Result<Granule<'_>> {
-    let file = File::open(path).map_err(|e| Error::file(path, format!("cannot open as HDF5: {e}")))?;
+    let file = without_locks().open(path).map_err(|e| Error::file(path, format!("cannot open as HDF5: {e}")))?;
     // A swapped --l1b/--l2a would otherwise fail later with a confusing "missing dataset".
     if let Some(name) = read_str_attr(&file, "short_name") {
         let other = if product == Product::L1b { Product::L2a } else { Product::L1b };

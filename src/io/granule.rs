@@ -320,7 +320,7 @@ fn h5err<'a>(path: &'a Path, what: &str) -> impl Fn(hdf5::Error) -> Error + 'a {
 
 /// Create the file with the root `short_name` and `METADATA/DatasetIdentification` attributes.
 fn create_granule(path: &Path, short_name: &str, meta: &GranuleMeta) -> Result<File> {
-    let file = File::create(path).map_err(h5err(path, "cannot create HDF5 file"))?;
+    let file = super::gedi::without_locks().create(path).map_err(h5err(path, "cannot create HDF5 file"))?;
     write_str_attr(&file, "short_name", short_name).map_err(h5err(path, "short_name"))?;
     let ident = file
         .create_group("METADATA")

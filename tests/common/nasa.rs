@@ -58,8 +58,8 @@ fn read<T: hdf5::H5Type>(group: &hdf5::Group, name: &str) -> Vec<T> {
 
 /// Every shot of the pair that joins on `shot_number`, in file order.
 pub fn load_real_shots() -> Vec<RealShot> {
-    let l1 = hdf5::File::open(data_path(L1B)).expect("open L1B");
-    let l2 = hdf5::File::open(data_path(L2A)).expect("open L2A");
+    let l1 = gedisim::io::gedi::without_locks().open(data_path(L1B)).expect("open L1B");
+    let l2 = gedisim::io::gedi::without_locks().open(data_path(L2A)).expect("open L2A");
     let mut shots = Vec::new();
     let beams = l1.member_names().expect("L1B members");
     for beam in beams.iter().filter(|b| b.starts_with("BEAM")) {
