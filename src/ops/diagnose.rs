@@ -23,7 +23,7 @@ use crate::kernels::diagnose::json::{params, DiagnosisJson};
 use crate::kernels::diagnose::selftest::{SelfTest, Verdict};
 use crate::kernels::diagnose::{self, Diagnosis, ShotCase};
 use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
-use crate::kernels::scenario::effects::ParamValue;
+use crate::kernels::scenario::effects::{EffectKind, ParamValue};
 use crate::kernels::sim::{self, Footprint, PulseModel, PulseReference, Weighting};
 use crate::kernels::study::classes;
 use crate::kernels::waveform::l2a::Noise;
@@ -422,7 +422,7 @@ pub struct DiagnosisOutput {
 /// changed table file anew, with a new time). Stored in diagnosis.json: a re-run on the same
 /// inputs reuses the diagnosis. A file rewritten with the same size within the file system's
 /// time resolution would go unseen: `--force` recomputes.
-fn inputs_key(ds: &Dataset, names: &[&str], opts: &DiagnoseOptions) -> Result<String> {
+fn inputs_key(ds: &Dataset, kinds: &[EffectKind], opts: &DiagnoseOptions) -> Result<String> {
     use sha2::{Digest, Sha256};
     let mut h = Sha256::new();
     let stamp = |h: &mut Sha256, path: &Path| -> Result<()> {
@@ -432,7 +432,11 @@ fn inputs_key(ds: &Dataset, names: &[&str], opts: &DiagnoseOptions) -> Result<St
         Ok(())
     };
     let (pulse, twins, ranked) = (&opts.pulse, opts.twins, opts.ranked_shots);
-    h.update(format!("gedisim {}\0{}\0{pulse:?}\0{twins}\0{ranked}\0", env!("CARGO_PKG_VERSION"), names.join(",")));
+    h.update(format!(
+        "gedisim {}\0{}\0{pulse:?}\0{twins}\0{ranked}\0",
+        env!("CARGO_PKG_VERSION"),
+        kinds.iter().map(|k| k.name()).collect::<Vec<_>>().join(",")
+    ));
     if let Ok(exe) = std::env::current_exe() {
         stamp(&mut h, &exe)?;
     }
@@ -612,22 +616,22 @@ pub fn diagnose_dataset(
     progress: &dyn Progress,
 ) -> Result<DiagnosisOutput> {
     let (effects, pulse) = (&opts.effects, &opts.pulse);
-    let names: Vec<&str> = if effects.is_empty() {
+    let kinds: Vec<EffectKind> = if effects.is_empty() {
         diagnose::fit::FITTED_EFFECTS.to_vec()
     } else {
         effects
             .iter()
             .map(|e| {
-                diagnose::fit::FITTED_EFFECTS.iter().copied().find(|n| n == e).ok_or_else(|| {
+                EffectKind::from_name(e).filter(|k| diagnose::fit::FITTED_EFFECTS.contains(k)).ok_or_else(|| {
                     Error::Usage(format!(
                         "--effects: '{e}' is not an effect the diagnosis fits (known: {})",
-                        diagnose::fit::FITTED_EFFECTS.join(", ")
+                        diagnose::fit::FITTED_EFFECTS.map(EffectKind::name).join(", ")
                     ))
                 })
             })
             .collect::<Result<_>>()?
     };
-    let key = inputs_key(ds, &names, opts)?;
+    let key = inputs_key(ds, &kinds, opts)?;
     if let Some(done) = reusable(out, &key).filter(|_| !opts.force) {
         return Ok(done);
     }
@@ -643,7 +647,7 @@ pub fn diagnose_dataset(
         ));
     }
     progress.start(Step::DiagnoseFit, 0);
-    let d = diagnose::diagnose(cases, &located, &names, opts.twins, &|step| progress.note(step));
+    let d = diagnose::diagnose(cases, &located, &kinds, opts.twins, &|step| progress.note(step));
     drop(located);
     progress.finish();
     std::fs::create_dir_all(out).map_err(|e| Error::file(out, e))?;
@@ -1161,30 +1165,30 @@ mod tests {
             ranked_shots,
             ..DiagnoseOptions::new()
         };
-        let key = |names: &[&str], pulse: &PulseModel| inputs_key(&ds, names, &with(pulse, 10, 1500)).unwrap();
-        let k0 = key(&["datum"], &pulse);
-        assert_eq!(k0, key(&["datum"], &pulse), "the same inputs, the same key");
-        assert_ne!(k0, key(&["datum", "pulse"], &pulse), "other effects");
-        assert_ne!(k0, key(&["datum"], &PulseModel::Gaussian(None)), "another pulse");
-        assert_ne!(k0, inputs_key(&ds, &["datum"], &with(&pulse, 4, 1500)).unwrap(), "another self-test");
-        assert_ne!(k0, inputs_key(&ds, &["datum"], &with(&pulse, 10, 0)).unwrap(), "another sample");
+        let key = |kinds: &[EffectKind], pulse: &PulseModel| inputs_key(&ds, kinds, &with(pulse, 10, 1500)).unwrap();
+        let k0 = key(&[EffectKind::Datum], &pulse);
+        assert_eq!(k0, key(&[EffectKind::Datum], &pulse), "the same inputs, the same key");
+        assert_ne!(k0, key(&[EffectKind::Datum, EffectKind::Pulse], &pulse), "other effects");
+        assert_ne!(k0, key(&[EffectKind::Datum], &PulseModel::Gaussian(None)), "another pulse");
+        assert_ne!(k0, inputs_key(&ds, &[EffectKind::Datum], &with(&pulse, 4, 1500)).unwrap(), "another self-test");
+        assert_ne!(k0, inputs_key(&ds, &[EffectKind::Datum], &with(&pulse, 10, 0)).unwrap(), "another sample");
         // A new file in a table the diagnosis reads.
         let strata = ds.table_file(tables::STRATA, "strata").unwrap();
         std::fs::write(&strata, b"s").unwrap();
-        let k1 = key(&["datum"], &pulse);
+        let k1 = key(&[EffectKind::Datum], &pulse);
         assert_ne!(k0, k1);
         // A shots file rewritten: another size, or the same size at another time.
         std::fs::write(&shots, b"second!").unwrap();
-        let k2 = key(&["datum"], &pulse);
+        let k2 = key(&[EffectKind::Datum], &pulse);
         assert_ne!(k1, k2);
         std::fs::write(&shots, b"third!!").unwrap();
         let later = std::time::SystemTime::now() + std::time::Duration::from_secs(5);
         std::fs::File::options().write(true).open(&shots).unwrap().set_modified(later).unwrap();
-        assert_ne!(k2, key(&["datum"], &pulse));
+        assert_ne!(k2, key(&[EffectKind::Datum], &pulse));
         // A file of a table it does not read (the report's) changes nothing.
-        let k3 = key(&["datum"], &pulse);
+        let k3 = key(&[EffectKind::Datum], &pulse);
         std::fs::create_dir_all(ds.root().join("report")).unwrap();
         std::fs::write(ds.root().join("report/msd.parquet"), b"r").unwrap();
-        assert_eq!(k3, key(&["datum"], &pulse));
+        assert_eq!(k3, key(&[EffectKind::Datum], &pulse));
     }
 }

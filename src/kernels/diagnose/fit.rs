@@ -11,10 +11,10 @@ use super::chain::{null_cases, predict, real_products, reposition, Model, Scratc
 use super::gap::GapSums;
 use super::profile::{self, ShotProfile};
 use crate::kernels::gedi::N_ALGORITHMS;
-use crate::kernels::scenario::effects::{Effect, GeoLevel, WeightMethod};
+use crate::kernels::scenario::effects::{Effect, EffectKind, GeoLevel, WeightMethod};
 
 /// The effects the diagnosis fits: every effect of the registry, in its order.
-pub const FITTED_EFFECTS: [&str; 9] = crate::kernels::scenario::effects::EFFECT_NAMES;
+pub const FITTED_EFFECTS: [EffectKind; 9] = EffectKind::ALL;
 
 /// The `geolocation` hypotheses: every segment re-placed as one (`beam`: the reference a per-shot
 /// error is judged against, since the per-track collocation leaves an error of its own) and every
@@ -120,27 +120,24 @@ pub fn minimise(f: &mut dyn FnMut(f64) -> f64, grid: &[f64], iterations: usize) 
     (best_x, best_v)
 }
 
-/// The effects that reshape the simulated waveform, and so move the positions that fit it best.
-pub const RESHAPING_EFFECTS: [&str; 5] = ["weighting", "pulse", "footprint", "canopy_change", "occlusion"];
-
 /// Re-placements of the shots alternated with re-fits of a reshaping effect.
 const REPLACEMENTS: usize = 2;
 
-/// Fit the effect `name` on top of `base` to `cases`, with the shots of short segments re-placed
+/// Fit the effect `kind` on top of `base` to `cases`, with the shots of short segments re-placed
 /// for each hypothesis ([`reposition`]): first for `base` (`placed`, which is `reposition(cases,
 /// base)`: every effect tried on one base shares it), then — for an effect that reshapes the
-/// waveform — alternately re-placed for the fitted model and re-fitted (positions and
+/// waveform ([`EffectKind::reshapes_waveform`]) — alternately re-placed for the fitted model and re-fitted (positions and
 /// parameters are fitted jointly). `None` when the cases carry no information about the effect
 /// (e.g. no ground differences).
-pub fn fit(name: &str, base: &Model, placed: &Model, cases: &[&ShotCase]) -> Option<Effect> {
+pub fn fit(kind: EffectKind, base: &Model, placed: &Model, cases: &[&ShotCase]) -> Option<Effect> {
     if cases.is_empty() {
         return None;
     }
-    if name == "geolocation" {
+    if kind == EffectKind::Geolocation {
         return fit_geolocation(base, cases);
     }
-    let mut effect = fit_placed(name, placed, cases)?;
-    if RESHAPING_EFFECTS.contains(&name) {
+    let mut effect = fit_placed(kind, placed, cases)?;
+    if kind.reshapes_waveform() {
         let mut current = placed.clone();
         for _ in 0..REPLACEMENTS {
             let next = reposition(cases, &current.with(effect.clone()));
@@ -148,7 +145,7 @@ pub fn fit(name: &str, base: &Model, placed: &Model, cases: &[&ShotCase]) -> Opt
                 break;
             }
             current = placed.placed_as(&next);
-            effect = fit_placed(name, &current, cases)?;
+            effect = fit_placed(kind, &current, cases)?;
         }
     }
     Some(effect)
@@ -183,15 +180,17 @@ fn mean_square_move(cases: &[&ShotCase], from: &Model, to: &Model) -> Option<f64
     (!d.is_empty()).then(|| d.iter().sum::<f64>() / d.len() as f64)
 }
 
-/// Fit the effect `name` on top of `base` (positions as `base` places them) to `cases`.
-fn fit_placed(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
+/// Fit the effect `kind` on top of `base` (positions as `base` places them) to `cases`.
+fn fit_placed(kind: EffectKind, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
     // Every parameter value weighed against the base model's between-shot variance (computed
     // once, and only for the effects fitted on the waveforms).
     let reference = std::cell::OnceCell::new();
     let prepared = profile::AfterPulse::new(cases, base);
     let obj = |e: Effect| prepared.sums(&e).chi2_against(reference.get_or_init(|| profile::sums(cases, base)));
-    match name {
-        "datum" => {
+    match kind {
+        // Fitted from the re-placements themselves (`fit_geolocation`), not at fixed positions.
+        EffectKind::Geolocation => None,
+        EffectKind::Datum => {
             // The collocation's vertical offsets come from whole waveforms, so a GEDI ground
             // found elsewhere than the ALS one does not bias them: preferred when present.
             let dz: Vec<f64> = cases.iter().filter_map(|c| c.real.collocation_dz).collect();
@@ -202,7 +201,7 @@ fn fit_placed(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
             let all: Vec<f64> = gaps.iter().flat_map(|g| g.ground.iter().flatten().copied()).collect();
             Some(Effect::Datum { dz_m: trimmed_mean(all)? })
         }
-        "ground_detection" => {
+        EffectKind::GroundDetection => {
             let gaps = evaluate(cases, base);
             let per: Vec<Option<f64>> = (0..N_ALGORITHMS)
                 .map(|a| {
@@ -230,19 +229,19 @@ fn fit_placed(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
                 Effect::GroundDetection { algorithm: 0, offset_m: pooled }
             })
         }
-        "noise" => {
+        EffectKind::Noise => {
             let ratios: Vec<f64> = cases.iter().map(|c| c.real.noise.stddev / c.real.nominal_noise_stddev).collect();
             Some(Effect::Noise { noise_sigma_factor: median(ratios)? })
         }
-        "pulse" => {
+        EffectKind::Pulse => {
             let (x, _) = minimise(&mut |s| obj(Effect::Pulse { pulse_sigma_m: s }), &PULSE_GRID, 8);
             Some(Effect::Pulse { pulse_sigma_m: x })
         }
-        "footprint" => {
+        EffectKind::Footprint => {
             let (x, _) = minimise(&mut |s| obj(Effect::Footprint { fsigma_m: s }), &FSIGMA_GRID, 8);
             Some(Effect::Footprint { fsigma_m: x })
         }
-        "weighting" => {
+        EffectKind::Weighting => {
             // ρ on the configuration's own weighting: a change of method is a configuration
             // (`super::configuration`), chosen before any effect, never an effect.
             let grid: Vec<f64> = RHO_GRID.iter().map(|r: &f64| r.ln()).collect();
@@ -250,15 +249,14 @@ fn fit_placed(name: &str, base: &Model, cases: &[&ShotCase]) -> Option<Effect> {
             let (x, _) = minimise(&mut |lr| obj(Effect::Weighting { method, rho_ground_over_veg: lr.exp() }), &grid, 8);
             Some(Effect::Weighting { method, rho_ground_over_veg: x.exp() })
         }
-        "canopy_change" => two_parameter(&CANOPY_HEIGHTS, &CANOPY_FRACTIONS, &|h, f| {
+        EffectKind::CanopyChange => two_parameter(&CANOPY_HEIGHTS, &CANOPY_FRACTIONS, &|h, f| {
             obj(Effect::CanopyChange { height_m: h, fraction: f })
         })
         .map(|(h, f)| Effect::CanopyChange { height_m: h, fraction: f }),
-        "occlusion" => {
+        EffectKind::Occlusion => {
             two_parameter(&OCCLUSION_HEIGHTS, &OCCLUSION_GAINS, &|h, g| obj(Effect::Occlusion { height_m: h, gain: g }))
                 .map(|(h, g)| Effect::Occlusion { height_m: h, gain: g })
         }
-        _ => None,
     }
 }
 

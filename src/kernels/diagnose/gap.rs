@@ -11,6 +11,7 @@
 //! The gap of a set of pairs is the mean over k of the absolute per-percentile bias, averaged over
 //! the two frames (`mean_abs_bias`), with the MSD and its Kobayashi–Salam parts likewise.
 
+use crate::kernels::scenario::effects::EffectKind;
 use crate::kernels::study::msd::MsdSplit;
 
 /// Number of percentiles in the gap (RH1..RH99).
@@ -166,11 +167,16 @@ pub enum Frame {
 
 impl Frame {
     /// The frame an effect acts in.
-    pub fn of(effect: &str) -> Frame {
+    pub fn of(effect: EffectKind) -> Frame {
         match effect {
-            "datum" => Frame::Als,
-            "ground_detection" | "noise" => Frame::Rh,
-            _ => Frame::Both,
+            EffectKind::Datum => Frame::Als,
+            EffectKind::GroundDetection | EffectKind::Noise => Frame::Rh,
+            EffectKind::Geolocation
+            | EffectKind::Weighting
+            | EffectKind::Pulse
+            | EffectKind::Footprint
+            | EffectKind::CanopyChange
+            | EffectKind::Occlusion => Frame::Both,
         }
     }
 

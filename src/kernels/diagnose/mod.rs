@@ -33,6 +33,7 @@ pub mod rank;
 pub mod sample;
 pub mod selftest;
 
+use crate::kernels::scenario::effects::EffectKind;
 pub use case::ShotCase;
 
 /// The whole diagnosis of a set of shots.
@@ -63,14 +64,14 @@ pub struct Diagnosis {
     pub mismatched: usize,
 }
 
-/// Diagnose `cases` with the effects `names` (normally [`fit::FITTED_EFFECTS`]) and a self-test of
+/// Diagnose `cases` with the effects `kinds` (normally [`fit::FITTED_EFFECTS`]) and a self-test of
 /// `twins` twin sets per planted hypothesis (0: none, the ranking's intervals decide alone);
 /// `on_step` hears each effect tried. `located` are shots outside the ranked sample
 /// ([`sample`]): only where the gap lies is measured on them (with `cases`).
 pub fn diagnose(
     mut cases: Vec<ShotCase>,
     located: &[ShotCase],
-    names: &[&str],
+    kinds: &[EffectKind],
     twins: usize,
     on_step: &dyn Fn(&str),
 ) -> Diagnosis {
@@ -88,10 +89,10 @@ pub fn diagnose(
     // Every site's pulsed parts under the chosen configuration, shared by the ranking and the
     // self-test (its twins have their shots' sites).
     let pulsed = chain::PulsedSites::new(&folds.cases, &chain::Model::configured(configuration.chosen));
-    let ranking = rank::rank(&folds, &configuration, &pulsed, names, on_step);
+    let ranking = rank::rank(&folds, &configuration, &pulsed, kinds, on_step);
     let nominal = fit::total(&configuration.gaps).metrics();
     let self_test = (twins > 0 && !ranking.effects.is_empty())
-        .then(|| selftest::run(cases, configuration.chosen, &pulsed, &ranking, names, twins, on_step));
+        .then(|| selftest::run(cases, configuration.chosen, &pulsed, &ranking, kinds, twins, on_step));
     let verdict = selftest::verdict(&ranking, self_test.as_ref());
     let n_replaceable = cases.iter().filter(|c| c.sim.short_segment && c.sim.sites.len() > 1).count();
     Diagnosis {

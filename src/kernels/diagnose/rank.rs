@@ -19,7 +19,7 @@ use super::fit::{evaluate, fit, geolocation, ShotGap};
 use super::gap::{Frame, GapMetrics, GapSums};
 use super::geolocation::{ground_test, GroundTest};
 use super::profile::ProfileSums;
-use crate::kernels::scenario::effects::{Effect, GeoLevel};
+use crate::kernels::scenario::effects::{Effect, EffectKind, GeoLevel};
 use crate::kernels::scenario::rng::Stream;
 
 /// An effect is named only when the lower bound of its held-out shrink's 95 % interval reaches
@@ -276,7 +276,7 @@ fn compare_spread(folds: &Folds, state: &State, models: &[Model; 2], after: &[Sh
     let spread = spread_of(&all);
     let (shrink, _) = spread_shrink(&spread);
     let (mut shrinks, mut gains) = (Vec::new(), Vec::new());
-    for pick in folds.resamples("geolocation") {
+    for pick in folds.resamples(EffectKind::Geolocation.name()) {
         let s = spread_of(&pick);
         if s.msd.iter().chain(&s.floor).all(|v| v.is_finite()) {
             let (sh, g) = spread_shrink(&s);
@@ -284,7 +284,7 @@ fn compare_spread(folds: &Folds, state: &State, models: &[Model; 2], after: &[Sh
             gains.push(g);
         }
     }
-    let base = compare(folds, &state.gaps, after, "geolocation", Frame::Both);
+    let base = compare(folds, &state.gaps, after, EffectKind::Geolocation.name(), Frame::Both);
     Comparison { shrink, ci95: interval(shrinks), gain_ci95: interval(gains), spread: Some(spread), ..base }
 }
 
@@ -436,23 +436,23 @@ impl Placed {
     }
 }
 
-/// Fit `name` on top of `state` (per fold on the other fold's tracks; once on all for the
+/// Fit `kind` on top of `state` (per fold on the other fold's tracks; once on all for the
 /// reported parameters) and score it on the held-out tracks. `placed` is [`Placed::new`] of
 /// `folds` and `state`.
-pub fn try_effect(folds: &Folds, state: &State, placed: &Placed, name: &str) -> Option<Trial> {
-    let effect = fit(name, &state.full, &placed.full, &folds.cases)?;
+pub fn try_effect(folds: &Folds, state: &State, placed: &Placed, kind: EffectKind) -> Option<Trial> {
+    let effect = fit(kind, &state.full, &placed.full, &folds.cases)?;
     // Fold f is scored with the parameters fitted on fold 1 − f.
     let fitted: [Option<Effect>; 2] =
-        std::array::from_fn(|f| fit(name, &state.folds[f], &placed.folds[f], &folds.of(1 - f)));
+        std::array::from_fn(|f| fit(kind, &state.folds[f], &placed.folds[f], &folds.of(1 - f)));
     let models: [Model; 2] = std::array::from_fn(|f| match &fitted[f] {
         Some(e) => state.folds[f].with(e.clone()),
         None => state.folds[f].clone(),
     });
     let gaps = folds.held_out(&models);
-    let (held_out, ground_test) = if name == "geolocation" {
+    let (held_out, ground_test) = if kind == EffectKind::Geolocation {
         (compare_spread(folds, state, &models, &gaps), Some(ground_test(folds, &state.folds)))
     } else {
-        (compare(folds, &state.gaps, &gaps, name, Frame::of(name)), None)
+        (compare(folds, &state.gaps, &gaps, kind.name(), Frame::of(kind)), None)
     };
     Some(Trial { effect, fold_effects: fitted, held_out, gaps, ground_test })
 }
@@ -471,17 +471,17 @@ pub struct Ranking {
     pub ambiguous_with: Vec<String>,
 }
 
-/// Rank `names` on the chosen configuration, then climb the ladder. `on_step` is told each
+/// Rank `kinds` on the chosen configuration, then climb the ladder. `on_step` is told each
 /// effect tried.
 pub fn rank(
     folds: &Folds,
     choice: &ConfigurationChoice,
     pulsed: &PulsedSites,
-    names: &[&str],
+    kinds: &[EffectKind],
     on_step: &dyn Fn(&str),
 ) -> Ranking {
     let nominal = State::configured(choice, pulsed);
-    let effects = rank_effects(folds, &nominal, names, on_step);
+    let effects = rank_effects(folds, &nominal, kinds, on_step);
     let unexplained = !explained(&effects);
     let ambiguous_with = near_ties(folds, &nominal.gaps, &effects);
     let mut ladder: Vec<Trial> = Vec::new();
@@ -490,14 +490,14 @@ pub fn rank(
         let mut state = advance(&nominal, &first);
         ladder.push(first);
         while ladder.len() < MAX_LADDER {
-            let used: Vec<&str> = ladder.iter().map(|t| t.effect.name()).collect();
+            let used: Vec<EffectKind> = ladder.iter().map(|t| t.effect.kind()).collect();
             let placed = Placed::new(folds, &state);
-            let mut step: Vec<Trial> = names
+            let mut step: Vec<Trial> = kinds
                 .iter()
-                .filter(|n| !used.contains(n))
-                .filter_map(|n| {
-                    on_step(&format!("ladder step {}: {n}", ladder.len() + 1));
-                    try_effect(folds, &state, &placed, n)
+                .filter(|k| !used.contains(k))
+                .filter_map(|&k| {
+                    on_step(&format!("ladder step {}: {}", ladder.len() + 1, k.name()));
+                    try_effect(folds, &state, &placed, k)
                 })
                 .collect();
             order(&mut step);
@@ -512,14 +512,14 @@ pub fn rank(
     Ranking { effects, ladder, unexplained, ambiguous_with }
 }
 
-/// Every effect of `names` tried on `state`, best first ([`order`]).
-pub fn rank_effects(folds: &Folds, state: &State, names: &[&str], on_step: &dyn Fn(&str)) -> Vec<Trial> {
+/// Every effect of `kinds` tried on `state`, best first ([`order`]).
+pub fn rank_effects(folds: &Folds, state: &State, kinds: &[EffectKind], on_step: &dyn Fn(&str)) -> Vec<Trial> {
     let placed = Placed::new(folds, state);
-    let mut effects: Vec<Trial> = names
+    let mut effects: Vec<Trial> = kinds
         .iter()
-        .filter_map(|n| {
-            on_step(n);
-            try_effect(folds, state, &placed, n)
+        .filter_map(|&k| {
+            on_step(k.name());
+            try_effect(folds, state, &placed, k)
         })
         .collect();
     order(&mut effects);
@@ -635,9 +635,9 @@ pub(super) mod tests {
         // frame's mismatch, which no datum can touch.
         let before = GapMetrics { systematic_rh: 0.4, systematic_als: 1.0, systematic: 0.7, ..Default::default() };
         let after = GapMetrics { systematic_rh: 0.4, systematic_als: 0.3, systematic: 0.35, ..Default::default() };
-        assert!((shrink_of(&before, &after, Frame::of("datum")) - 0.7).abs() < 1e-12);
+        assert!((shrink_of(&before, &after, Frame::of(EffectKind::Datum)) - 0.7).abs() < 1e-12);
         assert!((shrink_of(&before, &after, Frame::Both) - 0.5).abs() < 1e-12);
-        assert_eq!(shrink_of(&before, &after, Frame::of("ground_detection")), 0.0);
+        assert_eq!(shrink_of(&before, &after, Frame::of(EffectKind::GroundDetection)), 0.0);
     }
 
     #[test]

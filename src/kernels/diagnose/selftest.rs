@@ -16,7 +16,7 @@ use rayon::prelude::*;
 use super::case::{set_nominal_noise, ShotCase, SITE_STEP_M};
 use super::chain::{reposition, twin_case, Configuration, Model, PulsedSites, Scratch};
 use super::rank::{named_first, rank_effects, Folds, Ranking, State};
-use crate::kernels::scenario::effects::{Effect, GeoLevel};
+use crate::kernels::scenario::effects::{Effect, EffectKind, GeoLevel};
 use crate::kernels::scenario::rng::{derive_seed, Stream};
 
 /// Twins per planted hypothesis (`--twins`).
@@ -173,13 +173,13 @@ pub fn leading(ranking: &Ranking) -> Vec<Effect> {
 }
 
 /// Run the self-test: `twins` twins of `cases` for each leading candidate of `ranking` and for
-/// nothing planted, each set ranked with `names` on `configuration`. `on_step` hears each set.
+/// nothing planted, each set ranked with `kinds` on `configuration`. `on_step` hears each set.
 pub fn run(
     cases: &[ShotCase],
     configuration: Configuration,
     pulsed: &PulsedSites,
     ranking: &Ranking,
-    names: &[&str],
+    kinds: &[EffectKind],
     twins: usize,
     on_step: &dyn Fn(&str),
 ) -> SelfTest {
@@ -200,7 +200,7 @@ pub fn run(
                 .map(|r| {
                     on_step(&format!("self-test: {label} planted, twin set {} of {twins}", r + 1));
                     let set = twin_set(cases, &truth, reference_dz, &format!("{label} {r}"));
-                    diagnose_twins(set, configuration, pulsed, names)
+                    diagnose_twins(set, configuration, pulsed, kinds)
                 })
                 .collect();
             Planting { effect, named }
@@ -215,13 +215,13 @@ fn diagnose_twins(
     mut twins: Vec<ShotCase>,
     configuration: Configuration,
     pulsed: &PulsedSites,
-    names: &[&str],
+    kinds: &[EffectKind],
 ) -> Option<String> {
     set_nominal_noise(&mut twins);
     super::flag_ground_mismatches(&mut twins);
     let folds = Folds::new(&twins);
     let state = State::configured(&super::configuration::fixed(&folds, configuration), pulsed);
-    let trials = rank_effects(&folds, &state, names, &|_| ());
+    let trials = rank_effects(&folds, &state, kinds, &|_| ());
     named_first(&trials).map(|t| t.effect.name().to_string())
 }
 

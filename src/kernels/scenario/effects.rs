@@ -143,23 +143,99 @@ pub enum Effect {
     GroundDetection { algorithm: u8, offset_m: f64 },
 }
 
-/// All effect names, in registry order.
-pub const EFFECT_NAMES: [&str; 9] = [
-    "geolocation",
-    "datum",
-    "weighting",
-    "pulse",
-    "footprint",
-    "noise",
-    "canopy_change",
-    "occlusion",
-    "ground_detection",
-];
+/// The kinds of effect: the one registry the scenario, the diagnosis's fit and its report share.
+/// Every dispatch on a kind is an exhaustive `match`, so a new kind is a compile error wherever it
+/// needs a decision (its parameters, its parsing, its fit, the frame it is judged in).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum EffectKind {
+    Geolocation,
+    Datum,
+    Weighting,
+    Pulse,
+    Footprint,
+    Noise,
+    CanopyChange,
+    Occlusion,
+    GroundDetection,
+}
+
+impl EffectKind {
+    /// Every kind, in registry order.
+    pub const ALL: [EffectKind; 9] = [
+        EffectKind::Geolocation,
+        EffectKind::Datum,
+        EffectKind::Weighting,
+        EffectKind::Pulse,
+        EffectKind::Footprint,
+        EffectKind::Noise,
+        EffectKind::CanopyChange,
+        EffectKind::Occlusion,
+        EffectKind::GroundDetection,
+    ];
+
+    /// The registry name (a contract: docs/scenario.md).
+    pub fn name(self) -> &'static str {
+        match self {
+            EffectKind::Geolocation => "geolocation",
+            EffectKind::Datum => "datum",
+            EffectKind::Weighting => "weighting",
+            EffectKind::Pulse => "pulse",
+            EffectKind::Footprint => "footprint",
+            EffectKind::Noise => "noise",
+            EffectKind::CanopyChange => "canopy_change",
+            EffectKind::Occlusion => "occlusion",
+            EffectKind::GroundDetection => "ground_detection",
+        }
+    }
+
+    /// The kind named `name`.
+    pub fn from_name(name: &str) -> Option<EffectKind> {
+        EffectKind::ALL.into_iter().find(|k| k.name() == name)
+    }
+
+    /// Every name, joined by `, ` (for messages).
+    pub fn names() -> String {
+        EffectKind::ALL.map(EffectKind::name).join(", ")
+    }
+
+    /// Whether the effect reshapes the simulated waveform, and so moves the positions that fit
+    /// it best.
+    pub fn reshapes_waveform(self) -> bool {
+        match self {
+            EffectKind::Weighting
+            | EffectKind::Pulse
+            | EffectKind::Footprint
+            | EffectKind::CanopyChange
+            | EffectKind::Occlusion => true,
+            EffectKind::Geolocation | EffectKind::Datum | EffectKind::Noise | EffectKind::GroundDetection => false,
+        }
+    }
+
+    /// (parameters, main parameter, nominal value of the main parameter).
+    fn specs(self) -> (&'static [ParamSpec], &'static str, f64) {
+        macro_rules! p {
+            ($($n:literal = $d:literal),*) => { &[$(ParamSpec { name: $n, default: $d }),*] };
+        }
+        match self {
+            EffectKind::Geolocation => (p!("level" = "shot", "shot_sigma_m" = "3.0"), "shot_sigma_m", 0.0),
+            EffectKind::Datum => (p!("dz_m" = "0.5"), "dz_m", 0.0),
+            EffectKind::Weighting => {
+                (p!("method" = "ratio", "rho_ground_over_veg" = "0.7"), "rho_ground_over_veg", 1.0)
+            }
+            EffectKind::Pulse => (p!("pulse_sigma_m" = "1.2"), "pulse_sigma_m", 0.0),
+            EffectKind::Footprint => (p!("fsigma_m" = "7.0"), "fsigma_m", NOMINAL_FSIGMA_M),
+            EffectKind::Noise => (p!("noise_sigma_factor" = "2.0"), "noise_sigma_factor", 1.0),
+            EffectKind::CanopyChange => (p!("height_m" = "10.0", "fraction" = "0.3"), "fraction", 0.0),
+            EffectKind::Occlusion => (p!("height_m" = "5.0", "gain" = "0.5"), "gain", 0.0),
+            EffectKind::GroundDetection => (p!("algorithm" = "all", "offset_m" = "0.5"), "offset_m", 0.0),
+        }
+    }
+}
 
 /// Why an effect specification was rejected; `Display` is one line naming the field.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum EffectError {
-    #[error("--effect: unknown effect '{0}' (known: none, {known})", known = EFFECT_NAMES.join(", "))]
+    #[error("--effect: unknown effect '{0}' (known: none, {known})", known = EffectKind::names())]
     UnknownEffect(String),
     #[error("--effect: '{0}' is given twice")]
     Duplicate(String),
@@ -200,39 +276,25 @@ struct ParamSpec {
     default: &'static str,
 }
 
-/// (parameters, main parameter, nominal value of the main parameter) of an effect.
-fn specs(effect: &str) -> Option<(&'static [ParamSpec], &'static str, f64)> {
-    macro_rules! p {
-        ($($n:literal = $d:literal),*) => { &[$(ParamSpec { name: $n, default: $d }),*] };
-    }
-    Some(match effect {
-        "geolocation" => (p!("level" = "shot", "shot_sigma_m" = "3.0"), "shot_sigma_m", 0.0),
-        "datum" => (p!("dz_m" = "0.5"), "dz_m", 0.0),
-        "weighting" => (p!("method" = "ratio", "rho_ground_over_veg" = "0.7"), "rho_ground_over_veg", 1.0),
-        "pulse" => (p!("pulse_sigma_m" = "1.2"), "pulse_sigma_m", 0.0),
-        "footprint" => (p!("fsigma_m" = "7.0"), "fsigma_m", NOMINAL_FSIGMA_M),
-        "noise" => (p!("noise_sigma_factor" = "2.0"), "noise_sigma_factor", 1.0),
-        "canopy_change" => (p!("height_m" = "10.0", "fraction" = "0.3"), "fraction", 0.0),
-        "occlusion" => (p!("height_m" = "5.0", "gain" = "0.5"), "gain", 0.0),
-        "ground_detection" => (p!("algorithm" = "all", "offset_m" = "0.5"), "offset_m", 0.0),
-        _ => return None,
-    })
-}
-
 impl Effect {
+    /// The kind of effect.
+    pub fn kind(&self) -> EffectKind {
+        match self {
+            Effect::Geolocation { .. } => EffectKind::Geolocation,
+            Effect::Datum { .. } => EffectKind::Datum,
+            Effect::Weighting { .. } => EffectKind::Weighting,
+            Effect::Pulse { .. } => EffectKind::Pulse,
+            Effect::Footprint { .. } => EffectKind::Footprint,
+            Effect::Noise { .. } => EffectKind::Noise,
+            Effect::CanopyChange { .. } => EffectKind::CanopyChange,
+            Effect::Occlusion { .. } => EffectKind::Occlusion,
+            Effect::GroundDetection { .. } => EffectKind::GroundDetection,
+        }
+    }
+
     /// The registry name.
     pub fn name(&self) -> &'static str {
-        match self {
-            Effect::Geolocation { .. } => "geolocation",
-            Effect::Datum { .. } => "datum",
-            Effect::Weighting { .. } => "weighting",
-            Effect::Pulse { .. } => "pulse",
-            Effect::Footprint { .. } => "footprint",
-            Effect::Noise { .. } => "noise",
-            Effect::CanopyChange { .. } => "canopy_change",
-            Effect::Occlusion { .. } => "occlusion",
-            Effect::GroundDetection { .. } => "ground_detection",
-        }
+        self.kind().name()
     }
 
     /// The parameters, in registry order (names as in the contract).
@@ -280,7 +342,8 @@ impl Effect {
     /// its nominal value: `main = nominal + magnitude·(value − nominal)`), and `key=value`
     /// parameters (unknown keys are errors). Missing parameters take their defaults.
     pub fn parse(name: &str, magnitude: Option<f64>, params: &[(String, String)]) -> Result<Effect, EffectError> {
-        let (spec, main, nominal) = specs(name).ok_or_else(|| EffectError::UnknownEffect(name.to_string()))?;
+        let kind = EffectKind::from_name(name).ok_or_else(|| EffectError::UnknownEffect(name.to_string()))?;
+        let (spec, main, nominal) = kind.specs();
         for (k, _) in params {
             if !spec.iter().any(|s| s.name == k) {
                 let known: Vec<&str> = spec.iter().map(|s| s.name).collect();
@@ -314,8 +377,8 @@ impl Effect {
                 Err(param_err(k, format!("{x} is out of range ({what})")))
             }
         };
-        let effect = match name {
-            "geolocation" => {
+        let effect = match kind {
+            EffectKind::Geolocation => {
                 let level = match raw("level") {
                     "beam" => GeoLevel::Beam,
                     "shot" => GeoLevel::Shot,
@@ -327,11 +390,11 @@ impl Effect {
                     shot_sigma_m: check("shot_sigma_m", s, (0.0..=50.0).contains(&s), "0..50 m")?,
                 }
             }
-            "datum" => {
+            EffectKind::Datum => {
                 let dz = num("dz_m")?;
                 Effect::Datum { dz_m: check("dz_m", dz, dz.abs() <= 100.0, "|dz| ≤ 100 m")? }
             }
-            "weighting" => {
+            EffectKind::Weighting => {
                 let method = match raw("method") {
                     "count" => WeightMethod::Count,
                     "frac" => WeightMethod::Frac,
@@ -350,21 +413,21 @@ impl Effect {
                     rho_ground_over_veg: check("rho_ground_over_veg", rho, (0.0..=100.0).contains(&rho), "0..100")?,
                 }
             }
-            "pulse" => {
+            EffectKind::Pulse => {
                 let s = num("pulse_sigma_m")?;
                 Effect::Pulse { pulse_sigma_m: check("pulse_sigma_m", s, s > 0.01 && s <= 20.0, "0.01..20 m")? }
             }
-            "footprint" => {
+            EffectKind::Footprint => {
                 let s = num("fsigma_m")?;
                 Effect::Footprint { fsigma_m: check("fsigma_m", s, (0.5..=30.0).contains(&s), "0.5..30 m")? }
             }
-            "noise" => {
+            EffectKind::Noise => {
                 let f = num("noise_sigma_factor")?;
                 Effect::Noise {
                     noise_sigma_factor: check("noise_sigma_factor", f, f > 0.0 && f <= 100.0, "0..100, > 0")?,
                 }
             }
-            "canopy_change" => {
+            EffectKind::CanopyChange => {
                 let h = num("height_m")?;
                 let f = num("fraction")?;
                 Effect::CanopyChange {
@@ -372,7 +435,7 @@ impl Effect {
                     fraction: check("fraction", f, (-10.0..=1.0).contains(&f), "≤ 1; negative = growth")?,
                 }
             }
-            "occlusion" => {
+            EffectKind::Occlusion => {
                 let h = num("height_m")?;
                 let g = num("gain")?;
                 Effect::Occlusion {
@@ -380,7 +443,7 @@ impl Effect {
                     gain: check("gain", g, (-1.0..=100.0).contains(&g), "-1..100")?,
                 }
             }
-            "ground_detection" => {
+            EffectKind::GroundDetection => {
                 let algorithm = match raw("algorithm") {
                     "all" | "0" => 0,
                     v => match v.trim().trim_start_matches('a').parse::<u8>() {
@@ -394,7 +457,6 @@ impl Effect {
                     offset_m: check("offset_m", o, o.abs() <= 50.0, "|offset| ≤ 50 m")?,
                 }
             }
-            _ => return Err(EffectError::UnknownEffect(name.to_string())),
         };
         Ok(effect)
     }
@@ -498,10 +560,9 @@ impl EffectSet {
             }
             return Ok(EffectSet::default());
         }
+        let mut kinds = Vec::with_capacity(names.len());
         for (i, n) in names.iter().enumerate() {
-            if specs(n).is_none() {
-                return Err(EffectError::UnknownEffect(n.to_string()));
-            }
+            kinds.push(EffectKind::from_name(n).ok_or_else(|| EffectError::UnknownEffect(n.to_string()))?);
             if names[..i].contains(n) {
                 return Err(EffectError::Duplicate(n.to_string()));
             }
@@ -517,9 +578,8 @@ impl EffectSet {
                     (i, key.to_string())
                 }
                 None => {
-                    let owners: Vec<usize> = (0..names.len())
-                        .filter(|&i| specs(names[i]).map(|(s, _, _)| s.iter().any(|p| p.name == k)).unwrap_or(false))
-                        .collect();
+                    let owners: Vec<usize> =
+                        (0..names.len()).filter(|&i| kinds[i].specs().0.iter().any(|p| p.name == k)).collect();
                     match owners.as_slice() {
                         [i] => (*i, k.clone()),
                         [] => return Err(param_err(k, format!("not a parameter of {}", names.join(" or ")))),
@@ -591,6 +651,15 @@ mod tests {
 
     fn kv(k: &str, v: &str) -> (String, String) {
         (k.to_string(), v.to_string())
+    }
+
+    #[test]
+    fn every_kind_parses_from_its_name_to_itself() {
+        for kind in EffectKind::ALL {
+            assert_eq!(EffectKind::from_name(kind.name()), Some(kind));
+            assert_eq!(Effect::parse(kind.name(), None, &[]).unwrap().kind(), kind, "{}", kind.name());
+        }
+        assert_eq!(EffectKind::from_name("none"), None);
     }
 
     #[test]
