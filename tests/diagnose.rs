@@ -5,8 +5,9 @@
 //! effect.
 //!
 //! World suites: each test builds and diagnoses whole worlds (≈ 9 minutes together on 2 cores), so
-//! `cargo test` leaves them out and `.ci/run` runs them (`cargo test -- --ignored`). The last test
-//! (the ranked sample, with one effect and no self-test) takes seconds and runs with `cargo test`.
+//! `cargo test` leaves them out and `.ci/run` runs them (`cargo test -- --ignored`). The others (the
+//! ranked sample, the writer lock, writers at once: one effect, no self-test) take under a minute
+//! each and run with `cargo test`.
 
 mod common;
 
@@ -335,4 +336,142 @@ fn diagnose_writes_a_dataset_only_as_its_one_writer() {
     let (ok, _, err) = gedisim(&[&["diagnose", "--dataset", d, "--out", o][..], &quick].concat());
     assert!(ok, "{err}");
     assert!(ds.join("offsets/offsets.parquet").is_file() && out.join("diagnosis.json").is_file());
+}
+
+/// Every table of dataset `ds` that `run` and `diagnose` write or read, as sorted printed rows
+/// (the order of files and rows within a table is not a contract).
+fn tables_of(ds: &Path) -> Vec<(&'static str, Vec<String>)> {
+    let session = gedisim::ops::sql::SqlSession::open(ds, &Default::default(), &gedisim::sql::Engine::Local).unwrap();
+    ["tiles", "shots", "offsets", "sim", "results"]
+        .into_iter()
+        .map(|t| {
+            let batches = session.collect(&format!("select * from {t}")).unwrap();
+            let text = arrow::util::pretty::pretty_format_batches(&batches).unwrap().to_string();
+            let mut rows: Vec<String> = text.lines().map(str::to_string).collect();
+            rows.sort();
+            (t, rows)
+        })
+        .collect()
+}
+
+/// `run` and `diagnose --dataset` started at once on one dataset without `offsets/` (issue 44: each
+/// operation takes the writer lock where it writes, not its caller): whichever loses the lock
+/// stops with one line and writes nothing; run again, the tables equal those of the two run one
+/// after the other, in one order or the other. Through the binary and through the library.
+#[test]
+fn run_and_diagnose_at_once_leave_the_tables_of_a_sequential_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let tile = common::data("als/lidarforfuel_2_bas_lig.laz");
+    let world = scenario(tmp.path(), "none", &["--als", tile.to_str().unwrap(), "--passes", "3", "--seed", "7"]);
+    let (g, a) = (world.join("gedi"), world.join("als"));
+    let (g, a) = (g.to_str().unwrap(), a.to_str().unwrap());
+    let run_args = |d: &str| {
+        ["run", "--als", a, "--l1b", g, "--l2a", g, "--level", "beam", "--segment", "40", "--min-segment", "1"]
+            .into_iter()
+            .chain(["--dataset", d])
+            .map(str::to_string)
+            .collect::<Vec<_>>()
+    };
+    let diagnose_args = |d: &str, o: &str| {
+        ["diagnose", "--dataset", d, "--out", o, "--twins", "0", "--effects", "datum", "--ranked-shots", "30"]
+            .map(str::to_string)
+            .to_vec()
+    };
+    let ingested = |name: &str| {
+        let ds = tmp.path().join(name);
+        let d = ds.to_str().unwrap();
+        for args in [&["ingest", "als", a, "--out", d][..], &["ingest", "gedi", "--l1b", g, "--l2a", g, "--out", d]] {
+            let (ok, _, err) = gedisim(args);
+            assert!(ok, "{err}");
+        }
+        ds
+    };
+    let call = |args: &[String]| {
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (ok, _, err) = gedisim(&refs);
+        assert!(ok, "{err}");
+    };
+    // The two sequential orders.
+    let mut references = Vec::new();
+    for (k, run_first) in [true, false].into_iter().enumerate() {
+        let ds = ingested(&format!("sequential{k}"));
+        let (d, o) = (ds.to_str().unwrap(), tmp.path().join(format!("diagnosis{k}")));
+        let (run, diag) = (run_args(d), diagnose_args(d, o.to_str().unwrap()));
+        for args in if run_first { [&run, &diag] } else { [&diag, &run] } {
+            call(args);
+        }
+        references.push(tables_of(&ds));
+    }
+    assert!(references[0].iter().all(|(_, rows)| rows.len() > 4), "every table has rows");
+
+    // A loser's error is one line naming the lock; a winner's stderr has no error.
+    let settle = |outcomes: Vec<(bool, String)>, again: &[Vec<String>]| {
+        for ((ok, err), args) in outcomes.into_iter().zip(again) {
+            eprintln!("{}: {}", args[0], if ok { "finished" } else { "lost the lock, run again" });
+            if !ok {
+                assert!(err.contains("another gedisim process") && err.trim().lines().count() == 1, "{err}");
+                call(args);
+            }
+        }
+    };
+    // Through the binary: two processes.
+    let ds = ingested("binary");
+    let (d, o) = (ds.to_str().unwrap(), tmp.path().join("diagnosis-binary"));
+    let both = [run_args(d), diagnose_args(d, o.to_str().unwrap())];
+    let children: Vec<std::process::Child> = both
+        .iter()
+        .map(|args| {
+            std::process::Command::new(env!("CARGO_BIN_EXE_gedisim"))
+                .args(args)
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .unwrap()
+        })
+        .collect();
+    let outcomes = children
+        .into_iter()
+        .map(|c| {
+            let out = c.wait_with_output().unwrap();
+            (out.status.success(), String::from_utf8_lossy(&out.stderr).into_owned())
+        })
+        .collect();
+    settle(outcomes, &both);
+    assert!(references.contains(&tables_of(&ds)), "the tables of no sequential order");
+
+    // Through the library: two threads of one process.
+    use gedisim::ops::diagnose::{diagnose, DiagnoseInput, DiagnoseOptions};
+    use gedisim::ops::progress::NoProgress;
+    let ds = ingested("library");
+    let out = tmp.path().join("diagnosis-library");
+    let run_opts = gedisim::ops::run::RunOptions {
+        als: vec![world.join("als")],
+        l1b: vec![world.join("gedi")],
+        l2a: vec![world.join("gedi")],
+        // As `run_args` says.
+        collocate: gedisim::ops::collocate::CollocateOptions {
+            level: gedisim::kernels::collocate::segments::Level::Beam,
+            segment: 40,
+            min_segment: 1,
+            pulse: gedisim::kernels::sim::PulseModel::Recorded(Default::default()),
+            ..Default::default()
+        },
+        ..gedisim::ops::run::RunOptions::new(&ds)
+    };
+    let diag_opts =
+        DiagnoseOptions { twins: 0, effects: vec!["datum".into()], ranked_shots: 30, ..DiagnoseOptions::new() };
+    let err = |e: gedisim::Error| e.to_string();
+    let (r, dg) = std::thread::scope(|s| {
+        let r = s.spawn(|| gedisim::ops::run::run_study(&run_opts, &NoProgress).map(|_| ()).map_err(err));
+        let dg = s.spawn(|| {
+            diagnose(DiagnoseInput::Dataset(ds.clone()), &out, &diag_opts, &NoProgress).map(|_| ()).map_err(err)
+        });
+        (r.join().unwrap(), dg.join().unwrap())
+    });
+    let d = ds.to_str().unwrap();
+    settle(
+        vec![(r.is_ok(), r.err().unwrap_or_default()), (dg.is_ok(), dg.err().unwrap_or_default())],
+        &[run_args(d), diagnose_args(d, out.to_str().unwrap())],
+    );
+    assert!(references.contains(&tables_of(&ds)), "the tables of no sequential order");
 }

@@ -57,7 +57,7 @@ pub fn collocate(a: CollocateArgs) -> Result<()> {
     use gedisim::ops::collocate::CollocateOptions;
     let start = Instant::now();
     let level = collocate_level(a.level);
-    let ds = super::reporters::writer(&a.dataset)?;
+    let ds = gedisim::dataset::Dataset::create(&a.dataset)?;
     let opts = CollocateOptions {
         level,
         segment: a.segment,

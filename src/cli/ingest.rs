@@ -105,7 +105,7 @@ pub struct IngestStrataArgs {
 pub fn ingest_als(a: IngestAlsArgs) -> Result<()> {
     let start = Instant::now();
     let inputs: Vec<PathBuf> = a.als.into_iter().chain(a.inputs).collect();
-    let ds = super::reporters::writer(&a.dataset)?;
+    let ds = gedisim::dataset::Dataset::create(&a.dataset)?;
     let windows = match a.whole_tiles {
         true => None,
         false => als::shot_windows(&ds, als::run_window_half(CollocateOptions::default().max_shift))?,
@@ -163,7 +163,7 @@ pub fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
     if a.l1b.is_empty() && a.l2a.is_empty() {
         return Err(Error::Usage("give --l1b and/or --l2a files".into()));
     }
-    let ds = super::reporters::writer(&a.dataset)?;
+    let ds = gedisim::dataset::Dataset::create(&a.dataset)?;
     let request = gedisim::ops::ingest_gedi::IngestRequest {
         epsg: a.epsg,
         geoid_offset: a.geoid_offset,
@@ -191,7 +191,7 @@ pub fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
 }
 
 pub fn ingest_strata(a: IngestStrataArgs) -> Result<()> {
-    let ds = super::reporters::writer(&a.dataset)?;
+    let ds = gedisim::dataset::Dataset::create(&a.dataset)?;
     let report = gedisim::ops::ingest_strata::ingest_strata(&ds, &a.landcover, &Bars::new())?;
     let mut counts: Vec<_> = report.counts.iter().collect();
     counts.sort();

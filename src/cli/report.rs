@@ -26,7 +26,7 @@ pub struct ReportArgs {
 }
 
 pub fn report(a: ReportArgs) -> Result<()> {
-    let ds = super::reporters::writer(&a.dataset)?;
+    let ds = gedisim::dataset::Dataset::create(&a.dataset)?;
     let engine = a.cluster.map(gedisim::ops::report::Engine::Cluster).unwrap_or_default();
     let opts = gedisim::ops::report::ReportOptions { out: a.out, diagnosis: a.diagnosis };
     let s = gedisim::ops::report::run_report(&ds, &opts, &engine, &Bars::new())?;

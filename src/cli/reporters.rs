@@ -145,22 +145,6 @@ pub fn peak_rss_mb() -> f64 {
         .unwrap_or(0.0)
 }
 
-/// Open (or create) the dataset at `root` as its one writer (see `gedisim::dataset::lock`),
-/// saying on stderr what an interrupted writer left and this one removed. Every command that
-/// writes into a dataset calls it first and holds the returned dataset until it ends.
-pub fn writer(root: &std::path::Path) -> gedisim::Result<gedisim::dataset::Dataset> {
-    let (ds, cleanup) = gedisim::dataset::Dataset::writer(root)?;
-    let (tmp, orphans) = (cleanup.temporaries.len(), cleanup.orphan_points.len());
-    if tmp + orphans > 0 {
-        info!(
-            "{}: removed what an interrupted writer left: {tmp} temporary file(s), \
-             {orphans} als/ file(s) without a tiles/ row",
-            root.display()
-        );
-    }
-    Ok(ds)
-}
-
 /// What was fetched from each remote input (`https://…`, `s3://…`) that was read (stderr).
 pub fn print_fetched(inputs: &[std::path::PathBuf]) {
     for (input, f) in gedisim::ops::ingest_als::remote_reads(inputs) {

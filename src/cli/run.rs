@@ -106,7 +106,6 @@ pub fn run_command(a: RunArgs) -> Result<()> {
         engine: a.cluster.map(gedisim::ops::run::Engine::Cluster).unwrap_or_default(),
         ..base
     };
-    let _writer = super::reporters::writer(&opts.out)?;
     let report = gedisim::ops::run::run_study(&opts, &Bars::new())?;
     if a.json {
         print_ingest_and_collocation(&report);

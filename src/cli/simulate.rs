@@ -108,8 +108,6 @@ pub enum ProfileArg {
 pub fn simulate(a: SimulateArgs) -> Result<()> {
     use gedisim::kernels::sim::{DensityCount, Profile};
     use gedisim::ops::simulate::{SimulateOptions, Source};
-    // Dataset mode writes sim/ into the dataset: it holds the writer lock while it runs.
-    let _writer = a.dataset.as_deref().map(super::reporters::writer).transpose()?;
     let als_input = a.als.clone();
     let source = match (a.dataset, a.als) {
         (Some(dataset), _) => Source::Dataset { dataset, footprints: a.footprints, out: a.out },

@@ -149,6 +149,27 @@ impl Dataset {
         Ok((ds, cleanup))
     }
 
+    /// This dataset as its one writer, for an operation about to write into it: itself when it
+    /// holds the writer lock already (an operation inside another, as `run`'s ingest), else
+    /// opened again with the lock taken ([`Dataset::writer`]), what dead writers left removed and
+    /// said on stderr. Every operation in `ops` that writes a dataset starts with this, so no
+    /// caller can forget the lock.
+    pub fn as_writer(&self) -> Result<Dataset> {
+        if self.lock.is_some() {
+            return Ok(self.clone());
+        }
+        let (ds, cleanup) = Dataset::writer(&self.root)?;
+        let (tmp, orphans) = (cleanup.temporaries.len(), cleanup.orphan_points.len());
+        if tmp + orphans > 0 {
+            tracing::info!(
+                "{}: removed what an interrupted writer left: {tmp} temporary file(s), \
+                 {orphans} als/ file(s) without a tiles/ row",
+                self.root.display()
+            );
+        }
+        Ok(ds)
+    }
+
     /// Open an existing dataset for reading.
     pub fn open(root: &Path) -> Result<Self> {
         addressable(root)?;

@@ -30,6 +30,7 @@ pub fn collocate_on(
     opts: &CollocateOptions,
     progress: &dyn Progress,
 ) -> Result<CollocateReport> {
+    let ds = &ds.as_writer()?;
     let (batches, mut report) = solve(engine, Collocation::plan(ds, opts)?, ds, opts, progress)?;
     let dest = ds.table_file(tables::OFFSETS, "offsets")?;
     let mut metadata = HashMap::new();

@@ -585,15 +585,14 @@ pub fn diagnose(
     let (ds, chain) = match input {
         DiagnoseInput::Dataset(root) => {
             let ds = Dataset::open(&root)?;
-            let ds = if ds.has_table(tables::OFFSETS) { ds } else { Dataset::writer(&root)?.0 };
+            let ds = if ds.has_table(tables::OFFSETS) { ds } else { ds.as_writer()? };
             (ds, None)
         }
         DiagnoseInput::Chain(opts) => {
             let collocate = diagnosis_collocation(pulse);
             let als_window = Some(window_half(collocate.max_shift));
             let opts = RunOptions { out: out.join("dataset"), collocate, als_window, ..*opts };
-            let (ds, _) = Dataset::writer(&opts.out)?;
-            let report = crate::ops::run::ingest_and_collocate(&opts, progress)?;
+            let (ds, report) = crate::ops::run::ingest_and_collocate(&opts, progress)?;
             (ds, Some(report))
         }
     };

@@ -138,6 +138,7 @@ pub fn ingest(
     opts: &AlsOptions,
     progress: &dyn Progress,
 ) -> Result<Vec<TileOutcome>> {
+    let dataset = &dataset.as_writer()?;
     let files = expand_inputs(inputs)?;
     if files.is_empty() {
         return Err(Error::Usage("no LAS/LAZ file found in the inputs".into()));
@@ -157,6 +158,7 @@ pub fn ingest_tiles(
     opts: &AlsOptions,
     progress: &dyn Progress,
 ) -> Result<Vec<TileOutcome>> {
+    let dataset = &dataset.as_writer()?;
     let existing = dataset::dataset_epsg(dataset)?;
     let mut headers: Vec<(u32, u64, bool)> = Vec::with_capacity(files.len()); // (EPSG, points, COPC) per file
     for f in files {

@@ -33,6 +33,7 @@ pub struct StrataReport {
 /// Read `landcover` (`.tif`/`.tiff` GeoTIFF or `.csv`) and write `<dataset>/strata/strata.parquet`,
 /// replacing a previous one, as one [`Step::Strata`] counted in shots (raster input).
 pub fn ingest_strata(ds: &Dataset, landcover: &Path, progress: &dyn Progress) -> Result<StrataReport> {
+    let ds = &ds.as_writer()?;
     progress.start(Step::Strata, 0);
     let report = strata_of(ds, landcover, &|n, total| {
         progress.set_total(total);

@@ -211,16 +211,17 @@ pub fn run_study(opts: &RunOptions, progress: &dyn Progress) -> Result<RunReport
 
 /// The first half of a run: ingest what is new of the tiles, the granules and the land cover, then
 /// collocate the granules that need it (`opts.rules` is not used). `gedisim diagnose --als` stops
-/// here.
-pub fn ingest_and_collocate(opts: &RunOptions, progress: &dyn Progress) -> Result<RunReport> {
-    ingest_and_collocate_granules(opts, progress).map(|(_, report, _)| report)
+/// here. The dataset is returned as its writer: the lock held until the caller drops it.
+pub fn ingest_and_collocate(opts: &RunOptions, progress: &dyn Progress) -> Result<(Dataset, RunReport)> {
+    ingest_and_collocate_granules(opts, progress).map(|(ds, report, _)| (ds, report))
 }
 
 fn ingest_and_collocate_granules(
     opts: &RunOptions,
     progress: &dyn Progress,
 ) -> Result<(Dataset, RunReport, Vec<GranuleFile>)> {
-    let ds = Dataset::create(&opts.out)?;
+    // The writer lock held until the run ends (the dataset is returned to `run_study`).
+    let ds = Dataset::create(&opts.out)?.as_writer()?;
     let mut report = RunReport { dataset: opts.out.clone(), rules: opts.rules, ..Default::default() };
     require_inputs(&ds, opts)?;
     // The shots first, so that COPC tiles are read only around them; their CRS is then the

@@ -311,7 +311,8 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
     let mut outside_files = 0;
     let ((simulated, skipped), out) = match &opts.source {
         Source::Dataset { dataset, footprints, out } => {
-            let ds = Dataset::open(dataset)?;
+            // Dataset mode writes sim/ (or a table of footprints) into the dataset.
+            let ds = Dataset::open(dataset)?.as_writer()?;
             let from_csv = footprints.is_some();
             let (mut footprints, dest) = match footprints {
                 Some(csv) => {

@@ -126,9 +126,9 @@ const REPLACEMENTS: usize = 2;
 /// Fit the effect `kind` on top of `base` to `cases`, with the shots of short segments re-placed
 /// for each hypothesis ([`reposition`]): first for `base` (`placed`, which is `reposition(cases,
 /// base)`: every effect tried on one base shares it), then — for an effect that reshapes the
-/// waveform ([`EffectKind::reshapes_waveform`]) — alternately re-placed for the fitted model and re-fitted (positions and
-/// parameters are fitted jointly). `None` when the cases carry no information about the effect
-/// (e.g. no ground differences).
+/// waveform ([`EffectKind::reshapes_waveform`]) — alternately re-placed for the fitted model and
+/// re-fitted (positions and parameters are fitted jointly). `None` when the cases carry no
+/// information about the effect (e.g. no ground differences).
 pub fn fit(kind: EffectKind, base: &Model, placed: &Model, cases: &[&ShotCase]) -> Option<Effect> {
     if cases.is_empty() {
         return None;

@@ -803,6 +803,7 @@ pub fn ingest(
     request: &IngestRequest,
     progress: &dyn Progress,
 ) -> Result<(Vec<GranuleOutcome>, IngestReport)> {
+    let dataset = &dataset.as_writer()?;
     let l1b = expand_granule_inputs(l1b, "GEDI01_B")?;
     let l2a = expand_granule_inputs(l2a, "GEDI02_A")?;
     if l1b.is_empty() && l2a.is_empty() {
@@ -857,6 +858,7 @@ pub fn ingest_into_dataset(
     use crate::dataset::{self, tables, AtomicParquet};
     use arrow::array::{StringArray, UInt64Array};
 
+    let dataset = &dataset.as_writer()?;
     let (pairs, notes) = pair_granules(l1b, l2a)?;
     let shots_dir = dataset.table_dir(tables::SHOTS)?;
     let granules_dir = dataset.table_dir(tables::GRANULES)?;

@@ -237,6 +237,7 @@ pub fn run_report(
     engine: &Engine,
     progress: &dyn Progress,
 ) -> Result<ReportSummary> {
+    let ds = &ds.as_writer()?;
     progress.start(Step::Report, 0);
     let summary = report(ds, opts, engine, &|what| progress.note(what));
     progress.finish();
