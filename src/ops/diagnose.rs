@@ -415,37 +415,40 @@ pub struct DiagnosisOutput {
     pub reused: bool,
 }
 
-/// The key of a diagnosis's inputs (a hex SHA-256 over these facts): this binary's path, size and
-/// modification time, the effects, pulse (and a pulse file's size and time) and self-test twins
-/// asked for, and
-/// the path, size and modification time of every file of the tables it reads (gedisim writes a
-/// changed table file anew, with a new time). Stored in diagnosis.json: a re-run on the same
-/// inputs reuses the diagnosis. A file rewritten with the same size within the file system's
-/// time resolution would go unseen: `--force` recomputes.
+/// The key of a diagnosis's inputs (a hex SHA-256 over these facts), built from content keys as
+/// `run`'s work is: this binary's content, the effects, pulse (a pulse file's content) and
+/// self-test asked for; each granule of `shots/` by the content hashes and area it was ingested
+/// from (`ops::run::granule_inputs`); and the content of the files of `tiles/` (hence of what
+/// `als/` holds), `offsets/` and `strata/` (files above 256 MiB by their length and 32 blocks,
+/// `dataset::granule_hash`). Stored in diagnosis.json: a re-run on the same inputs — even a copy
+/// of the dataset elsewhere — reuses the diagnosis; `--force` recomputes.
 fn inputs_key(ds: &Dataset, kinds: &[EffectKind], opts: &DiagnoseOptions) -> Result<String> {
     use sha2::{Digest, Sha256};
     let mut h = Sha256::new();
-    let stamp = |h: &mut Sha256, path: &Path| -> Result<()> {
-        let m = std::fs::metadata(path).map_err(|e| Error::file(path, e))?;
-        let mtime = m.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).unwrap_or_default();
-        h.update(format!("{}\0{}\0{}\0", path.display(), m.len(), mtime.as_nanos()));
-        Ok(())
-    };
     let (pulse, twins, ranked) = (&opts.pulse, opts.twins, opts.ranked_shots);
     h.update(format!(
         "gedisim {}\0{}\0{pulse:?}\0{twins}\0{ranked}\0",
         env!("CARGO_PKG_VERSION"),
         kinds.iter().map(|k| k.name()).collect::<Vec<_>>().join(",")
     ));
+    // The program by its content: a rebuild of the same version counts.
     if let Ok(exe) = std::env::current_exe() {
-        stamp(&mut h, &exe)?;
+        h.update(format!("{}\0", dataset::granule_hash(&exe)?));
     }
     if let PulseModel::File(p) = pulse {
-        stamp(&mut h, p)?;
+        h.update(format!("{}\0", dataset::content_hash(p)?));
     }
-    for table in [tables::SHOTS, tables::OFFSETS, tables::ALS, tables::TILES, tables::STRATA] {
+    // shots/: each granule by what it was ingested from, as `run` keys it.
+    for f in ds.visible_files(tables::SHOTS).unwrap_or_default() {
+        let (key, inputs) = crate::ops::run::granule_inputs(ds, &f)?;
+        h.update(format!("shots {key}\0{inputs}\0"));
+    }
+    // als/ is what the rows of tiles/ say was read (each tile's content hash, the cells read);
+    // tiles/, offsets/ and strata/ by their files' content.
+    for table in [tables::TILES, tables::OFFSETS, tables::STRATA] {
         for f in ds.visible_files(table).unwrap_or_default() {
-            stamp(&mut h, &f)?;
+            let name = f.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+            h.update(format!("{table} {name}\0{}\0", dataset::granule_hash(&f)?));
         }
     }
     Ok(hex::encode(h.finalize()))
@@ -1152,7 +1155,7 @@ mod tests {
     }
 
     #[test]
-    fn the_inputs_key_follows_effects_pulse_and_every_table_file() {
+    fn the_inputs_key_follows_effects_pulse_and_the_content_of_every_table() {
         let dir = tempfile::tempdir().unwrap();
         let ds = Dataset::create(&dir.path().join("ds")).unwrap();
         let shots = ds.table_file(tables::SHOTS, "g1").unwrap();
@@ -1189,5 +1192,20 @@ mod tests {
         std::fs::create_dir_all(ds.root().join("report")).unwrap();
         std::fs::write(ds.root().join("report/msd.parquet"), b"r").unwrap();
         assert_eq!(k3, key(&[EffectKind::Datum], &pulse));
+        // Content, not times: strata rewritten with the same size at the same time is seen…
+        let mtime = |f: &Path| std::fs::metadata(f).unwrap().modified().unwrap();
+        let at = mtime(&strata);
+        std::fs::write(&strata, b"t").unwrap();
+        std::fs::File::options().write(true).open(&strata).unwrap().set_modified(at).unwrap();
+        let k4 = key(&[EffectKind::Datum], &pulse);
+        assert_ne!(k3, k4);
+        // …and a copy of the dataset elsewhere has the same key.
+        let copy = Dataset::create(&dir.path().join("copy")).unwrap();
+        for (table, name) in [(tables::SHOTS, "g1"), (tables::STRATA, "strata")] {
+            let (from, to) = (ds.table_file(table, name).unwrap(), copy.table_file(table, name).unwrap());
+            std::fs::copy(&from, &to).unwrap();
+            std::fs::File::options().write(true).open(&to).unwrap().set_modified(mtime(&from)).unwrap();
+        }
+        assert_eq!(k4, inputs_key(&copy, &[EffectKind::Datum], &with(&pulse, 10, 1500)).unwrap());
     }
 }

@@ -315,27 +315,36 @@ fn list_granules(ds: &Dataset) -> Result<Vec<GranuleFile>> {
         dataset::table_files(&dir).map_err(|e| Error::file(&dir, format!("no shots table ({e}): give --l1b/--l2a")))?;
     let mut out = Vec::new();
     for path in files {
-        let key = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        let record = ds.root().join(tables::GRANULES).join(format!("{key}.parquet"));
-        let inputs = match gedi::previous_record(&record)? {
-            Some(((a, b), area)) => {
-                let area = if area == "all" { String::new() } else { format!(" area={area}") };
-                format!("l1b={} l2a={}{area}", a.unwrap_or_default(), b.unwrap_or_default())
-            }
-            None => {
-                let m = std::fs::metadata(&path).map_err(|e| Error::file(&path, e))?;
-                let t = m
-                    .modified()
-                    .ok()
-                    .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
-                    .map_or(0, |d| d.as_nanos());
-                format!("size={} mtime={t}", m.len())
-            }
-        };
+        let (key, inputs) = granule_inputs(ds, &path)?;
         let name = first_string(&path, "granule")?.unwrap_or_else(|| key.clone());
         out.push(GranuleFile { key, path, name, inputs });
     }
     Ok(out)
+}
+
+/// The granule key of a `shots/` file and what its shots were ingested from, as one string: the
+/// content hashes of its L1B and L2A and the area its shots were kept by (its `granules/`
+/// record); for a file without a record, its size and time. What `run` (and the diagnosis's
+/// re-use key) treat as the granule's identity.
+pub(crate) fn granule_inputs(ds: &Dataset, shots_file: &Path) -> Result<(String, String)> {
+    let key = shots_file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let record = ds.root().join(tables::GRANULES).join(format!("{key}.parquet"));
+    let inputs = match gedi::previous_record(&record)? {
+        Some(((a, b), area)) => {
+            let area = if area == "all" { String::new() } else { format!(" area={area}") };
+            format!("l1b={} l2a={}{area}", a.unwrap_or_default(), b.unwrap_or_default())
+        }
+        None => {
+            let m = std::fs::metadata(shots_file).map_err(|e| Error::file(shots_file, e))?;
+            let t = m
+                .modified()
+                .ok()
+                .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+                .map_or(0, |d| d.as_nanos());
+            format!("size={} mtime={t}", m.len())
+        }
+    };
+    Ok((key, inputs))
 }
 
 /// The first value of string column `column` of a Parquet file.
