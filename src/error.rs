@@ -70,6 +70,15 @@ pub fn one_line(s: &str) -> String {
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
+/// A kernel's usage error (a value it cannot work with) is the caller's usage error.
+impl From<crate::kernels::error::Error> for Error {
+    fn from(e: crate::kernels::error::Error) -> Self {
+        match e {
+            crate::kernels::error::Error::Usage(m) => Error::Usage(m),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

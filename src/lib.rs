@@ -13,7 +13,8 @@
 pub mod dataset;
 pub mod error;
 pub mod io;
-pub mod kernels;
+/// The pure kernels, a package of their own (`src/kernels/`, `gedisim-kernels`).
+pub use gedisim_kernels as kernels;
 pub mod ops;
 pub mod sql;
 

@@ -93,7 +93,7 @@ impl Iterator for BlockSimulation {
         let (results, ahead) =
             rayon::join(|| sim::simulate(&points, &footprints, &this.cfg), || next.as_ref().map(|b| this.read(b)));
         self.current = next.zip(ahead);
-        Some(results.map(|results| SimulatedBlock { footprints, applied, results }))
+        Some(results.map(|results| SimulatedBlock { footprints, applied, results }).map_err(Into::into))
     }
 }
 

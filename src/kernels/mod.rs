@@ -2,6 +2,7 @@
 
 pub mod collocate;
 pub mod diagnose;
+pub mod error;
 pub mod gedi;
 pub mod geo;
 pub mod scenario;

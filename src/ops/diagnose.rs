@@ -344,7 +344,7 @@ fn simulate_cases(
                     .collect(),
             );
         }
-        let vars = variants.iter().map(|cfg| sim::simulate(&points, &full, cfg)).collect::<Result<Vec<_>>>()?;
+        let vars = variants.iter().map(|cfg| sim::simulate(&points, &full, cfg)).collect::<Result<Vec<_>, _>>()?;
         let light_vars = sim::simulate(&points, &light, &variants[NOMINAL_WIDTH])?;
         for (j, (mut real, short, ranked, positions)) in reals.into_iter().enumerate() {
             on_shot();

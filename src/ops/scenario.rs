@@ -225,7 +225,7 @@ pub fn make_scenario(opts: &ScenarioOptions) -> Result<ScenarioReport> {
     }
 
     // Make every shot.
-    let projectors: Vec<Projector> = tiles.iter().map(|t| Projector::new(t.epsg)).collect::<Result<_>>()?;
+    let projectors: Vec<Projector> = tiles.iter().map(|t| Projector::new(t.epsg)).collect::<Result<_, _>>()?;
     let mut l1b: Vec<Vec<Vec<L1bShot>>> = granules.iter().map(|_| vec![Vec::new(); BEAM_NAMES.len()]).collect();
     let mut l2a: Vec<Vec<Vec<L2aShot>>> = granules.iter().map(|_| vec![Vec::new(); BEAM_NAMES.len()]).collect();
     let mut shots_written = Vec::new();

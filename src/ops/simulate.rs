@@ -2,6 +2,7 @@
 //! a footprint CSV) and dataset mode (every ingested shot, or a footprint CSV such as inventory
 //! plots, against the `als/` table).
 
+use std::borrow::Cow;
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -446,7 +447,7 @@ pub fn simulate_direct(
     for group in groups {
         let fps: Vec<Footprint> = group.iter().map(|&i| footprints[i].clone()).collect();
         let points = inputs.read_around(&fps, cfg, drop_classes, &mut read)?;
-        sim::simulate_in_chunks(std::borrow::Cow::Owned(points), &fps, cfg, DIRECT_CHUNK, &mut |start, results| {
+        sim::simulate_in_chunks::<crate::Error>(Cow::Owned(points), &fps, cfg, DIRECT_CHUNK, &mut |start, results| {
             let n_ok = results.iter().filter(|r| r.is_ok()).count();
             ok += n_ok;
             skipped += results.len() - n_ok;

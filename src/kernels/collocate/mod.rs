@@ -24,8 +24,8 @@ pub mod surface;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::kernels::sim::index::CellGrid;
-use crate::kernels::sim::{Profile, Pulse, SimConfig};
+use crate::sim::index::CellGrid;
+use crate::sim::{Profile, Pulse, SimConfig};
 
 use correlation::{LagWindow, SimulatedProfiles};
 use profile::GridProfile;
@@ -131,7 +131,7 @@ impl CollocateConfig {
     }
 
     /// The simulation model of the collocation, as a [`SimConfig`] that the brute-force simulator
-    /// ([`crate::kernels::sim::simulate`]) accepts: `default` profile, no density normalisation, no
+    /// ([`crate::sim::simulate`]) accepts: `default` profile, no density normalisation, no
     /// cleaning, no coverage check.
     pub fn model() -> SimConfig {
         let mut m = SimConfig::new(Profile::Default);
@@ -147,7 +147,7 @@ impl CollocateConfig {
         let q = m.quirks;
         if m.normalise_density
             || m.clean_outliers
-            || m.pulse_timing != crate::kernels::sim::PulseTiming::AfterBinning
+            || m.pulse_timing != crate::sim::PulseTiming::AfterBinning
             || q.batch_grid
             || q.divide_by_taps
         {

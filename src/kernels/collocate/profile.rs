@@ -3,7 +3,7 @@
 //! while above μ), put on orthometric heights with the geoid offset, resampled onto the absolute
 //! vertical grid of the simulation and cut to its signal extent.
 
-use crate::kernels::waveform::denoise::{denoise_leading_noise, DenoiseError, LeadingNoiseDenoise};
+use crate::waveform::denoise::{denoise_leading_noise, DenoiseError, LeadingNoiseDenoise};
 
 /// Fraction of a waveform's total below which its leading and trailing samples are outside its
 /// signal extent (collocateWaves `waveCorrel`: 10⁻⁴).

@@ -11,10 +11,10 @@
 //! checked with the simulator's own f32 test. The pulse convolution is linear and the same for every
 //! offset, so it is applied once to the whole raster. The result equals the brute-force simulation
 //! of each offset (count weighting, no density normalisation, no cleaning) to f32 rounding:
-//! `tests/collocate.rs` checks it against [`crate::kernels::sim::simulate`].
+//! `tests/collocate.rs` checks it against [`crate::sim::simulate`].
 
-use crate::kernels::sim::footprint::{footprint_weight, I_THRESH};
-use crate::kernels::sim::{absolute_bin, tap_offsets, Pulse, SimConfig};
+use crate::sim::footprint::{footprint_weight, I_THRESH};
+use crate::sim::{absolute_bin, tap_offsets, Pulse, SimConfig};
 
 use super::OffsetGrid;
 
@@ -233,7 +233,7 @@ pub fn offset_waves(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kernels::sim::{Profile, SimConfig};
+    use crate::sim::{Profile, SimConfig};
 
     #[test]
     fn cut_off_radius_brackets_the_simulator_test() {

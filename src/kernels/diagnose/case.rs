@@ -3,10 +3,10 @@
 //! parts of the ALS waveform, without a pulse, for each footprint width and weighting tried, at
 //! the collocated position and, for short segments, at nearby positions).
 
-use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
-use crate::kernels::scenario::effects::NOMINAL_DENSITY;
-use crate::kernels::sim::{self, Profile, SimConfig, Weighting, N_WEIGHTINGS};
-use crate::kernels::waveform::l2a::Noise;
+use crate::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
+use crate::scenario::effects::NOMINAL_DENSITY;
+use crate::sim::{self, Profile, SimConfig, Weighting, N_WEIGHTINGS};
+use crate::waveform::l2a::Noise;
 
 /// Footprint σ (m) at which every shot is simulated; other widths are interpolated between them.
 pub const FSIGMA_GRID: [f64; 6] = [3.5, 4.5, 5.5, 7.0, 8.5, 10.0];
@@ -55,7 +55,7 @@ pub struct RealShot {
     pub collocation_dz: Option<f64>,
     /// The shot's recorded transmit pulse on the simulation's bins (`SimShot::dz`), placed at its
     /// reference point (docs/pulse.md); `None` = the study's Gaussian.
-    pub pulse: Option<std::sync::Arc<crate::kernels::sim::Pulse>>,
+    pub pulse: Option<std::sync::Arc<crate::sim::Pulse>>,
 }
 
 /// Strata labels of one shot for the "where" decomposition.
@@ -163,7 +163,7 @@ pub struct ShotCase {
     /// Shared: the noise-twin null of a hypothesis (`chain::null_case`) reuses it.
     pub sim: std::sync::Arc<SimShot>,
     /// Algorithms whose real ground disagrees grossly with the nominal chain's (a different
-    /// mode picked: [`crate::kernels::diagnose::flag_ground_mismatches`]); left out of every gap.
+    /// mode picked: [`crate::diagnose::flag_ground_mismatches`]); left out of every gap.
     pub mismatch: [bool; N_ALGORITHMS],
 }
 
@@ -178,7 +178,7 @@ impl ShotCase {
 /// granule (docs/scenario.md): the noise σ of the nominal chain, against which the `noise`
 /// effect's factor is expressed.
 pub fn nominal_noise_stddev(beam_type: BeamType) -> f64 {
-    crate::kernels::scenario::real::record(beam_type).noise_stddev
+    crate::scenario::real::record(beam_type).noise_stddev
 }
 
 /// Give every shot its noise σ in the nominal chain: its reported σ rescaled so that the median
@@ -277,6 +277,6 @@ mod tests {
 
     #[test]
     fn nominal_width_is_the_nominal_footprint() {
-        assert_eq!(FSIGMA_GRID[NOMINAL_WIDTH], crate::kernels::scenario::effects::NOMINAL_FSIGMA_M);
+        assert_eq!(FSIGMA_GRID[NOMINAL_WIDTH], crate::scenario::effects::NOMINAL_FSIGMA_M);
     }
 }

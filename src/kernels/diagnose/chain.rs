@@ -16,16 +16,16 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use super::case::{RealAlgorithm, ShotCase, SimShot, Site, FSIGMA_GRID, SITE_STEP_M};
-use crate::kernels::gedi::{N_ALGORITHMS, RH_LEN};
-use crate::kernels::scenario::effects::{
+use crate::gedi::{N_ALGORITHMS, RH_LEN};
+use crate::scenario::effects::{
     Effect, GeoLevel, WaveParts, WeightMethod, NOMINAL_FSIGMA_M, NOMINAL_PULSE_SIGMA_M, NOMINAL_WEIGHTING,
 };
-use crate::kernels::scenario::EffectSet;
-use crate::kernels::sim::pulse::gaussian_blur;
-use crate::kernels::sim::{Pulse, Weighting};
-use crate::kernels::waveform::forward::{forward, signal_span, L2aRunner, RecordWindow};
-use crate::kernels::waveform::l2a::Noise;
-use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
+use crate::scenario::EffectSet;
+use crate::sim::pulse::gaussian_blur;
+use crate::sim::{Pulse, Weighting};
+use crate::waveform::forward::{forward, signal_span, L2aRunner, RecordWindow};
+use crate::waveform::l2a::Noise;
+use crate::waveform::noise_twin::GEDI_BIN_M;
 
 /// The transmit pulse a configuration simulates with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -553,7 +553,7 @@ fn twin(
 /// judged on spread (`geolocation`) is measured. `None` when no twin can be made.
 pub fn null_case(case: &ShotCase, model: &Model, scratch: &mut Scratch) -> Option<ShotCase> {
     let seed = noise_seed(case.real.shot_number) ^ NULL_SEED;
-    let mut rng = crate::kernels::scenario::rng::Stream::new(seed, &["null position"]);
+    let mut rng = crate::scenario::rng::Stream::new(seed, &["null position"]);
     let here = model.site(case).offset;
     let target = (here.0 + (rng.uniform() - 0.5) * SITE_STEP_M, here.1 + (rng.uniform() - 0.5) * SITE_STEP_M);
     twin_case(case, model, target, seed, scratch)
@@ -660,8 +660,8 @@ pub fn real_products(case: &ShotCase, model: &Model, alg: u8) -> Option<Products
 mod tests {
     use super::*;
 
-    use crate::kernels::diagnose::case::{site_grid, Parts, RealShot, SimShot, SimVariant, Strata};
-    use crate::kernels::gedi::BeamType;
+    use crate::diagnose::case::{site_grid, Parts, RealShot, SimShot, SimVariant, Strata};
+    use crate::gedi::BeamType;
 
     /// A site at `offset` (m from the collocated position) whose canopy layer's height depends on
     /// the position (unique on the site grid), over a ground at 100 m.

@@ -20,9 +20,9 @@ use super::fit::{minimise, ShotGap, RHO_GRID};
 use super::gap::{Frame, GapMetrics};
 use super::profile::{self, ProfileSums};
 use super::rank::{compare, interval, Comparison, Folds};
-use crate::kernels::gedi::N_ALGORITHMS;
-use crate::kernels::scenario::effects::{Effect, WeightMethod};
-use crate::kernels::sim::Weighting;
+use crate::gedi::N_ALGORITHMS;
+use crate::scenario::effects::{Effect, WeightMethod};
+use crate::sim::Weighting;
 
 /// The configurations tried: every weighting × the Gaussian and, when some shot has one, the
 /// recorded pulse.

@@ -10,8 +10,8 @@ use super::case::{ShotCase, FSIGMA_GRID};
 use super::chain::{null_cases, predict, real_products, reposition, Model, Scratch};
 use super::gap::GapSums;
 use super::profile::{self, ShotProfile};
-use crate::kernels::gedi::N_ALGORITHMS;
-use crate::kernels::scenario::effects::{Effect, EffectKind, GeoLevel, WeightMethod};
+use crate::gedi::N_ALGORITHMS;
+use crate::scenario::effects::{Effect, EffectKind, GeoLevel, WeightMethod};
 
 /// The effects the diagnosis fits: every effect of the registry, in its order.
 pub const FITTED_EFFECTS: [EffectKind; 9] = EffectKind::ALL;

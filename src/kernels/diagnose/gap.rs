@@ -11,8 +11,8 @@
 //! The gap of a set of pairs is the mean over k of the absolute per-percentile bias, averaged over
 //! the two frames (`mean_abs_bias`), with the MSD and its Kobayashi–Salam parts likewise.
 
-use crate::kernels::scenario::effects::EffectKind;
-use crate::kernels::study::msd::MsdSplit;
+use crate::scenario::effects::EffectKind;
+use crate::study::msd::MsdSplit;
 
 /// Number of percentiles in the gap (RH1..RH99).
 pub const N_PCT: usize = 99;

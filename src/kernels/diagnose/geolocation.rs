@@ -28,9 +28,9 @@ use super::case::ShotCase;
 use super::chain::{pearson, real_products, reposition, simulated_wave_at, value_at, Model};
 use super::fit::geolocation;
 use super::rank::{interval, Folds};
-use crate::kernels::gedi::N_ALGORITHMS;
-use crate::kernels::scenario::effects::GeoLevel;
-use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
+use crate::gedi::N_ALGORITHMS;
+use crate::scenario::effects::GeoLevel;
+use crate::waveform::noise_twin::GEDI_BIN_M;
 
 /// Height above ground (m) from which a waveform counts as canopy in the match.
 pub const CANOPY_FROM_M: f64 = 3.0;

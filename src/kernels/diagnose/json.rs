@@ -11,8 +11,8 @@ use super::gap::{GapMetrics, N_PCT};
 use super::geolocation::{GroundTest, MIN_BETA_LOWER};
 use super::rank::{Comparison, Trial, BOOTSTRAP, MIN_GAIN_M, MIN_SHRINK_LOWER};
 use super::Diagnosis;
-use crate::kernels::scenario::effects::{Effect, ParamValue};
-use crate::kernels::scenario::truth::PlantedEffect;
+use crate::scenario::effects::{Effect, ParamValue};
+use crate::scenario::truth::PlantedEffect;
 
 /// An effect's parameters by contract name.
 pub type Params = BTreeMap<String, ParamValue>;

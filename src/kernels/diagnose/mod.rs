@@ -33,7 +33,7 @@ pub mod rank;
 pub mod sample;
 pub mod selftest;
 
-use crate::kernels::scenario::effects::EffectKind;
+use crate::scenario::effects::EffectKind;
 pub use case::ShotCase;
 
 /// The whole diagnosis of a set of shots.
@@ -120,7 +120,7 @@ pub fn flag_ground_mismatches(cases: &mut [ShotCase]) -> usize {
     let refs: Vec<&ShotCase> = cases.iter().collect();
     let gaps = fit::evaluate(&refs, &chain::Model::default());
     let mut flagged = 0;
-    for a in 0..crate::kernels::gedi::N_ALGORITHMS {
+    for a in 0..crate::gedi::N_ALGORITHMS {
         let mut g: Vec<f64> = gaps.iter().filter_map(|s| s.ground[a]).collect();
         if g.len() < 3 {
             continue;

@@ -13,8 +13,8 @@
 
 use super::case::{ShotCase, Site};
 use super::chain::{pulsed_parts, same_before_pulse, simulated_wave, Model};
-use crate::kernels::scenario::effects::{Effect, WaveParts};
-use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
+use crate::scenario::effects::{Effect, WaveParts};
+use crate::waveform::noise_twin::GEDI_BIN_M;
 
 /// Height grid: bins of this size (m) from [`PROFILE_MIN_M`].
 pub const PROFILE_BIN_M: f64 = 0.5;
@@ -110,7 +110,7 @@ fn normalise(v: &mut [f64]) -> bool {
 
 /// Slope group of a case.
 pub fn group(case: &ShotCase) -> usize {
-    usize::from(case.real.strata.slope_class != crate::kernels::study::classes::slope_class(Some(0.0)))
+    usize::from(case.real.strata.slope_class != crate::study::classes::slope_class(Some(0.0)))
 }
 
 /// One shot's profile difference (real − simulated) and its slope group.

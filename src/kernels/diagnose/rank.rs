@@ -19,8 +19,8 @@ use super::fit::{evaluate, fit, geolocation, ShotGap};
 use super::gap::{Frame, GapMetrics, GapSums};
 use super::geolocation::{ground_test, GroundTest};
 use super::profile::ProfileSums;
-use crate::kernels::scenario::effects::{Effect, EffectKind, GeoLevel};
-use crate::kernels::scenario::rng::Stream;
+use crate::scenario::effects::{Effect, EffectKind, GeoLevel};
+use crate::scenario::rng::Stream;
 
 /// An effect is named only when the lower bound of its held-out shrink's 95 % interval reaches
 /// this: a gain that could be noise, or a few percent, leaves the gap `unexplained`.
@@ -40,7 +40,7 @@ pub const MAX_LADDER: usize = 3;
 
 /// Fold (0 or 1) of a track: a stable hash of its name.
 pub fn fold_of(track: &str) -> usize {
-    (crate::kernels::scenario::rng::derive_seed(0x5EED, &["fold", track]) & 1) as usize
+    (crate::scenario::rng::derive_seed(0x5EED, &["fold", track]) & 1) as usize
 }
 
 /// The cases split by the fold of their track.
@@ -572,12 +572,7 @@ pub(super) mod tests {
     }
 
     /// A trial of `effect` with these held-out figures (also the self-test's tests').
-    pub(in crate::kernels::diagnose) fn trial(
-        effect: Effect,
-        shrink: f64,
-        ci95: [f64; 2],
-        gain_ci95: [f64; 2],
-    ) -> Trial {
+    pub(in crate::diagnose) fn trial(effect: Effect, shrink: f64, ci95: [f64; 2], gain_ci95: [f64; 2]) -> Trial {
         let held_out = Comparison {
             frame: Frame::Both,
             before: GapMetrics::default(),

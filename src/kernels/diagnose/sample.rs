@@ -6,7 +6,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use crate::kernels::scenario::rng::derive_seed;
+use crate::scenario::rng::derive_seed;
 
 /// Shots ranked by default (`--ranked-shots`): the tracks drawn until they hold this many.
 pub const RANKED_SHOTS: usize = 1000;

@@ -16,8 +16,8 @@ use rayon::prelude::*;
 use super::case::{set_nominal_noise, ShotCase, SITE_STEP_M};
 use super::chain::{reposition, twin_case, Configuration, Model, PulsedSites, Scratch};
 use super::rank::{named_first, rank_effects, Folds, Ranking, State};
-use crate::kernels::scenario::effects::{Effect, EffectKind, GeoLevel};
-use crate::kernels::scenario::rng::{derive_seed, Stream};
+use crate::scenario::effects::{Effect, EffectKind, GeoLevel};
+use crate::scenario::rng::{derive_seed, Stream};
 
 /// Twins per planted hypothesis (`--twins`).
 pub const TWINS: usize = 10;
@@ -293,7 +293,7 @@ fn median(mut v: Vec<f64>) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kernels::diagnose::rank::{tests, Trial};
+    use crate::diagnose::rank::{tests, Trial};
 
     fn trial(effect: Effect) -> Trial {
         tests::trial(effect, 0.5, [0.3, 0.6], [0.05, 0.1])
@@ -303,7 +303,7 @@ mod tests {
         Ranking {
             effects: vec![
                 trial(Effect::Weighting {
-                    method: crate::kernels::scenario::effects::WeightMethod::Ratio,
+                    method: crate::scenario::effects::WeightMethod::Ratio,
                     rho_ground_over_veg: 0.7,
                 }),
                 trial(Effect::CanopyChange { height_m: 2.0, fraction: -0.4 }),
@@ -335,10 +335,7 @@ mod tests {
     #[test]
     fn the_self_test_decides_named_ambiguous_and_unexplained() {
         let r = ranking(false);
-        let w = Effect::Weighting {
-            method: crate::kernels::scenario::effects::WeightMethod::Ratio,
-            rho_ground_over_veg: 0.7,
-        };
+        let w = Effect::Weighting { method: crate::scenario::effects::WeightMethod::Ratio, rho_ground_over_veg: 0.7 };
         let c = Effect::CanopyChange { height_m: 8.0, fraction: 0.3 };
         let test = |canopy: &[Option<&str>], none: &[Option<&str>]| SelfTest {
             configuration: Configuration::default(),

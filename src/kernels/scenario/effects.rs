@@ -10,7 +10,7 @@
 
 use std::fmt;
 
-use crate::kernels::sim::{DensityCount, SimConfig, Weighting};
+use crate::sim::{DensityCount, SimConfig, Weighting};
 
 /// Footprint σ of the nominal physics (m), gediRat's default.
 pub const NOMINAL_FSIGMA_M: f64 = 5.5;
@@ -50,7 +50,7 @@ impl Physics {
     /// diagnosis's nominal chain.
     pub fn nominal() -> Physics {
         Physics {
-            sim: SimConfig { density_count: NOMINAL_DENSITY, ..SimConfig::new(crate::kernels::sim::Profile::Default) },
+            sim: SimConfig { density_count: NOMINAL_DENSITY, ..SimConfig::new(crate::sim::Profile::Default) },
             weighting: NOMINAL_WEIGHTING,
             rho_ground_over_veg: 1.0,
         }

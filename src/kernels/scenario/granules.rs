@@ -5,7 +5,7 @@
 use chrono::{DateTime, Datelike, Duration, TimeZone, Timelike, Utc};
 
 use super::rng::Stream;
-use crate::kernels::gedi::v2_file_name;
+use crate::gedi::v2_file_name;
 
 /// Ground speed of the ISS footprint (m/s), for the time between shots.
 pub const GROUND_SPEED_M_S: f64 = 7000.0;

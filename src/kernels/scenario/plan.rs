@@ -5,7 +5,7 @@
 
 use super::effects::GeoLevel;
 use super::rng::Stream;
-use crate::kernels::gedi::BEAM_NAMES;
+use crate::gedi::BEAM_NAMES;
 
 /// GEDI shot spacing along track (m).
 pub const SHOT_SPACING_M: f64 = 60.0;

@@ -4,7 +4,7 @@
 //! `scenario_constants_match_the_real_granule` (tests/scenario.rs) re-measures the noise and
 //! energy medians from the file through our reader. Method and commands: docs/scenario.md.
 
-use crate::kernels::gedi::BeamType;
+use crate::gedi::BeamType;
 
 /// Typical record of one beam type (medians over the granule's shots of that type).
 #[derive(Debug, Clone, Copy, PartialEq)]

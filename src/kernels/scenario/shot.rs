@@ -3,12 +3,12 @@
 //! NASA would, with the `ground_detection` effect applied to the stored products. Pure.
 
 use super::effects::{EffectSet, Physics, WaveParts};
-use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
-use crate::kernels::gedi::{L1bShot, L2aAlgorithm, L2aShot, LandCover};
-use crate::kernels::sim::{Pulse, PulseReference, SimulatedFootprint, TransmitPulse, Weighting};
-use crate::kernels::waveform::forward::{forward, signal_span, L2aRunner, RecordWindow};
-use crate::kernels::waveform::l2a::{L2aOutcome, Noise};
-use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
+use crate::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
+use crate::gedi::{L1bShot, L2aAlgorithm, L2aShot, LandCover};
+use crate::sim::{Pulse, PulseReference, SimulatedFootprint, TransmitPulse, Weighting};
+use crate::waveform::forward::{forward, signal_span, L2aRunner, RecordWindow};
+use crate::waveform::l2a::{L2aOutcome, Noise};
+use crate::waveform::noise_twin::GEDI_BIN_M;
 
 /// NASA's fill value for L2A fields without a result.
 pub const FILL: f64 = -9999.0;
@@ -67,7 +67,7 @@ pub enum ShotError {
     #[error("simulated waveform has no energy")]
     NoEnergy,
     #[error("noise twin: {0}")]
-    Twin(#[from] crate::kernels::waveform::noise_twin::TwinError),
+    Twin(#[from] crate::waveform::noise_twin::TwinError),
     #[error("record of {0} samples does not fit GEDI's uint16 count")]
     TooLong(usize),
 }

@@ -4,7 +4,7 @@
 //! footprint weights ([`footprint`]), density normalisation ([`density`]), count/frac/int
 //! weighting with a ground/canopy split, binning at `res`, pulse convolution ([`pulse`], [`wave`]),
 //! outlier cleaning, unit-integral normalisation, then truths ([`truth`]) and RH
-//! ([`crate::kernels::waveform::rh`]) per weighting.
+//! ([`crate::waveform::rh`]) per weighting.
 //!
 //! [`Profile::Gedirat`] reproduces gediRat + gediMetric exactly; [`Profile::Default`] fixes the
 //! reference's slips. Both run the same code: the profile switches a handful of decisions
@@ -22,7 +22,7 @@ pub mod wave;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::kernels::waveform::rh::{rh_profile_by, N_RH};
+use crate::waveform::rh::{rh_profile_by, N_RH};
 
 pub use density::DensityCount;
 use density::{is_last_return, Densities, DensityGrid, PulseIndex, Square};
@@ -306,7 +306,7 @@ fn simulate_points(
     cfg: &SimConfig,
 ) -> Result<Vec<std::result::Result<SimulatedFootprint, SkipReason>>> {
     let mut all = Vec::with_capacity(footprints.len());
-    simulate_in_chunks(points, footprints, cfg, footprints.len().max(1), &mut |_, results| {
+    simulate_in_chunks::<Error>(points, footprints, cfg, footprints.len().max(1), &mut |_, results| {
         all.extend(results);
         Ok(())
     })?;
@@ -315,14 +315,15 @@ fn simulate_points(
 
 /// [`simulate_owned`] handing the results to `on_chunk` `chunk` footprints at a time, in footprint
 /// order, with the index of each chunk's first footprint: the points are indexed once, and memory
-/// holds one chunk's waveforms, not every footprint's. The results are those of [`simulate`].
-pub fn simulate_in_chunks(
+/// holds one chunk's waveforms, not every footprint's. The results are those of [`simulate`];
+/// `on_chunk`'s error (the caller's, a write) ends it.
+pub fn simulate_in_chunks<E: From<Error>>(
     points: std::borrow::Cow<AlsPoints>,
     footprints: &[Footprint],
     cfg: &SimConfig,
     chunk: usize,
-    on_chunk: &mut dyn FnMut(usize, Vec<Outcome>) -> Result<()>,
-) -> Result<()> {
+    on_chunk: &mut dyn FnMut(usize, Vec<Outcome>) -> std::result::Result<(), E>,
+) -> std::result::Result<(), E> {
     let n = points.len();
     let lens = [
         points.y.len(),
@@ -334,7 +335,7 @@ pub fn simulate_in_chunks(
         points.scan_angle_deg.len(),
     ];
     if lens.iter().any(|&l| l != n) {
-        return Err(Error::Usage("ALS points: columns of different lengths".into()));
+        return Err(Error::Usage("ALS points: columns of different lengths".into()).into());
     }
     let max_sep = gauss_sep(cfg.fsigma, I_THRESH) as f64;
     // The reference bounds its boxes by sqrt(maxSep²).
@@ -526,7 +527,7 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
     }
     // With an absolute grid a return's bin is read from its own height alone (bin m of the
     // absolute grid holds [m·dz, (m+1)·dz)), so every footprint — and the collocation raster,
-    // `crate::kernels::collocate` — bins a return identically, even one lying on a bin boundary.
+    // `crate::collocate` — bins a return identically, even one lying on a bin boundary.
     let bin_of = |z: f64| match top_index {
         Some(t) => t - 1 - absolute_bin(z, dz),
         None => ((top - z) / dz).floor() as i64,

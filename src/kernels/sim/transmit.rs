@@ -6,7 +6,7 @@ use std::fmt;
 use std::str::FromStr;
 
 use super::pulse::Pulse;
-use crate::kernels::waveform::noise_twin::GEDI_BIN_M;
+use crate::waveform::noise_twin::GEDI_BIN_M;
 
 /// Range spacing of the transmit record's samples (m): 1 ns, two-way.
 pub const TX_SAMPLE_M: f64 = GEDI_BIN_M;

@@ -17,9 +17,9 @@
 //!
 //! Pure: plain structs in, [`ResultInput`] rows and counts out.
 
-use crate::kernels::gedi::RH_LEN;
-use crate::kernels::study::align::VerticalReference;
-use crate::kernels::study::classes::sensitivity_group;
+use crate::gedi::RH_LEN;
+use crate::study::align::VerticalReference;
+use crate::study::classes::sensitivity_group;
 
 /// Default of `--max-days-apart`: a GEDI shot more than a year before or after the ALS
 /// acquisition window is dropped. Within a year canopy growth (< 1 m in these forests) stays
@@ -445,7 +445,7 @@ pub struct ResultInput {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kernels::study::classes::passes_quality;
+    use crate::study::classes::passes_quality;
 
     fn rh(top: f32) -> Vec<f32> {
         (0..RH_LEN).map(|k| top * k as f32 / 100.0).collect()

@@ -10,7 +10,7 @@
 //! output is smoothed twice, which fills the shallow dips that separate weak modes (docs/l2a.md,
 //! "Why a5 and a6 fall short").
 
-use crate::kernels::waveform::l2a::{GaussianKernel, Noise};
+use crate::waveform::l2a::{GaussianKernel, Noise};
 
 /// Denoising parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -1,5 +1,5 @@
 //! Noise twin: turns a noise-free simulated waveform into a GEDI-like received waveform that the
-//! L2A kernel ([`crate::kernels::waveform::l2a`]) processes like a real one.
+//! L2A kernel ([`crate::waveform::l2a`]) processes like a real one.
 //!
 //! Both modes resample the simulated waveform (top to bottom, any normalisation) to GEDI's 1 ns
 //! grid, scale it to digitiser counts (DN), add Gaussian noise on a DC level and quantise:
@@ -15,7 +15,7 @@
 use rand_chacha::rand_core::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::kernels::waveform::l2a::Noise;
+use crate::waveform::l2a::Noise;
 
 /// GEDI sample spacing in range: 1 ns two-way travel time, c·1 ns / 2 (m).
 pub const GEDI_BIN_M: f64 = 0.149_896_229;
