@@ -306,9 +306,9 @@ fn simulate_points(
     cfg: &SimConfig,
 ) -> Result<Vec<std::result::Result<SimulatedFootprint, SkipReason>>> {
     let mut all = Vec::with_capacity(footprints.len());
-    simulate_in_chunks::<Error>(points, footprints, cfg, footprints.len().max(1), &mut |_, results| {
+    simulate_chunks(points, footprints, cfg, footprints.len().max(1), &mut |_, results| {
         all.extend(results);
-        Ok(())
+        true
     })?;
     Ok(all)
 }
@@ -316,7 +316,8 @@ fn simulate_points(
 /// [`simulate_owned`] handing the results to `on_chunk` `chunk` footprints at a time, in footprint
 /// order, with the index of each chunk's first footprint: the points are indexed once, and memory
 /// holds one chunk's waveforms, not every footprint's. The results are those of [`simulate`];
-/// `on_chunk`'s error (the caller's, a write) ends it.
+/// `on_chunk`'s error (the caller's, a write) ends it. Only this wrapper is generic, so the
+/// simulation itself is compiled once, here, with the kernels' optimisation.
 pub fn simulate_in_chunks<E: From<Error>>(
     points: std::borrow::Cow<AlsPoints>,
     footprints: &[Footprint],
@@ -324,6 +325,25 @@ pub fn simulate_in_chunks<E: From<Error>>(
     chunk: usize,
     on_chunk: &mut dyn FnMut(usize, Vec<Outcome>) -> std::result::Result<(), E>,
 ) -> std::result::Result<(), E> {
+    let mut failed = None;
+    simulate_chunks(points, footprints, cfg, chunk, &mut |start, results| match on_chunk(start, results) {
+        Ok(()) => true,
+        Err(e) => {
+            failed = Some(e);
+            false
+        }
+    })?;
+    failed.map_or(Ok(()), Err)
+}
+
+/// [`simulate_in_chunks`] whose `on_chunk` says whether to go on.
+fn simulate_chunks(
+    points: std::borrow::Cow<AlsPoints>,
+    footprints: &[Footprint],
+    cfg: &SimConfig,
+    chunk: usize,
+    on_chunk: &mut dyn FnMut(usize, Vec<Outcome>) -> bool,
+) -> Result<()> {
     let n = points.len();
     let lens = [
         points.y.len(),
@@ -335,7 +355,7 @@ pub fn simulate_in_chunks<E: From<Error>>(
         points.scan_angle_deg.len(),
     ];
     if lens.iter().any(|&l| l != n) {
-        return Err(Error::Usage("ALS points: columns of different lengths".into()).into());
+        return Err(Error::Usage("ALS points: columns of different lengths".into()));
     }
     let max_sep = gauss_sep(cfg.fsigma, I_THRESH) as f64;
     // The reference bounds its boxes by sqrt(maxSep²).
@@ -378,7 +398,9 @@ pub fn simulate_in_chunks<E: From<Error>>(
                 sim(&Job { points: &points, pulses: pulses.as_ref(), candidates: &cand, footprint: fp, cfg, half })
             })
             .collect();
-        on_chunk(k * chunk.max(1), results)?;
+        if !on_chunk(k * chunk.max(1), results) {
+            break;
+        }
     }
     Ok(())
 }
