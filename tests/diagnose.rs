@@ -4,10 +4,11 @@
 //! replicated for long tracks, generated with its own seed; the diagnosis is never told the
 //! effect.
 //!
-//! World suites: each test builds and diagnoses whole worlds (≈ 9 minutes together on 2 cores), so
-//! `cargo test` leaves them out and `.ci/run` runs them (`cargo test -- --ignored`). The others (the
-//! ranked sample, the writer lock, writers at once: one effect, no self-test) take under a minute
-//! each and run with `cargo test`.
+//! World suites: each test builds and diagnoses whole worlds (≈ 13 minutes together on 2 cores), so
+//! `cargo test` leaves them out and `.ci/run` runs them (`cargo test -- --ignored`). A
+//! `ground_detection` world is `gedisim demo`'s, whose diagnosis `.ci/run` checks the same way. The
+//! others (the ranked sample, reuse and `--force`, the writer lock, writers at once: one effect, at
+//! most one twin set) take under a minute each and run with `cargo test`.
 
 mod common;
 
@@ -192,16 +193,6 @@ fn datum_world_names_datum_and_recovers_dz() {
 
 #[test]
 #[ignore = "world suite (minutes): cargo test --test diagnose -- --ignored; .ci/run runs it"]
-fn ground_detection_world_names_ground_detection() {
-    let tmp = tempfile::tempdir().unwrap();
-    let d = diagnose_world(tmp.path(), "ground_detection", &["--seed", "12"]);
-    assert_named_first(&d, "ground_detection");
-    assert_eq!(first(&d)["params"]["algorithm"], "all");
-    assert_param(&d, "offset_m", 0.5, 0.1);
-}
-
-#[test]
-#[ignore = "world suite (minutes): cargo test --test diagnose -- --ignored; .ci/run runs it"]
 fn canopy_change_world_names_canopy_change() {
     // A waveform-shape effect: weighting and occlusion move the RH profile alike, the waveform
     // shape tells them apart.
@@ -231,25 +222,6 @@ fn control_world_is_unexplained() {
     check_contract(&d);
     assert_eq!(d["unexplained"], true, "{:#}", d["effects"][0]);
     assert!(d["ladder"].as_array().unwrap().is_empty());
-    // The same inputs again: the diagnosis is reused, and `--json` says what it found.
-    let (world, out) = (tmp.path().join("world"), tmp.path().join("diagnosis"));
-    let g = world.join("gedi");
-    let (g, a, o) = (g.to_str().unwrap(), world.join("als"), out.to_str().unwrap());
-    let args =
-        ["diagnose", "--als", a.to_str().unwrap(), "--l1b", g, "--l2a", g, "--out", o, "--twins", TWINS, "--json"];
-    let (ok, stdout, err) = gedisim(&args);
-    assert!(ok, "{err}");
-    assert!(err.contains("inputs unchanged") && err.contains("diagnosis reused"), "{err}");
-    let j: Value = serde_json::from_str(stdout.trim()).unwrap_or_else(|e| panic!("{e}: {stdout}"));
-    assert_eq!(j["unexplained"], true);
-    assert_eq!(j["summary"], d["summary"]);
-    assert_eq!(j["shots"], d["shots"]);
-    assert!(j["files"].as_array().unwrap().len() >= 10);
-    // --force recomputes: the same verdict (the diagnosis is deterministic).
-    let (ok, stdout, err) = gedisim(&[&args[..], &["--force"]].concat());
-    assert!(ok && !err.contains("diagnosis reused"), "{err}");
-    let again: Value = serde_json::from_str(stdout.trim()).unwrap();
-    assert_eq!(again["summary"], d["summary"]);
 }
 
 #[test]
@@ -299,6 +271,40 @@ fn the_effects_are_ranked_on_whole_tracks_up_to_ranked_shots_and_where_keeps_eve
     assert!(ok, "{err}");
     let d: Value = serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap()).unwrap();
     assert_eq!(n(&d["shots"]["ranked"]), n(&d["shots"]["used"]), "0: every shot ranked");
+}
+
+/// Not a world suite (seconds): the same inputs again reuse the diagnosis, and `--json` says what
+/// it found; `--force` recomputes it, self-test included, to the same verdict (the diagnosis is
+/// deterministic).
+#[test]
+fn a_diagnosis_is_reused_on_the_same_inputs_and_force_recomputes_the_same_one() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = scenario(tmp.path(), "none", &["--seed", "13"]);
+    let (g, a, out) = (world.join("gedi"), world.join("als"), tmp.path().join("diagnosis"));
+    let (g, a, o) = (g.to_str().unwrap(), a.to_str().unwrap(), out.to_str().unwrap());
+    let quick = ["--twins", "1", "--effects", "datum", "--ranked-shots", "30"];
+    let args = [&["diagnose", "--als", a, "--l1b", g, "--l2a", g, "--out", o][..], &quick].concat();
+    let (ok, _, err) = gedisim(&args);
+    assert!(ok, "{err}");
+    let d: Value = serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap()).unwrap();
+    assert_eq!(d["self_test"]["twins"], 1, "{:#}", d["self_test"]);
+    let args = [&args[..], &["--json"]].concat();
+    let (ok, stdout, err) = gedisim(&args);
+    assert!(ok, "{err}");
+    assert!(err.contains("inputs unchanged") && err.contains("diagnosis reused"), "{err}");
+    let j: Value = serde_json::from_str(stdout.trim()).unwrap_or_else(|e| panic!("{e}: {stdout}"));
+    assert_eq!(j["unexplained"], d["unexplained"]);
+    assert_eq!(j["summary"], d["summary"]);
+    assert_eq!(j["shots"], d["shots"]);
+    assert!(j["files"].as_array().unwrap().len() >= 10);
+    let (ok, stdout, err) = gedisim(&[&args[..], &["--force"]].concat());
+    assert!(ok && !err.contains("diagnosis reused"), "{err}");
+    let again: Value = serde_json::from_str(stdout.trim()).unwrap();
+    assert_eq!(again["summary"], d["summary"]);
+    let recomputed: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap()).unwrap();
+    assert_eq!(recomputed["self_test"], d["self_test"]);
+    assert_eq!(recomputed["effects"], d["effects"]);
 }
 
 /// What `diagnose` writes into a dataset — the chain's tables, a missing `offsets/` — it writes as
