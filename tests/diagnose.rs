@@ -4,7 +4,7 @@
 //! replicated for long tracks, generated with its own seed; the diagnosis is never told the
 //! effect.
 //!
-//! World suites: each test builds and diagnoses whole worlds (≈ 13 minutes together on 2 cores), so
+//! World suites: each test builds and diagnoses whole worlds (681 s together in a fresh-clone CI run, 2 cores), so
 //! `cargo test` leaves them out and `.ci/run` runs them (`cargo test -- --ignored`). A
 //! `ground_detection` world is `gedisim demo`'s, whose diagnosis `.ci/run` checks the same way. The
 //! others (the ranked sample, reuse and `--force`, the writer lock, writers at once: one effect, at
@@ -63,6 +63,11 @@ fn diagnose_world(dir: &Path, effect: &str, extra: &[&str]) -> Value {
     ] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
+    diagnosis_json(&out)
+}
+
+/// The `diagnosis.json` written into `out`.
+fn diagnosis_json(out: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap()).unwrap()
 }
 
@@ -257,7 +262,7 @@ fn the_effects_are_ranked_on_whole_tracks_up_to_ranked_shots_and_where_keeps_eve
     let args = ["diagnose", "--als", a, "--l1b", g, "--l2a", g, "--out", o, "--twins", "0", "--effects", "datum"];
     let (ok, stdout, err) = gedisim(&[&args[..], &["--ranked-shots", "30"]].concat());
     assert!(ok, "{err}");
-    let d: Value = serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap()).unwrap();
+    let d = diagnosis_json(&out);
     let shots = &d["shots"];
     let n = |v: &Value| v.as_u64().unwrap();
     let (used, ranked) = (n(&shots["used"]), n(&shots["ranked"]));
@@ -269,7 +274,7 @@ fn the_effects_are_ranked_on_whole_tracks_up_to_ranked_shots_and_where_keeps_eve
     // Another limit is another diagnosis (its key differs): 0 ranks every shot.
     let (ok, _, err) = gedisim(&[&args[..], &["--ranked-shots", "0"]].concat());
     assert!(ok, "{err}");
-    let d: Value = serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap()).unwrap();
+    let d = diagnosis_json(&out);
     assert_eq!(n(&d["shots"]["ranked"]), n(&d["shots"]["used"]), "0: every shot ranked");
 }
 
@@ -286,7 +291,7 @@ fn a_diagnosis_is_reused_on_the_same_inputs_and_force_recomputes_the_same_one() 
     let args = [&["diagnose", "--als", a, "--l1b", g, "--l2a", g, "--out", o][..], &quick].concat();
     let (ok, _, err) = gedisim(&args);
     assert!(ok, "{err}");
-    let d: Value = serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap()).unwrap();
+    let d = diagnosis_json(&out);
     assert_eq!(d["self_test"]["twins"], 1, "{:#}", d["self_test"]);
     let args = [&args[..], &["--json"]].concat();
     let (ok, stdout, err) = gedisim(&args);
@@ -301,8 +306,7 @@ fn a_diagnosis_is_reused_on_the_same_inputs_and_force_recomputes_the_same_one() 
     assert!(ok && !err.contains("diagnosis reused"), "{err}");
     let again: Value = serde_json::from_str(stdout.trim()).unwrap();
     assert_eq!(again["summary"], d["summary"]);
-    let recomputed: Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap()).unwrap();
+    let recomputed = diagnosis_json(&out);
     assert_eq!(recomputed["self_test"], d["self_test"]);
     assert_eq!(recomputed["effects"], d["effects"]);
 }
