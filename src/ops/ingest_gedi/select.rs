@@ -9,7 +9,8 @@ use crate::io::gedi::{read_l1b_places, read_l2a_places, runs_of, valid_lowestmod
 use crate::kernels::geo::area::ShotArea;
 use crate::kernels::geo::projection::Projector;
 
-use super::{duplicate_check, position, GranulePair};
+use super::join::{duplicate_check, position};
+use super::GranulePair;
 
 /// The shots of one beam inside the area: the runs of each side's rows to read.
 pub(super) struct Kept {

@@ -1,0 +1,274 @@
+//! Into a dataset: each granule pair's shots written as one `shots/` file with its `granules/`
+//! record, skipped when its inputs are unchanged, replacing an earlier version of it.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use arrow::array::RecordBatch;
+use rayon::prelude::*;
+
+use super::join::ShotOwners;
+use super::pairs::{expand_granule_inputs, pair_granules};
+use super::{granule_key, read_granule};
+use super::{BeamReport, GediOptions, GranulePair, IngestReport, ShotChoice};
+use crate::dataset::shots::{granules_schema, shots_schema, VERTICAL_DATUM};
+use crate::error::{Error, Result};
+use crate::kernels::geo::area::ShotArea;
+use crate::ops::progress::{Progress, Step};
+
+/// What happened to one granule in [`ingest_into_dataset`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum GranuleOutcome {
+    /// Shots written (replacing an earlier version of the granule, if any).
+    Ingested { granule: String, shots: usize },
+    /// The same files (by content hash) were ingested before.
+    AlreadyIngested { granule: String },
+}
+
+/// What `gedisim ingest gedi` (and `run`) is asked beyond the files.
+#[derive(Debug, Clone, Default)]
+pub struct IngestRequest {
+    /// Projected CRS of `x`, `y` (`None`: the dataset's ALS CRS, else [`DEFAULT_EPSG`], said in a note).
+    pub epsg: Option<u32>,
+    /// Geoid offset N (m) for every shot instead of each shot's L1B geoid.
+    pub geoid_offset: Option<f64>,
+    /// Fail on a shot in only one of a paired L1B/L2A.
+    pub strict_join: bool,
+    /// The shots kept.
+    pub shots: ShotChoice,
+    /// ALS files about to be ingested (`run`): their header extents join the dataset's coverage.
+    pub als_inputs: Vec<PathBuf>,
+    /// Margin (m) around each tile extent: the collocation's search and the footprint's reach
+    /// ([`crate::ops::ingest_als::run_window_half`]).
+    pub margin_m: f64,
+}
+
+/// `gedisim ingest gedi`: the granules of `l1b` and `l2a` (files, or folders expanded) into
+/// `dataset`, the shots of `request.shots` kept, as one [`Step::IngestGedi`] counted in granules.
+pub fn ingest(
+    dataset: &crate::dataset::Dataset,
+    l1b: &[PathBuf],
+    l2a: &[PathBuf],
+    request: &IngestRequest,
+    progress: &dyn Progress,
+) -> Result<(Vec<GranuleOutcome>, IngestReport)> {
+    let dataset = &dataset.as_writer()?;
+    let l1b = expand_granule_inputs(l1b, "GEDI01_B")?;
+    let l2a = expand_granule_inputs(l2a, "GEDI02_A")?;
+    if l1b.is_empty() && l2a.is_empty() {
+        return Err(Error::Usage("--l1b/--l2a: no GEDI01_B or GEDI02_A .h5 file found in the inputs".into()));
+    }
+    let existing = crate::dataset::dataset_epsg(dataset)?;
+    let (given, had_crs) = (request.epsg.is_some(), existing.is_some());
+    let epsg = match (request.epsg, existing) {
+        (Some(given), Some(ds)) if given != ds => {
+            return Err(Error::field(
+                dataset.root(),
+                "CRS",
+                format!("--epsg {given} differs from the dataset's EPSG:{ds} (one CRS per dataset)"),
+            ))
+        }
+        (Some(e), _) | (None, Some(e)) => e,
+        (None, None) => DEFAULT_EPSG,
+    };
+    let (area, called) = request.shots.area(dataset, &request.als_inputs, request.margin_m)?;
+    let opts = GediOptions { epsg, geoid_offset: request.geoid_offset, strict_join: request.strict_join, area };
+    progress.start(Step::IngestGedi, pair_granules(&l1b, &l2a)?.0.len() as u64);
+    let r = ingest_into_dataset(dataset, &l1b, &l2a, &opts, progress);
+    progress.finish();
+    let (outcomes, mut report) = r?;
+    if let Some(called) = called {
+        report.area = called;
+    }
+    if !given && !had_crs {
+        // Never a silent default: the shots took a CRS nobody named.
+        report.notes.push(format!(
+            "shots projected to EPSG:{DEFAULT_EPSG} (Lambert-93, LiDAR HD's): neither --epsg nor ALS tiles in the \
+             dataset name a CRS; the dataset's tiles must be in it too"
+        ));
+    }
+    Ok((outcomes, report))
+}
+
+/// The CRS of the shots' x, y when neither `--epsg` nor the dataset's tiles name one.
+pub const DEFAULT_EPSG: u32 = 2154;
+
+/// Ingest L1B/L2A files into `<dataset>/shots/` (one file per granule, `<granule_key>.parquet`)
+/// and `<dataset>/granules/`. A granule whose files have the same content hashes as at its last
+/// ingest is skipped; one whose files changed (e.g. its L2A arrived later) is rewritten.
+/// Granules are processed in parallel; `progress` advances by one after each.
+pub fn ingest_into_dataset(
+    dataset: &crate::dataset::Dataset,
+    l1b: &[PathBuf],
+    l2a: &[PathBuf],
+    opts: &GediOptions,
+    progress: &dyn Progress,
+) -> Result<(Vec<GranuleOutcome>, IngestReport)> {
+    use crate::dataset::{self, tables, AtomicParquet};
+    use arrow::array::{StringArray, UInt64Array};
+
+    let dataset = &dataset.as_writer()?;
+    let (pairs, notes) = pair_granules(l1b, l2a)?;
+    let shots_dir = dataset.table_dir(tables::SHOTS)?;
+    let granules_dir = dataset.table_dir(tables::GRANULES)?;
+    // Content first: copies of a granule under other names are found before anything is written.
+    let hash = |p: &Option<PathBuf>| p.as_deref().map(dataset::granule_hash).transpose();
+    let keyed = pairs
+        .par_iter()
+        .map(|pair| {
+            let key = granule_key(pair.l1b.as_deref().or(pair.l2a.as_deref()).expect("a pair has a file"));
+            Ok((key, hash(&pair.l1b)?, hash(&pair.l2a)?))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    // What each granule's record says, read once: (L1B hash, L2A hash) by granule key.
+    let (mut recorded, mut recorded_area) = (HashMap::new(), HashMap::new());
+    for record in dataset::table_files(&granules_dir).map_err(|e| Error::file(&granules_dir, e))? {
+        let key = record.file_stem().and_then(|s| s.to_str()).unwrap_or_default().to_string();
+        if let Some((hashes, area)) = previous_record(&record)? {
+            recorded.insert(key.clone(), hashes);
+            recorded_area.insert(key, area);
+        }
+    }
+    let duplicate = copies_of_other_granules(&pairs, &keyed, &recorded)?;
+    let owners = ShotOwners::read(&shots_dir)?;
+    let results = pairs
+        .par_iter()
+        .zip(keyed)
+        .zip(duplicate)
+        .map(|((pair, (key, h1, h2)), duplicate)| -> Result<(GranuleOutcome, Vec<BeamReport>)> {
+            let record = granules_dir.join(format!("{key}.parquet"));
+            let previous = recorded.get(&key).cloned();
+            // A side the granule had and this call lacks would be lost by a rewrite: unchanged
+            // given sides are nothing new; changed ones need both files.
+            let same = |new: &Option<String>, old: &Option<String>| new.is_none() || new == old;
+            if let Some((p1, p2)) = &previous {
+                if (p1.is_some() && h1.is_none()) || (p2.is_some() && h2.is_none()) {
+                    if same(&h1, p1) && same(&h2, p2) {
+                        progress.advance(1);
+                        return Ok((GranuleOutcome::AlreadyIngested { granule: pair.granule.clone() }, Vec::new()));
+                    }
+                    let (given, missing) = if h1.is_none() { ("L2A", "L1B") } else { ("L1B", "L2A") };
+                    let file = pair.l1b.as_ref().or(pair.l2a.as_ref()).expect("a pair has a file");
+                    return Err(Error::file(
+                        file,
+                        format!(
+                            "a changed {given} of granule {key}, which the dataset holds with its {missing}: \
+                             give both files to replace it"
+                        ),
+                    ));
+                }
+            }
+            // Read again with another area; but a granule read whole holds every shot the default
+            // (the tiles' coverage) asks for.
+            let area_read = recorded_area.get(&key).map(String::as_str);
+            let whole_for_tiles = matches!(opts.area, ShotArea::Tiles { .. }) && area_read == Some("all");
+            let same_area = area_read == Some(opts.area.key().as_str()) || whole_for_tiles;
+            if duplicate || (previous == Some((h1.clone(), h2.clone())) && same_area) {
+                progress.advance(1);
+                return Ok((GranuleOutcome::AlreadyIngested { granule: pair.granule.clone() }, Vec::new()));
+            }
+            let schema = shots_schema(opts.epsg);
+            let mut metadata = std::collections::HashMap::new();
+            metadata.insert("gedisim:crs_epsg".to_string(), opts.epsg.to_string());
+            metadata.insert("gedisim:vertical_reference".to_string(), VERTICAL_DATUM.to_string());
+            let props = dataset::writer_properties(&metadata, 1 << 16);
+            let mut writer = AtomicParquet::create(&shots_dir.join(format!("{key}.parquet")), schema, props)?;
+            let owner: Arc<str> = Arc::from(key.as_str());
+            let beams = read_granule(pair, opts, &mut |b| {
+                owners.claim(pair, &owner, &b)?;
+                writer.write(&b)
+            })?;
+            writer.finish()?;
+            let shots: usize = beams.iter().map(BeamReport::rows).sum();
+            let path = |p: &Option<PathBuf>| p.as_ref().map(|p| p.display().to_string());
+            let cols: Vec<arrow::array::ArrayRef> = vec![
+                Arc::new(StringArray::from(vec![pair.granule.clone()])),
+                Arc::new(StringArray::from(vec![key.clone()])),
+                Arc::new(StringArray::from(vec![path(&pair.l1b)])),
+                Arc::new(StringArray::from(vec![h1])),
+                Arc::new(StringArray::from(vec![path(&pair.l2a)])),
+                Arc::new(StringArray::from(vec![h2])),
+                Arc::new(UInt64Array::from(vec![shots as u64])),
+                Arc::new(StringArray::from(vec![opts.area.key()])),
+                Arc::new(UInt64Array::from(vec![beams.iter().map(|b| b.outside_area as u64).sum::<u64>()])),
+            ];
+            let batch = RecordBatch::try_new(granules_schema(), cols).map_err(|e| Error::table(&record, e))?;
+            dataset::write_parquet(&record, granules_schema(), &[batch], &metadata)?;
+            progress.advance(1);
+            Ok((GranuleOutcome::Ingested { granule: pair.granule.clone(), shots }, beams))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let mut report = IngestReport { beams: Vec::new(), notes, area: opts.area.describe() };
+    let mut outcomes = Vec::new();
+    for (o, beams) in results {
+        outcomes.push(o);
+        report.beams.extend(beams);
+    }
+    Ok((outcomes, report))
+}
+
+/// The content hashes of a granule's L1B and L2A files (either may be absent).
+pub(super) type Hashes = (Option<String>, Option<String>);
+
+/// A pair's granule key and the content hashes of its L1B and L2A files.
+pub(super) type Keyed = (String, Option<String>, Option<String>);
+
+/// Which pairs are copies of granules the dataset (or an earlier pair of the call) already holds
+/// under another key: a file's content belongs to one granule key, whatever the file is called, so
+/// a renamed copy must not double the shots. A copy paired with other files is an error.
+pub(super) fn copies_of_other_granules(
+    pairs: &[GranulePair],
+    keyed: &[Keyed],
+    recorded: &HashMap<String, Hashes>,
+) -> Result<Vec<bool>> {
+    // content hash → granule key
+    let mut owner: HashMap<String, String> = recorded
+        .iter()
+        .flat_map(|(key, (h1, h2))| [h1, h2].into_iter().flatten().map(move |h| (h.clone(), key.clone())))
+        .collect();
+    let mut duplicate = vec![false; pairs.len()];
+    for (i, ((key, h1, h2), pair)) in keyed.iter().zip(pairs).enumerate() {
+        let present: Vec<(&String, &PathBuf)> = [(h1, &pair.l1b), (h2, &pair.l2a)]
+            .into_iter()
+            .filter_map(|(h, f)| Some((h.as_ref()?, f.as_ref()?)))
+            .collect();
+        let others: Vec<&String> = present.iter().filter_map(|(h, _)| owner.get(*h)).filter(|o| *o != key).collect();
+        match others.first() {
+            None => owner.extend(present.iter().map(|(h, _)| ((*h).clone(), key.clone()))),
+            // Every file is a copy of the same other granule: nothing new.
+            Some(other) if others.len() == present.len() && others.iter().all(|o| o == other) => duplicate[i] = true,
+            Some(other) => {
+                let file = present.iter().find(|(h, _)| owner.get(*h) == Some(*other)).map(|(_, f)| *f).expect("owned");
+                return Err(Error::file(
+                    file,
+                    format!(
+                        "same content as granule {other} of the dataset, paired here with other files: \
+                         ingest it under its original name to replace that granule"
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(duplicate)
+}
+
+/// What an earlier ingest of a granule recorded (its `granules/<key>.parquet`), if anything: the
+/// (L1B, L2A) content hashes and the [`ShotArea::key`] its shots were kept by (`all` in a record
+/// written before areas, when every shot was kept).
+pub fn previous_record(record: &Path) -> Result<Option<(Hashes, String)>> {
+    if !record.exists() {
+        return Ok(None);
+    }
+    let mut out = None;
+    crate::dataset::read::for_each_batch(record, None, None, |c| {
+        if out.is_none() && c.num_rows() > 0 {
+            let has_area = c.batch().schema().column_with_name("shot_area").is_some();
+            let area = if has_area { c.string("shot_area", 0)? } else { None };
+            let hashes = (c.string("l1b_hash", 0)?, c.string("l2a_hash", 0)?);
+            out = Some((hashes, area.unwrap_or_else(|| ShotArea::All.key())));
+        }
+        Ok(())
+    })?;
+    Ok(out)
+}
