@@ -360,6 +360,45 @@ pub fn collocate_unit<E>(
 /// Cell size of the point index (m).
 const INDEX_CELL: f64 = 5.0;
 
+/// [`horizontal_offset_at`] of each group of shots (a group shares one offset; `None` when it has
+/// none), whole groups about [`SUB_BATCH`] shots at a time sharing one `points_for` request, as
+/// [`collocate_unit`] asks for the points of its sub-batches.
+pub fn horizontal_offsets_at<E>(
+    groups: &[Vec<ShotInput>],
+    cfg: &CollocateConfig,
+    dz: f64,
+    points_for: &mut dyn FnMut(&[&ShotInput]) -> std::result::Result<PointCloud, E>,
+) -> std::result::Result<Vec<Option<(f64, f64)>>, E> {
+    let mut out = vec![None; groups.len()];
+    for batch in whole_groups(groups.iter().map(Vec::len), SUB_BATCH) {
+        let shots: Vec<&ShotInput> = groups[batch.clone()].iter().flatten().collect();
+        if !shots.is_empty() {
+            let cloud = points_for(&shots)?;
+            for k in batch.filter(|&k| !groups[k].is_empty()) {
+                out[k] = horizontal_offset_at(&groups[k], &cloud, cfg, dz);
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Consecutive groups (of the given sizes) taken whole, each batch closed once it holds `max`
+/// items or more: the ranges of group indices.
+fn whole_groups(sizes: impl Iterator<Item = usize>, max: usize) -> Vec<std::ops::Range<usize>> {
+    let (mut out, mut start, mut n, mut len) = (Vec::new(), 0, 0, 0);
+    for (k, size) in sizes.enumerate() {
+        (n, len) = (n + size, k + 1);
+        if n >= max {
+            out.push(start..len);
+            (start, n) = (len, 0);
+        }
+    }
+    if start < len {
+        out.push(start..len);
+    }
+    out
+}
+
 /// The horizontal offset (dx, dy) of `shots`, which share one offset, with the vertical offset
 /// given instead of searched: the grid node maximising their summed r at the lag of `dz` (m,
 /// GEDI − N − ALS). `cloud` must hold the returns within [`CollocateConfig::support_half_width`]
@@ -507,6 +546,17 @@ pub fn coarse_lag(shots: &[(&GridProfile, &SimulatedProfiles)], column: usize, d
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn groups_are_batched_whole_up_to_the_sub_batch() {
+        let batches = |sizes: &[usize]| whole_groups(sizes.iter().copied(), 16);
+        assert_eq!(batches(&[]), Vec::<std::ops::Range<usize>>::new());
+        assert_eq!(batches(&[3, 0, 2]), vec![0..3]);
+        // A batch closes once it holds 16 shots or more; a group is never split.
+        assert_eq!(batches(&[10, 10, 16, 1, 0]), vec![0..2, 2..3, 3..5]);
+        assert_eq!(batches(&[40]), vec![0..1]);
+        assert_eq!(batches(&[16, 0]), vec![0..1, 1..2]);
+    }
 
     #[test]
     fn offset_grid_is_symmetric() {

@@ -6,7 +6,7 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use super::sites::simulate_cases;
-use crate::dataset::als::AlsTable;
+use crate::dataset::als::{AlsTable, BBox};
 use crate::dataset::read::{self, value};
 use crate::dataset::{self, tables, Dataset};
 use crate::error::{Error, Result};
@@ -218,11 +218,9 @@ fn reference_dz(offsets: &HashMap<u64, crate::dataset::offsets::AppliedOffset>) 
 
 /// The centre of the [`site_grid`] of each short segment's shots: the segment's horizontal
 /// collocation redone with the vertical offset fixed at `dz`
-/// ([`crate::kernels::collocate::horizontal_offset_at`]), as an absolute position per shot.
+/// ([`crate::kernels::collocate::horizontal_offsets_at`]), as an absolute position per shot.
 fn recollocate(als: &AlsTable, pending: &[Pending], dz: f64) -> Result<HashMap<u64, (f64, f64)>> {
-    use crate::kernels::collocate::{
-        horizontal_offset_at, profile::real_profile, CollocateConfig, ShotInput, SUB_BATCH,
-    };
+    use crate::kernels::collocate::{horizontal_offsets_at, profile::real_profile, CollocateConfig, ShotInput};
     let cfg = CollocateConfig::new(RECOLLOCATE_SHIFT_M, RECOLLOCATE_STEP_M)?;
     let half = cfg.support_half_width();
     let mut segments: std::collections::BTreeMap<&str, Vec<&Pending>> = Default::default();
@@ -230,42 +228,28 @@ fn recollocate(als: &AlsTable, pending: &[Pending], dz: f64) -> Result<HashMap<u
         .iter()
         .filter(|p| p.short_segment && p.ranked)
         .for_each(|p| segments.entry(p.real.segment.as_str()).or_default().push(p));
-    let inputs: Vec<(&[&Pending], Vec<ShotInput>)> = segments
+    let groups: Vec<Vec<ShotInput>> = segments
         .values()
         .map(|shots| {
-            let inputs = shots
+            shots
                 .iter()
                 .filter_map(|p| {
                     let r = &p.real;
                     let real = real_profile(&r.wave, r.bin0, r.lastbin, cfg.model.res).ok()?;
                     Some(ShotInput { x: p.reported.0, y: p.reported.1, real, pulse: r.pulse.clone() })
                 })
-                .collect();
-            (shots.as_slice(), inputs)
+                .collect()
         })
         .collect();
-    // Whole segments, about SUB_BATCH shots at a time, share one read, like the collocation's.
+    let offsets = horizontal_offsets_at(&groups, &cfg, dz, &mut |shots| {
+        let boxes: Vec<BBox> = shots.iter().map(|s| [s.x - half, s.y - half, s.x + half, s.y + half]).collect();
+        als.xyz_in_boxes(&boxes).map(|(cloud, _)| cloud)
+    })?;
     let mut out = HashMap::new();
-    let mut start = 0;
-    while start < inputs.len() {
-        let (mut end, mut n) = (start, 0);
-        while end < inputs.len() && n < SUB_BATCH {
-            n += inputs[end].1.len();
-            end += 1;
-        }
-        let chunk = &inputs[start..end];
-        start = end;
-        let boxes: Vec<crate::dataset::als::BBox> =
-            chunk.iter().flat_map(|(_, i)| i).map(|s| [s.x - half, s.y - half, s.x + half, s.y + half]).collect();
-        if boxes.is_empty() {
-            continue;
-        }
-        let (cloud, _) = als.xyz_in_boxes(&boxes)?;
-        for (shots, inputs) in chunk.iter().filter(|(_, i)| !i.is_empty()) {
-            if let Some((ox, oy)) = horizontal_offset_at(inputs, &cloud, &cfg, dz) {
-                for p in shots.iter() {
-                    out.insert(p.real.shot_number, (p.reported.0 + ox, p.reported.1 + oy));
-                }
+    for (shots, offset) in segments.values().zip(offsets) {
+        if let Some((ox, oy)) = offset {
+            for p in shots {
+                out.insert(p.real.shot_number, (p.reported.0 + ox, p.reported.1 + oy));
             }
         }
     }
