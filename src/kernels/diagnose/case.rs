@@ -215,22 +215,24 @@ pub fn rh_ok(rh: &[f32]) -> bool {
 pub const PAD_M: f64 = 16.0;
 
 /// The simulator settings of the diagnosis: the study's nominal one (15 ns pulse, σ_f 5.5 m,
-/// default profile) and, for every width of [`FSIGMA_GRID`], the nominal chain's: without pulse
-/// (the chain convolves its own), without the coverage skip (the nominal run decides coverage),
-/// density normalised by pulse ([`NOMINAL_DENSITY`]).
-pub fn configs() -> (SimConfig, Vec<SimConfig>) {
+/// default profile) and the nominal chain's, simulated at every width of [`FSIGMA_GRID`]
+/// ([`fsigma_grid`]): without pulse (the chain convolves its own), without the coverage skip (the
+/// nominal run decides coverage), density normalised by pulse ([`NOMINAL_DENSITY`]).
+pub fn configs() -> (SimConfig, SimConfig) {
     let nominal = SimConfig::new(Profile::Default);
-    let variants = FSIGMA_GRID
-        .iter()
-        .map(|&f| SimConfig {
-            fsigma: f as f32,
-            pulse: sim::Pulse::dirac(),
-            min_covered_fraction: None,
-            density_count: NOMINAL_DENSITY,
-            ..nominal.clone()
-        })
-        .collect();
-    (nominal, variants)
+    let chain = SimConfig {
+        fsigma: FSIGMA_GRID[NOMINAL_WIDTH] as f32,
+        pulse: sim::Pulse::dirac(),
+        min_covered_fraction: None,
+        density_count: NOMINAL_DENSITY,
+        ..nominal.clone()
+    };
+    (nominal, chain)
+}
+
+/// [`FSIGMA_GRID`] as the simulator takes it.
+pub fn fsigma_grid() -> [f32; FSIGMA_GRID.len()] {
+    FSIGMA_GRID.map(|f| f as f32)
 }
 
 /// Search of the re-collocation of short segments: ±8 m every metre around the reported position.

@@ -138,7 +138,7 @@ impl Square {
 
 /// The first returns of one pulse key found in a square.
 #[derive(Debug, Clone, Copy, PartialEq)]
-enum Found {
+pub enum Found {
     None,
     One((f64, f64)),
     Several,
@@ -201,18 +201,34 @@ impl PulseIndex {
 
     /// Position of the first return of point `i`, at (x, y), if exactly one of its pulse's first
     /// returns lies in `square`: none there, or two pulses with one key, give `None`.
-    pub fn first_return(&self, i: usize, (x, y): (f64, f64), square: Square) -> Option<(f64, f64)> {
-        let near = *self.near.get(i)?;
+    pub fn first_return(&self, i: usize, xy: (f64, f64), square: Square) -> Option<(f64, f64)> {
+        match self.first_returns(i, xy, square) {
+            Found::One(xy) => Some(xy),
+            _ => None,
+        }
+    }
+
+    /// The first returns of point `i`'s pulse in `square` (`One` only if it lies there): what
+    /// [`PulseIndex::first_return`] answers from. In a smaller square inside it, `None` stays
+    /// `None` and `One` is that return if the smaller square holds it; `Several` must be asked again.
+    pub fn first_returns(&self, i: usize, (x, y): (f64, f64), square: Square) -> Found {
+        let Some(&near) = self.near.get(i) else { return Found::None };
         // Every first return in a box holding (x, y) lies within twice its half-width of (x, y).
         let found = if near != Found::Several && square.half <= self.half && square.contains(x, y) {
             near
         } else {
-            let k = *self.pulse.get(i)? as usize;
-            in_square(self.firsts.get(*self.starts.get(k)? as usize..*self.starts.get(k + 1)? as usize)?, square)
+            let firsts = self.pulse.get(i).and_then(|&k| {
+                let k = k as usize;
+                self.firsts.get(*self.starts.get(k)? as usize..*self.starts.get(k + 1)? as usize)
+            });
+            match firsts {
+                Some(f) => in_square(f, square),
+                None => return Found::None,
+            }
         };
         match found {
-            Found::One(xy) if square.contains(xy.0, xy.1) => Some(xy),
-            _ => None,
+            Found::One(xy) if !square.contains(xy.0, xy.1) => Found::None,
+            other => other,
         }
     }
 }

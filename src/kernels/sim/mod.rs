@@ -25,7 +25,7 @@ use crate::error::{Error, Result};
 use crate::waveform::rh::{rh_profile_by, N_RH};
 
 pub use density::DensityCount;
-use density::{is_last_return, Densities, DensityGrid, PulseIndex, Square};
+use density::{is_last_return, Densities, DensityGrid, Found, PulseIndex, Square};
 use footprint::{footprint_weight, gauss_sep, I_THRESH};
 use index::{CellGrid, Octree};
 use wave::{Contribution, Sample, WaveSet};
@@ -344,6 +344,20 @@ fn simulate_chunks(
     chunk: usize,
     on_chunk: &mut dyn FnMut(usize, Vec<Outcome>) -> bool,
 ) -> Result<()> {
+    check_columns(&points)?;
+    let width = [Width::of(cfg.fsigma)];
+    let prepared = Prepared::new(points, footprints, cfg, width[0].half, gauss_sep(cfg.fsigma, I_THRESH) as f64);
+    for (k, fps) in footprints.chunks(chunk.max(1)).enumerate() {
+        let results = fps.par_iter().map(|fp| prepared.footprint(fp, cfg, &width).remove(0)).collect();
+        if !on_chunk(k * chunk.max(1), results) {
+            break;
+        }
+    }
+    Ok(())
+}
+
+/// Fails when the point columns have different lengths.
+fn check_columns(points: &AlsPoints) -> Result<()> {
     let n = points.len();
     let lens = [
         points.y.len(),
@@ -357,51 +371,6 @@ fn simulate_chunks(
     if lens.iter().any(|&l| l != n) {
         return Err(Error::Usage("ALS points: columns of different lengths".into()));
     }
-    let max_sep = gauss_sep(cfg.fsigma, I_THRESH) as f64;
-    // The reference bounds its boxes by sqrt(maxSep²).
-    let half = (max_sep * max_sep).sqrt();
-    let sim: fn(&Job) -> Outcome =
-        if cfg.quirks.f32_sums { simulate_footprint::<f32> } else { simulate_footprint::<f64> };
-    let by_pulse = cfg.counts_pulses();
-    let pulses_of = |pts: &AlsPoints| by_pulse.then(|| PulseIndex::build(pts, half));
-    // The candidates of a footprint, from an index over the points built once.
-    let (points, index) = if cfg.quirks.batch_grid {
-        let centres: Vec<(f64, f64)> =
-            footprints.iter().map(|f| (f.x, f.y)).filter(|c| c.0.is_finite() && c.1.is_finite()).collect();
-        let octree = Octree::build(&points, &centres, max_sep);
-        (points, Index::Octree(octree))
-    } else {
-        let grid = CellGrid::build(&points, INDEX_CELL);
-        let sorted = match points {
-            std::borrow::Cow::Borrowed(p) => p.permuted(grid.order()),
-            std::borrow::Cow::Owned(mut p) => {
-                p.permute(grid.order());
-                p
-            }
-        };
-        (std::borrow::Cow::Owned(sorted), Index::Grid(grid))
-    };
-    let pulses = pulses_of(&points);
-    for (k, fps) in footprints.chunks(chunk.max(1)).enumerate() {
-        let results = fps
-            .par_iter()
-            .map(|fp| {
-                if !(fp.x.is_finite() && fp.y.is_finite()) {
-                    return Err(SkipReason::NoPoints);
-                }
-                let mut cand = Vec::new();
-                match &index {
-                    Index::Octree(Some(o)) => o.candidates(fp.x, fp.y, half, &mut cand),
-                    Index::Octree(None) => {}
-                    Index::Grid(g) => g.candidates(fp.x, fp.y, half, &mut cand),
-                }
-                sim(&Job { points: &points, pulses: pulses.as_ref(), candidates: &cand, footprint: fp, cfg, half })
-            })
-            .collect();
-        if !on_chunk(k * chunk.max(1), results) {
-            break;
-        }
-    }
     Ok(())
 }
 
@@ -412,6 +381,98 @@ enum Index {
     Grid(CellGrid),
 }
 
+/// The points of one simulation, indexed once for every footprint: sorted by cell (the default
+/// profile) or with the reference's octree over the batch, and their pulses when the density
+/// normalisation counts pulses.
+struct Prepared<'a> {
+    points: std::borrow::Cow<'a, AlsPoints>,
+    index: Index,
+    pulses: Option<PulseIndex>,
+    /// Half-width of the widest footprint box the index answers for (m).
+    half: f64,
+}
+
+impl<'a> Prepared<'a> {
+    fn new(
+        points: std::borrow::Cow<'a, AlsPoints>,
+        footprints: &[Footprint],
+        cfg: &SimConfig,
+        half: f64,
+        max_sep: f64,
+    ) -> Prepared<'a> {
+        let (points, index) = if cfg.quirks.batch_grid {
+            let centres: Vec<(f64, f64)> =
+                footprints.iter().map(|f| (f.x, f.y)).filter(|c| c.0.is_finite() && c.1.is_finite()).collect();
+            let octree = Octree::build(&points, &centres, max_sep);
+            (points, Index::Octree(octree))
+        } else {
+            let grid = CellGrid::build(&points, INDEX_CELL);
+            let sorted = match points {
+                std::borrow::Cow::Borrowed(p) => p.permuted(grid.order()),
+                std::borrow::Cow::Owned(mut p) => {
+                    p.permute(grid.order());
+                    p
+                }
+            };
+            (std::borrow::Cow::Owned(sorted), Index::Grid(grid))
+        };
+        let pulses = cfg.counts_pulses().then(|| PulseIndex::build(&points, half));
+        Prepared { points, index, pulses, half }
+    }
+
+    /// Footprint `fp` simulated at every width of `widths` (boxes within `self.half`).
+    fn footprint(&self, fp: &Footprint, cfg: &SimConfig, widths: &[Width]) -> Vec<Outcome> {
+        if !(fp.x.is_finite() && fp.y.is_finite()) {
+            return widths.iter().map(|_| Err(SkipReason::NoPoints)).collect();
+        }
+        let mut cand = Vec::new();
+        match &self.index {
+            Index::Octree(Some(o)) => o.candidates(fp.x, fp.y, self.half, &mut cand),
+            Index::Octree(None) => {}
+            Index::Grid(g) => g.candidates(fp.x, fp.y, self.half, &mut cand),
+        }
+        let job = Job { points: &self.points, pulses: self.pulses.as_ref(), candidates: &cand, footprint: fp, cfg };
+        if cfg.quirks.f32_sums {
+            simulate_footprint::<f32>(&job, widths)
+        } else {
+            simulate_footprint::<f64>(&job, widths)
+        }
+    }
+}
+
+/// Simulates `footprints` at each footprint width of `widths` (σ_f, m) with the settings of `cfg`
+/// otherwise: `[width][footprint]`. Each width's results are exactly those of [`simulate`] with
+/// `fsigma` set to it; the points are indexed once, each footprint's candidates gathered once
+/// (in the widest box) and each return's pulse looked up once, for every width. The default
+/// profile only (the reference's batch grid depends on the width).
+pub fn simulate_widths(
+    points: &AlsPoints,
+    footprints: &[Footprint],
+    cfg: &SimConfig,
+    widths: &[f32],
+) -> Result<Vec<Vec<Outcome>>> {
+    if cfg.quirks.batch_grid {
+        return Err(Error::Usage("several footprint widths at once: the default profile only".into()));
+    }
+    if widths.is_empty() || widths.iter().any(|w| !(w.is_finite() && *w > 0.0)) {
+        return Err(Error::Usage(format!("footprint widths {widths:?}: positive and finite, at least one")));
+    }
+    check_columns(points)?;
+    let widths: Vec<Width> = widths.iter().map(|&fsigma| Width::of(fsigma)).collect();
+    let half = widths.iter().map(|w| w.half).fold(0.0, f64::max);
+    // No octree (the batch grid is refused): its search distance is not used.
+    let prepared = Prepared::new(std::borrow::Cow::Borrowed(points), footprints, cfg, half, half);
+    let by_footprint: Vec<Vec<Outcome>> =
+        footprints.par_iter().map(|fp| prepared.footprint(fp, cfg, &widths)).collect();
+    let mut out: Vec<Vec<Outcome>> = (0..widths.len()).map(|_| Vec::with_capacity(footprints.len())).collect();
+    for results in by_footprint {
+        for (w, r) in results.into_iter().enumerate() {
+            out[w].push(r);
+        }
+    }
+    Ok(out)
+}
+
 /// Result of one footprint.
 pub type Outcome = std::result::Result<SimulatedFootprint, SkipReason>;
 
@@ -420,31 +481,70 @@ struct Job<'a> {
     points: &'a AlsPoints,
     /// The points' pulses when the density normalisation counts pulses.
     pulses: Option<&'a PulseIndex>,
+    /// The points of the widest footprint box.
     candidates: &'a [u32],
     footprint: &'a Footprint,
     cfg: &'a SimConfig,
-    /// Half-width of the footprint's square box (m).
+}
+
+/// One footprint width: σ_f (m) and the half-width of its square box (m).
+#[derive(Debug, Clone, Copy)]
+struct Width {
+    fsigma: f32,
     half: f64,
+}
+
+impl Width {
+    /// σ_f with the reference's box: [`gauss_sep`] at the cut-off, bounded by sqrt(maxSep²).
+    fn of(fsigma: f32) -> Width {
+        let max_sep = gauss_sep(fsigma, I_THRESH) as f64;
+        Width { fsigma, half: (max_sep * max_sep).sqrt() }
+    }
+}
+
+/// What the two passes over the candidates gather for one width.
+struct Gathered {
+    contributions: Vec<Contribution>,
+    /// Elevation range of the contributing returns (of every candidate with the batch grid).
+    z_range: (f64, f64),
+    densities: Densities,
+    covered_fraction: f32,
+    mean_scan_angle_deg: f32,
 }
 
 /// Buffer added above the highest and below the lowest return (m), before the pulse half-length.
 const WAVE_BUFFER: f64 = 35.0;
 
-/// Simulates one footprint, accumulating in `T` (f32 for the reference, f64 otherwise).
-fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
-    let Job { points: p, pulses, candidates, footprint: fp, cfg, half } = *job;
+/// Simulates one footprint at each of `widths`, accumulating in `T` (f32 for the reference, f64
+/// otherwise).
+fn simulate_footprint<T: Sample>(job: &Job, widths: &[Width]) -> Vec<Outcome> {
+    gather(job, widths).into_iter().zip(widths).map(|(g, w)| g.and_then(|g| finish::<T>(job, w.fsigma, g))).collect()
+}
+
+/// Passes 1 and 2 over the footprint's candidates, once for every width: each width sees the
+/// candidates of its own box in the same order, its own density grid, the same pulses.
+fn gather(job: &Job, widths: &[Width]) -> Vec<std::result::Result<Gathered, SkipReason>> {
+    let Job { points: p, pulses, candidates, footprint: fp, cfg, .. } = *job;
     let q = cfg.quirks;
     let (x0, y0) = (fp.x, fp.y);
     if candidates.is_empty() {
-        return Err(SkipReason::NoPoints);
+        return widths.iter().map(|_| Err(SkipReason::NoPoints)).collect();
     }
 
     // Pass 1 (gediIO determineALScoverage): pulses on the 1.5 m grid and densities within 2σ,
-    // over the candidates inside the footprint box.
-    let mut grid = DensityGrid::new(x0, y0, half, q.shifted_density_grid);
-    let square = Square { x0, y0, half };
-    let dense_rad_sq = ((cfg.fsigma * cfg.fsigma) as f64 * 4.0) as f32;
-    let (mut n_dense, mut n_dense_last) = (0f32, 0f32);
+    // over the candidates inside each width's footprint box.
+    let mut grids: Vec<DensityGrid> =
+        widths.iter().map(|w| DensityGrid::new(x0, y0, w.half, q.shifted_density_grid)).collect();
+    let squares: Vec<Square> = widths.iter().map(|w| Square { x0, y0, half: w.half }).collect();
+    let dense_rad_sq: Vec<f32> = widths.iter().map(|w| ((w.fsigma * w.fsigma) as f64 * 4.0) as f32).collect();
+    let mut n_dense = vec![(0f32, 0f32); widths.len()];
+    // Same-centred boxes (and circles) are nested: the largest first, none after one that misses.
+    let largest_first = |size: &dyn Fn(usize) -> f64| {
+        let mut order: Vec<usize> = (0..widths.len()).collect();
+        order.sort_by(|&a, &b| size(b).total_cmp(&size(a)));
+        order
+    };
+    let widest_first = largest_first(&|k| widths[k].half);
     let (mut z_lo, mut z_hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for &i in candidates {
         let i = i as usize;
@@ -454,76 +554,115 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
             z_lo = z_lo.min(p.z[i]);
             z_hi = z_hi.max(p.z[i]);
         }
-        if square.contains(x, y) {
+        for &k in &widest_first {
+            if !squares[k].contains(x, y) {
+                break;
+            }
             let last = is_last_return(p, i);
             if pulses.is_some() {
                 if p.return_number[i] == 1 {
-                    grid.add_pulse(x, y);
+                    grids[k].add_pulse(x, y);
                 }
             } else if last {
-                grid.add_pulse(x, y);
+                grids[k].add_pulse(x, y);
             }
             let (dx, dy) = (x - x0, y - y0);
-            if dx * dx + dy * dy <= dense_rad_sq as f64 {
-                n_dense += 1.0;
-                n_dense_last += f32::from(u8::from(last));
+            if dx * dx + dy * dy <= dense_rad_sq[k] as f64 {
+                n_dense[k].0 += 1.0;
+                n_dense[k].1 += f32::from(u8::from(last));
             }
         }
     }
-    if n_dense == 0.0 {
-        grid.clear();
-    }
-    let area = (std::f64::consts::PI * dense_rad_sq as f64) as f32;
-    let densities = Densities { point: n_dense / area, beam: n_dense_last / area };
-    let covered_fraction = grid.covered_fraction(x0, y0, 10f64.min(cfg.fsigma as f64));
-    if let Some(min) = cfg.min_covered_fraction {
-        if covered_fraction < min {
-            return Err(SkipReason::PartlyCovered { covered_fraction });
+    let mut out: Vec<std::result::Result<Gathered, SkipReason>> = Vec::with_capacity(widths.len());
+    for (k, w) in widths.iter().enumerate() {
+        if n_dense[k].0 == 0.0 {
+            grids[k].clear();
         }
+        let area = (std::f64::consts::PI * dense_rad_sq[k] as f64) as f32;
+        let densities = Densities { point: n_dense[k].0 / area, beam: n_dense[k].1 / area };
+        let covered_fraction = grids[k].covered_fraction(x0, y0, 10f64.min(w.fsigma as f64));
+        out.push(match cfg.min_covered_fraction {
+            Some(min) if covered_fraction < min => Err(SkipReason::PartlyCovered { covered_fraction }),
+            _ => Ok(Gathered {
+                contributions: Vec::new(),
+                z_range: (z_lo, z_hi),
+                densities,
+                covered_fraction,
+                mean_scan_angle_deg: 0.0,
+            }),
+        });
     }
 
     // Pass 2 (waveFromPointCloud): weights of the contributing returns.
-    let cut_sq = weight_cut_off_sq(cfg.fsigma);
-    let mut contributions = Vec::with_capacity(candidates.len());
-    let (mut scan_sum, mut weight_sum) = (0f32, 0f32);
+    let cut_sq: Vec<f64> = widths.iter().map(|w| weight_cut_off_sq(w.fsigma)).collect();
+    let farthest_first = largest_first(&|k| cut_sq[k]);
+    let mut sums = vec![(0f32, 0f32); widths.len()];
+    let widest = Square { x0, y0, half: widths.iter().map(|w| w.half).fold(0.0, f64::max) };
     for &i in candidates {
         let i = i as usize;
         let (dx, dy) = (p.x[i] - x0, p.y[i] - y0);
         let d_sq = dx * dx + dy * dy;
-        if !(d_sq <= cut_sq) {
-            continue; // far beyond the cut-off: the weight test below would reject it
-        }
-        let mut r = footprint_weight(d_sq.sqrt(), cfg.fsigma);
-        if !(r > I_THRESH) {
-            continue;
-        }
-        if cfg.normalise_density {
-            // The cell of the return's pulse (its one first return in the box), else its own.
-            let own = (p.x[i], p.y[i]);
-            let (x, y) = pulses.and_then(|ps| ps.first_return(i, own, square)).unwrap_or(own);
-            let n = grid.pulses_at(x, y);
-            if n > 0 {
-                r /= n as f32;
+        // Its pulse's first returns in the widest box, looked up once for every width.
+        let mut first: Option<Found> = None;
+        for &k in &farthest_first {
+            if !(d_sq <= cut_sq[k]) {
+                break; // far beyond this width's cut-off, and beyond every narrower one's
+            }
+            let Ok(g) = &mut out[k] else { continue };
+            let mut r = footprint_weight(d_sq.sqrt(), widths[k].fsigma);
+            if !(r > I_THRESH) {
+                continue;
+            }
+            if cfg.normalise_density {
+                // The cell of the return's pulse (its one first return in the box), else its own.
+                let own = (p.x[i], p.y[i]);
+                let found =
+                    *first.get_or_insert_with(|| pulses.map_or(Found::None, |ps| ps.first_returns(i, own, widest)));
+                let in_box = match found {
+                    Found::One(xy) => squares[k].contains(xy.0, xy.1).then_some(xy),
+                    Found::None => None,
+                    Found::Several => pulses.and_then(|ps| ps.first_return(i, own, squares[k])),
+                };
+                let (x, y) = in_box.unwrap_or(own);
+                let n = grids[k].pulses_at(x, y);
+                if n > 0 {
+                    r /= n as f32;
+                }
+            }
+            let intensity = if p.intensity[i] > 0 { p.intensity[i] } else { 1 };
+            let n_ret = p.number_of_returns[i];
+            let frac_hit = if n_ret > 0 { (1.0 / n_ret as f64) as f32 } else { 1.0 };
+            let mut w = [0f32; N_WEIGHTINGS];
+            w[Weighting::Count as usize] = r;
+            w[Weighting::Frac as usize] = r * frac_hit;
+            w[Weighting::Int as usize] = intensity as f32 * r;
+            g.contributions.push(Contribution { z: p.z[i], w, ground: p.classification[i] == 2 });
+            sums[k].0 += r * p.scan_angle_deg[i].abs();
+            sums[k].1 += r;
+            if !q.batch_grid {
+                g.z_range = (g.z_range.0.min(p.z[i]), g.z_range.1.max(p.z[i]));
             }
         }
-        let intensity = if p.intensity[i] > 0 { p.intensity[i] } else { 1 };
-        let n_ret = p.number_of_returns[i];
-        let frac_hit = if n_ret > 0 { (1.0 / n_ret as f64) as f32 } else { 1.0 };
-        let mut w = [0f32; N_WEIGHTINGS];
-        w[Weighting::Count as usize] = r;
-        w[Weighting::Frac as usize] = r * frac_hit;
-        w[Weighting::Int as usize] = intensity as f32 * r;
-        contributions.push(Contribution { z: p.z[i], w, ground: p.classification[i] == 2 });
-        scan_sum += r * p.scan_angle_deg[i].abs();
-        weight_sum += r;
-        if !q.batch_grid {
-            z_lo = z_lo.min(p.z[i]);
-            z_hi = z_hi.max(p.z[i]);
-        }
     }
-    if contributions.is_empty() && !q.batch_grid {
-        return Err(SkipReason::NoPoints);
-    }
+    out.into_iter()
+        .zip(sums)
+        .map(|(g, (scan_sum, weight_sum))| {
+            let g = g?;
+            if g.contributions.is_empty() && !q.batch_grid {
+                return Err(SkipReason::NoPoints);
+            }
+            let mean_scan_angle_deg = if weight_sum > 0.0 { scan_sum / weight_sum } else { 0.0 };
+            Ok(Gathered { mean_scan_angle_deg, ..g })
+        })
+        .collect()
+}
+
+/// The waveforms of one width from what [`gather`] found: binned, convolved with the pulse,
+/// cleaned, normalised, and their truths and RH.
+fn finish<T: Sample>(job: &Job, fsigma: f32, g: Gathered) -> Outcome {
+    let Job { footprint: fp, cfg, .. } = *job;
+    let q = cfg.quirks;
+    let Gathered { contributions, z_range: (z_lo, z_hi), densities, covered_fraction, mean_scan_angle_deg } = g;
 
     // Bin grid: top edge `top`, bin k = floor((top − z)/dz).
     let pulse = fp.pulse.as_deref().unwrap_or(&cfg.pulse);
@@ -599,9 +738,9 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
             // pulse and footprint widths from the %f header.
             let w: Vec<f32> = wave.iter().map(|&v| as_printed(v, 1e10)).collect();
             let g: Vec<f32> = ground.iter().map(|&v| as_printed(v, 1e6)).collect();
-            metrics(&w, &g, |k| printed_label(label(k)), as_printed(pulse.sigma, 1e6), as_printed(cfg.fsigma, 1e6))
+            metrics(&w, &g, |k| printed_label(label(k)), as_printed(pulse.sigma, 1e6), as_printed(fsigma, 1e6))
         } else {
-            metrics(&wave, &ground, label, pulse.sigma, cfg.fsigma)
+            metrics(&wave, &ground, label, pulse.sigma, fsigma)
         };
         WeightedWave { wave, ground, canopy, truth, rh }
     });
@@ -613,7 +752,7 @@ fn simulate_footprint<T: Sample>(job: &Job) -> Outcome {
         weightings,
         n_points: contributions.len() as u32,
         densities,
-        mean_scan_angle_deg: if weight_sum > 0.0 { scan_sum / weight_sum } else { 0.0 },
+        mean_scan_angle_deg,
         covered_fraction,
     })
 }
@@ -838,6 +977,39 @@ mod tests {
         // Without GPS times no pulse is found: each return uses its own cell (first returns).
         let no_gps = ground_share(&slanted_scene(true, true), DensityCount::Pulses);
         assert!((no_gps - per_pulse).abs() > 0.03, "{no_gps} vs {per_pulse}");
+    }
+
+    #[test]
+    fn several_widths_at_once_are_each_width_alone() {
+        // Slanted pulses over scan-line stripes: each width's density grid, box and pulse lookups
+        // differ; footprints inside, near the edge and outside the data.
+        let mut points = slanted_scene(true, false);
+        // The scene again 14 m further in x with the same pulse keys (a tile mosaicked twice):
+        // the widest box meets two pulses of one key where a narrower one meets one.
+        let mut copy = points.clone();
+        copy.x.iter_mut().for_each(|x| *x += 14.0);
+        points.extend_from(&copy);
+        let fps: Vec<Footprint> = [(30.0, 30.0), (12.3, 47.9), (2.0, 30.0), (58.0, 1.0), (-40.0, 5.0)]
+            .iter()
+            .enumerate()
+            .map(|(k, &(x, y))| fp(&k.to_string(), x, y))
+            .collect();
+        let widths = [5.5f32, 10.0, 3.5];
+        for density_count in [DensityCount::Pulses, DensityCount::LastReturns] {
+            for min_covered_fraction in [None, Some(2.0 / 3.0)] {
+                let cfg = SimConfig { density_count, min_covered_fraction, ..SimConfig::new(Profile::Default) };
+                let all = simulate_widths(&points, &fps, &cfg, &widths).unwrap();
+                for (k, &fsigma) in widths.iter().enumerate() {
+                    let alone = simulate(&points, &fps, &SimConfig { fsigma, ..cfg.clone() }).unwrap();
+                    assert_eq!(all[k], alone, "σ_f {fsigma}, {density_count:?}, {min_covered_fraction:?}");
+                }
+                assert!(all.iter().all(|w| w[0].is_ok() && w[4] == Err(SkipReason::NoPoints)));
+            }
+        }
+        // The reference's batch grid depends on the width: refused, as are widths that are no widths.
+        assert!(simulate_widths(&points, &fps, &SimConfig::new(Profile::Gedirat), &widths).is_err());
+        assert!(simulate_widths(&points, &fps, &SimConfig::new(Profile::Default), &[5.5, f32::NAN]).is_err());
+        assert!(simulate_widths(&points, &fps, &SimConfig::new(Profile::Default), &[]).is_err());
     }
 
     #[test]

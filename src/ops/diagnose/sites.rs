@@ -8,7 +8,7 @@ use super::cases::{count_dropped, CaseReport, Pending};
 use crate::dataset::als::AlsTable;
 use crate::error::Result;
 use crate::kernels::diagnose::case::{
-    configs, site_grid, site_of, RealShot, SimShot, Site, FSIGMA_GRID, NOMINAL_WIDTH,
+    configs, fsigma_grid, site_grid, site_of, RealShot, SimShot, Site, FSIGMA_GRID, NOMINAL_WIDTH,
 };
 use crate::kernels::diagnose::ShotCase;
 use crate::kernels::gedi::N_ALGORITHMS;
@@ -29,7 +29,7 @@ pub(super) fn simulate_cases(
     if pending.is_empty() {
         return Ok(Vec::new());
     }
-    let (nominal, variants) = configs();
+    let (nominal, chain) = configs();
     let fmax = FSIGMA_GRID[FSIGMA_GRID.len() - 1] as f32;
     let half = sim::footprint::read_radius(fmax);
     let grid = site_grid();
@@ -76,8 +76,8 @@ pub(super) fn simulate_cases(
                     .collect(),
             );
         }
-        let vars = variants.iter().map(|cfg| sim::simulate(&points, &full, cfg)).collect::<Result<Vec<_>, _>>()?;
-        let light_vars = sim::simulate(&points, &light, &variants[NOMINAL_WIDTH])?;
+        let vars = sim::simulate_widths(&points, &full, &chain, &fsigma_grid())?;
+        let light_vars = sim::simulate(&points, &light, &chain)?;
         for (j, (mut real, short, ranked, positions)) in reals.into_iter().enumerate() {
             on_shot();
             let Ok(n) = &nom[j] else {
