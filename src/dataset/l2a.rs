@@ -1,21 +1,15 @@
-//! The `l2a` table: one row per shot × algorithm (the `gedisim l2a` contract, docs/contracts.md), from
-//! the L1B waveforms of the `shots` schema through the L2A kernel, and the columns of one L2A
-//! outcome that the CLI table and the `gedi_l2a` SQL struct share.
+//! The `l2a` table: one row per shot × algorithm (the `gedisim l2a` contract, docs/contracts.md), and
+//! the columns of one L2A outcome that the table (`crate::ops::l2a` runs the kernel) and the
+//! `gedi_l2a` SQL struct share.
 
 use std::sync::Arc;
 
-use arrow::array::{
-    Array, ArrayRef, AsArray, Float32Array, Float32Builder, Float64Array, ListBuilder, RecordBatch, StringArray,
-    UInt64Array, UInt8Array,
-};
-use arrow::datatypes::{DataType, Field, Fields, Float32Type, Float64Type, Schema, SchemaRef, UInt64Type};
-use rayon::prelude::*;
+use arrow::array::{ArrayRef, Float32Array, Float32Builder, Float64Array, ListBuilder, StringArray, UInt8Array};
+use arrow::datatypes::{DataType, Field, Fields, Schema, SchemaRef};
 
 use super::{list_f32, list_f32_builder};
-use crate::error::{Error, Result};
-use crate::kernels::waveform::l2a::{
-    AlgorithmSettings, L2aOutcome, L2aProcessor, NoResult, Noise, WaveformGeolocation,
-};
+use crate::error::Result;
+use crate::kernels::waveform::l2a::{L2aOutcome, WaveformGeolocation};
 
 /// Schema of the `l2a` table.
 pub fn l2a_schema() -> SchemaRef {
@@ -155,6 +149,23 @@ impl L2aColumns {
         self.num_modes.push(None);
     }
 
+    /// The columns of the `l2a` table after its keys and `status` ([`l2a_schema`]).
+    pub fn finish_table_columns(mut self) -> Vec<ArrayRef> {
+        vec![
+            Arc::new(Float64Array::from(self.toploc)),
+            Arc::new(Float64Array::from(self.botloc)),
+            Arc::new(Float64Array::from(self.zcross)),
+            Arc::new(Float64Array::from(self.elev_lowestmode)),
+            Arc::new(Float64Array::from(self.elev_highestreturn)),
+            Arc::new(Float64Array::from(self.lat_lowestmode)),
+            Arc::new(Float64Array::from(self.lon_lowestmode)),
+            Arc::new(self.rh.finish()),
+            Arc::new(Float32Array::from(self.sensitivity)),
+            Arc::new(Float32Array::from(self.energy_total)),
+            Arc::new(UInt8Array::from(self.num_modes)),
+        ]
+    }
+
     /// The `gedi_l2a` struct column ([`l2a_struct_fields`]); null rows are null structs.
     pub fn finish_struct(mut self) -> Result<arrow::array::StructArray, arrow::error::ArrowError> {
         let arrays: Vec<ArrayRef> = vec![
@@ -171,74 +182,4 @@ impl L2aColumns {
         let nulls = self.valid.iter().any(|v| !v).then(|| self.valid.into());
         arrow::array::StructArray::try_new(l2a_struct_fields(), arrays, nulls)
     }
-}
-
-/// Run the L2A kernel with `settings` on every shot of a `shots` batch that has L1B columns (rows
-/// without are skipped), shots in parallel. A shot the kernel cannot process, or whose waveform
-/// ingest nulled, keeps its rows with `status` = `no_result: <reason>` and null values.
-pub fn l2a_batch(shots: &RecordBatch, settings: &[AlgorithmSettings], source: &std::path::Path) -> Result<RecordBatch> {
-    let col = |n: &str| shots.column_by_name(n).ok_or_else(|| Error::field(source, n, "column missing"));
-    let sn = col("shot_number")?.as_primitive::<UInt64Type>().clone();
-    let beam = col("beam")?.as_string::<i32>().clone();
-    let waves = col("rx_waveform")?.as_list::<i32>().clone();
-    let f64c = |n: &str| -> Result<Float64Array> { Ok(col(n)?.as_primitive::<Float64Type>().clone()) };
-    let (mean, sd) = (f64c("noise_mean_corrected")?, f64c("noise_stddev_corrected")?);
-    let (z0, zn) = (f64c("elevation_bin0")?, f64c("elevation_lastbin")?);
-    let (la0, lan) = (f64c("lat_bin0")?, f64c("lat_lastbin")?);
-    let (lo0, lon) = (f64c("lon_bin0")?, f64c("lon_lastbin")?);
-    let l1b_rows: Vec<usize> = (0..shots.num_rows()).filter(|&i| !z0.is_null(i)).collect();
-    let outcomes: Vec<(usize, Vec<L2aOutcome>, WaveformGeolocation)> = l1b_rows
-        .par_iter()
-        .map_init(L2aProcessor::new, |proc, &i| {
-            let w = if waves.is_null(i) { None } else { Some(waves.value(i)) };
-            let w = w.as_ref().map(|w| w.as_primitive::<Float32Type>());
-            let geo = WaveformGeolocation {
-                sample_count: w.map_or(0, |w| w.len()),
-                elevation_bin0: z0.value(i),
-                elevation_lastbin: zn.value(i),
-                latitude_bin0: la0.value(i),
-                latitude_lastbin: lan.value(i),
-                longitude_bin0: lo0.value(i),
-                longitude_lastbin: lon.value(i),
-            };
-            let noise = Noise { mean: mean.value(i), stddev: sd.value(i) };
-            let mut out = Vec::with_capacity(settings.len());
-            match w {
-                Some(w) => proc.process_all(w.values(), noise, &geo, settings, &mut out),
-                None => out.extend(settings.iter().map(|_| Err(NoResult::NoWaveform))),
-            }
-            (i, out, geo)
-        })
-        .collect();
-    let n = outcomes.len() * settings.len();
-    let (mut o_sn, mut o_beam, mut o_alg, mut o_status) =
-        (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
-    let mut c = L2aColumns::with_capacity(n);
-    for (i, outs, geo) in &outcomes {
-        for (s, o) in settings.iter().zip(outs) {
-            o_sn.push(sn.value(*i));
-            o_beam.push(beam.value(*i).to_string());
-            o_alg.push(s.id);
-            o_status.push(status_text(o));
-            c.append(o, geo, true);
-        }
-    }
-    let cols: Vec<ArrayRef> = vec![
-        Arc::new(UInt64Array::from(o_sn)),
-        Arc::new(StringArray::from(o_beam)),
-        Arc::new(UInt8Array::from(o_alg)),
-        Arc::new(StringArray::from(o_status)),
-        Arc::new(Float64Array::from(c.toploc)),
-        Arc::new(Float64Array::from(c.botloc)),
-        Arc::new(Float64Array::from(c.zcross)),
-        Arc::new(Float64Array::from(c.elev_lowestmode)),
-        Arc::new(Float64Array::from(c.elev_highestreturn)),
-        Arc::new(Float64Array::from(c.lat_lowestmode)),
-        Arc::new(Float64Array::from(c.lon_lowestmode)),
-        Arc::new(c.rh.finish()),
-        Arc::new(Float32Array::from(c.sensitivity)),
-        Arc::new(Float32Array::from(c.energy_total)),
-        Arc::new(UInt8Array::from(c.num_modes)),
-    ];
-    RecordBatch::try_new(l2a_schema(), cols).map_err(|e| Error::table(source, e))
 }

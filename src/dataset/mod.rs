@@ -9,7 +9,6 @@
 
 pub mod als;
 pub mod blocks;
-pub mod collocation;
 pub mod l2a;
 pub mod lock;
 pub mod offsets;

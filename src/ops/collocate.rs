@@ -1,4 +1,4 @@
-//! `collocate`: granules of a dataset's `shots/` collocated ([`crate::dataset::collocation`]), here or
+//! `collocate`: granules of a dataset's `shots/` collocated ([`crate::sql::collocation`]), here or
 //! as one plan on a cluster (a partition per granule, [`crate::sql::collocate`]), into
 //! `<dataset>/offsets/offsets.parquet`. Each run of `gedisim collocate` replaces the table (the level
 //! is in every row); `gedisim run` merges the granules it collocates into it.
@@ -10,7 +10,7 @@ use std::sync::Arc;
 use arrow::array::RecordBatch;
 use futures::StreamExt;
 
-pub use crate::dataset::collocation::{CollocateOptions, CollocateReport, Collocation};
+pub use crate::sql::collocation::{CollocateOptions, CollocateReport, Collocation};
 use crate::dataset::offsets::{offsets_batch, offsets_schema};
 use crate::dataset::{self, tables, Dataset};
 use crate::error::{Error, Result};

@@ -2,11 +2,18 @@
 //! per shot × algorithm written to a Parquet file (docs/l2a.md).
 
 use std::path::Path;
+use std::sync::Arc;
 
-use crate::dataset::l2a::{l2a_batch, l2a_schema};
+use arrow::array::{Array, ArrayRef, AsArray, Float64Array, RecordBatch, StringArray, UInt64Array, UInt8Array};
+use arrow::datatypes::{Float32Type, Float64Type, UInt64Type};
+use rayon::prelude::*;
+
+use crate::dataset::l2a::{l2a_schema, status_text, L2aColumns};
 use crate::dataset::{writer_properties, AtomicParquet};
 use crate::error::{Error, Result};
-use crate::kernels::waveform::l2a::AlgorithmSettings;
+use crate::kernels::waveform::l2a::{
+    AlgorithmSettings, L2aOutcome, L2aProcessor, NoResult, Noise, WaveformGeolocation,
+};
 use crate::ops::ingest_gedi::{ingest_gedi, GediOptions};
 
 /// What `gedisim l2a` wrote.
@@ -39,4 +46,64 @@ pub fn l2a(l1b: &Path, algorithms: &[u8], out: &Path) -> Result<L2aReport> {
     })?;
     writer.finish()?;
     Ok(L2aReport { shots: report.rows(), rows, warnings: report.warnings() })
+}
+
+/// Run the L2A kernel with `settings` on every shot of a `shots` batch that has L1B columns (rows
+/// without are skipped), shots in parallel. A shot the kernel cannot process, or whose waveform
+/// ingest nulled, keeps its rows with `status` = `no_result: <reason>` and null values.
+fn l2a_batch(shots: &RecordBatch, settings: &[AlgorithmSettings], source: &Path) -> Result<RecordBatch> {
+    let col = |n: &str| shots.column_by_name(n).ok_or_else(|| Error::field(source, n, "column missing"));
+    let sn = col("shot_number")?.as_primitive::<UInt64Type>().clone();
+    let beam = col("beam")?.as_string::<i32>().clone();
+    let waves = col("rx_waveform")?.as_list::<i32>().clone();
+    let f64c = |n: &str| -> Result<Float64Array> { Ok(col(n)?.as_primitive::<Float64Type>().clone()) };
+    let (mean, sd) = (f64c("noise_mean_corrected")?, f64c("noise_stddev_corrected")?);
+    let (z0, zn) = (f64c("elevation_bin0")?, f64c("elevation_lastbin")?);
+    let (la0, lan) = (f64c("lat_bin0")?, f64c("lat_lastbin")?);
+    let (lo0, lon) = (f64c("lon_bin0")?, f64c("lon_lastbin")?);
+    let l1b_rows: Vec<usize> = (0..shots.num_rows()).filter(|&i| !z0.is_null(i)).collect();
+    let outcomes: Vec<(usize, Vec<L2aOutcome>, WaveformGeolocation)> = l1b_rows
+        .par_iter()
+        .map_init(L2aProcessor::new, |proc, &i| {
+            let w = if waves.is_null(i) { None } else { Some(waves.value(i)) };
+            let w = w.as_ref().map(|w| w.as_primitive::<Float32Type>());
+            let geo = WaveformGeolocation {
+                sample_count: w.map_or(0, |w| w.len()),
+                elevation_bin0: z0.value(i),
+                elevation_lastbin: zn.value(i),
+                latitude_bin0: la0.value(i),
+                latitude_lastbin: lan.value(i),
+                longitude_bin0: lo0.value(i),
+                longitude_lastbin: lon.value(i),
+            };
+            let noise = Noise { mean: mean.value(i), stddev: sd.value(i) };
+            let mut out = Vec::with_capacity(settings.len());
+            match w {
+                Some(w) => proc.process_all(w.values(), noise, &geo, settings, &mut out),
+                None => out.extend(settings.iter().map(|_| Err(NoResult::NoWaveform))),
+            }
+            (i, out, geo)
+        })
+        .collect();
+    let n = outcomes.len() * settings.len();
+    let (mut o_sn, mut o_beam, mut o_alg, mut o_status) =
+        (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
+    let mut c = L2aColumns::with_capacity(n);
+    for (i, outs, geo) in &outcomes {
+        for (s, o) in settings.iter().zip(outs) {
+            o_sn.push(sn.value(*i));
+            o_beam.push(beam.value(*i).to_string());
+            o_alg.push(s.id);
+            o_status.push(status_text(o));
+            c.append(o, geo, true);
+        }
+    }
+    let mut cols: Vec<ArrayRef> = vec![
+        Arc::new(UInt64Array::from(o_sn)),
+        Arc::new(StringArray::from(o_beam)),
+        Arc::new(UInt8Array::from(o_alg)),
+        Arc::new(StringArray::from(o_status)),
+    ];
+    cols.extend(c.finish_table_columns());
+    RecordBatch::try_new(l2a_schema(), cols).map_err(|e| Error::table(source, e))
 }

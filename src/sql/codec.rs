@@ -22,7 +22,7 @@ use datafusion_proto::physical_plan::{PhysicalExtensionCodec, PhysicalProtoConve
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
-use crate::dataset::collocation::CollocateOptions;
+use crate::sql::collocation::CollocateOptions;
 use crate::dataset::offsets::AppliedOffset;
 use crate::dataset::Dataset;
 use crate::kernels::collocate::segments::Level;

@@ -16,7 +16,7 @@ use datafusion::datasource::TableType;
 use datafusion::logical_expr::Expr;
 use datafusion::physical_plan::ExecutionPlan;
 
-use crate::dataset::collocation::{CollocateOptions, CollocateReport, Collocation};
+use crate::sql::collocation::{CollocateOptions, CollocateReport, Collocation};
 use crate::dataset::offsets::{offsets_batch, offsets_schema};
 use crate::dataset::{tables, Dataset};
 use crate::error::{Error, Result};

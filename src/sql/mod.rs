@@ -5,6 +5,7 @@ pub mod args;
 #[cfg(feature = "cluster")]
 pub mod codec;
 pub mod collocate;
+pub mod collocation;
 pub mod l2a;
 pub mod link_margin_twin;
 pub mod noise_twin;

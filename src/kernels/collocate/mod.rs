@@ -13,7 +13,7 @@
 //!   sub-node refinement) and the half-extents of the region within 0.005 of it.
 //!
 //! Which shots share an offset is decided by [`segments`]; the real waveform is prepared by
-//! [`profile`]. `crate::dataset::collocation` drives it from a dataset. `docs/collocation.md` has the method.
+//! [`profile`]. `crate::sql::collocation` drives it from a dataset. `docs/collocation.md` has the method.
 
 pub mod correlation;
 pub mod profile;
