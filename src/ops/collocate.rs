@@ -10,12 +10,12 @@ use std::sync::Arc;
 use arrow::array::RecordBatch;
 use futures::StreamExt;
 
-pub use crate::sql::collocation::{CollocateOptions, CollocateReport, Collocation};
 use crate::dataset::offsets::{offsets_batch, offsets_schema};
 use crate::dataset::{self, tables, Dataset};
 use crate::error::{Error, Result};
 use crate::ops::progress::{Progress, Step};
 use crate::sql::collocate::{granule_results, shots_file_name, CollocatedGranules};
+pub use crate::sql::collocation::{CollocateOptions, CollocateReport, Collocation};
 pub use crate::sql::Engine;
 
 /// `gedisim collocate`: every granule of the dataset collocated here and written to `offsets/`.

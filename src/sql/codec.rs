@@ -22,12 +22,12 @@ use datafusion_proto::physical_plan::{PhysicalExtensionCodec, PhysicalProtoConve
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
-use crate::sql::collocation::CollocateOptions;
 use crate::dataset::offsets::AppliedOffset;
 use crate::dataset::Dataset;
 use crate::kernels::collocate::segments::Level;
 use crate::kernels::sim::{Footprint, Profile, PulseModel, PulseReference};
 use crate::sql::collocate::{CollocateExec, CollocatedGranules};
+use crate::sql::collocation::CollocateOptions;
 use crate::sql::simulate::{FootprintPartition, Footprints, SimulateExec, SimulateWork, SimulatedShots};
 
 /// What starts an encoded simulation (Ballista's own nodes are protobuf messages, which never start

@@ -16,10 +16,10 @@ use datafusion::datasource::TableType;
 use datafusion::logical_expr::Expr;
 use datafusion::physical_plan::ExecutionPlan;
 
-use crate::sql::collocation::{CollocateOptions, CollocateReport, Collocation};
 use crate::dataset::offsets::{offsets_batch, offsets_schema};
 use crate::dataset::{tables, Dataset};
 use crate::error::{Error, Result};
+use crate::sql::collocation::{CollocateOptions, CollocateReport, Collocation};
 use crate::sql::partitions::{to_df, PartitionBatches, PartitionExec, PartitionWork};
 
 /// The plan collocating [`CollocatedGranules`].
