@@ -527,7 +527,7 @@ fn gather(job: &Job, widths: &[Width]) -> Vec<std::result::Result<Gathered, Skip
     let Job { points: p, pulses, candidates, footprint: fp, cfg, .. } = *job;
     let q = cfg.quirks;
     let (x0, y0) = (fp.x, fp.y);
-    if candidates.is_empty() {
+    if candidates.is_empty() || widths.is_empty() {
         return widths.iter().map(|_| Err(SkipReason::NoPoints)).collect();
     }
 
@@ -554,11 +554,15 @@ fn gather(job: &Job, widths: &[Width]) -> Vec<std::result::Result<Gathered, Skip
             z_lo = z_lo.min(p.z[i]);
             z_hi = z_hi.max(p.z[i]);
         }
+        if !squares[widest_first[0]].contains(x, y) {
+            continue;
+        }
+        let last = is_last_return(p, i);
+        let (dx, dy) = (x - x0, y - y0);
         for &k in &widest_first {
             if !squares[k].contains(x, y) {
                 break;
             }
-            let last = is_last_return(p, i);
             if pulses.is_some() {
                 if p.return_number[i] == 1 {
                     grids[k].add_pulse(x, y);
@@ -566,7 +570,6 @@ fn gather(job: &Job, widths: &[Width]) -> Vec<std::result::Result<Gathered, Skip
             } else if last {
                 grids[k].add_pulse(x, y);
             }
-            let (dx, dy) = (x - x0, y - y0);
             if dx * dx + dy * dy <= dense_rad_sq[k] as f64 {
                 n_dense[k].0 += 1.0;
                 n_dense[k].1 += f32::from(u8::from(last));
@@ -597,7 +600,7 @@ fn gather(job: &Job, widths: &[Width]) -> Vec<std::result::Result<Gathered, Skip
     let cut_sq: Vec<f64> = widths.iter().map(|w| weight_cut_off_sq(w.fsigma)).collect();
     let farthest_first = largest_first(&|k| cut_sq[k]);
     let mut sums = vec![(0f32, 0f32); widths.len()];
-    let widest = Square { x0, y0, half: widths.iter().map(|w| w.half).fold(0.0, f64::max) };
+    let widest = squares[widest_first[0]];
     for &i in candidates {
         let i = i as usize;
         let (dx, dy) = (p.x[i] - x0, p.y[i] - y0);
