@@ -3,6 +3,7 @@
 //!   line also opens the `dataset` handle it hands to an operation), and every
 //!   layer may use `error`; kernels use nothing but kernels (no files, no Arrow, no Parquet: they
 //!   are a package of their own, `src/kernels/Cargo.toml`, whose `crate::` is `kernels`);
+//! - `dataset/` is the store: it takes the kernels' types and constants, never a function;
 //! - no module imports one of its importers (no cycle between the modules of the tree);
 //! - no line is wider than `rustfmt.toml`'s `max_width` (rustfmt leaves long strings alone).
 
@@ -201,6 +202,53 @@ fn no_module_imports_one_of_its_importers() {
         }
     }
     assert!(cycles.is_empty(), "{} cycles between modules (listed above)", cycles.len());
+}
+
+/// The names a line of code takes from the kernels: the last segment of each `kernels::…` path,
+/// and every name of a `kernels::…::{…}` list.
+fn kernel_names(line: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut rest = line;
+    while let Some(i) = rest.find("kernels::") {
+        rest = &rest[i + "kernels::".len()..];
+        let path: String = rest.chars().take_while(|c| c.is_alphanumeric() || *c == '_' || *c == ':').collect();
+        let after = &rest[path.len()..];
+        if path.ends_with("::") && after.starts_with('{') {
+            let list = &after[1..after.find('}').unwrap_or(after.len())];
+            out.extend(list.split(',').map(|n| n.trim().to_string()).filter(|n| !n.is_empty()));
+        } else {
+            out.push(path.rsplit("::").next().unwrap_or("").to_string());
+        }
+    }
+    out
+}
+
+#[test]
+fn the_store_calls_no_kernel() {
+    // `dataset/` is the store (docs/ARCHITECTURE.md): it holds the kernels' values (types and
+    // constants, whose names begin with a capital) and never takes one of their functions or a
+    // whole kernel module (`sim::simulate`, `sim::{self, …}`): what computes lives in `sql/` or `ops/`.
+    let mut files = Vec::new();
+    rust_files(&src().join("dataset"), &mut files);
+    let mut wrong = Vec::new();
+    for f in files {
+        let text = std::fs::read_to_string(&f).unwrap();
+        for (n, line) in code_of(&text).lines().enumerate() {
+            for name in kernel_names(line) {
+                if !name.starts_with(|c: char| c.is_ascii_uppercase()) {
+                    wrong.push(format!("{}:{}: `{name}` in {}", f.display(), n + 1, line.trim()));
+                }
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "the store calls kernels:\n{}", wrong.join("\n"));
+}
+
+#[test]
+fn kernel_names_reads_paths_and_lists() {
+    assert_eq!(kernel_names("use crate::kernels::sim::{self, Footprint};"), ["self", "Footprint"]);
+    assert_eq!(kernel_names("let r = crate::kernels::sim::footprint::read_radius(s);"), ["read_radius"]);
+    assert_eq!(kernel_names("use crate::kernels::gedi::N_ALGORITHMS;"), ["N_ALGORITHMS"]);
 }
 
 #[test]

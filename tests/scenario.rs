@@ -238,7 +238,7 @@ fn shots_carry_real_transmit_pulses_and_plots_get_their_mean() {
     // (floor = median of samples 0–19, clipped at 0) it lies 0.217–0.782 m after the peak (median
     // 0.506); the draws stretch time by at most ±8 %, hence 0.15–0.9 m.
     let dataset = gedisim::dataset::Dataset::open(&ds).unwrap();
-    let pulses = gedisim::dataset::shots::shot_pulses(&dataset, PulseReference::Peak, 0.15).unwrap();
+    let pulses = gedisim::sql::pulses::shot_pulses(&dataset, PulseReference::Peak, 0.15).unwrap();
     assert_eq!((pulses.by_shot.len(), pulses.missing, pulses.unusable), (shots, 0, 0));
     for p in pulses.by_shot.values() {
         let centroid: f32 = p.x.iter().zip(&p.y).map(|(x, y)| x * y).sum();

@@ -8,7 +8,6 @@
 //! [`offsets`], [`results`] (schemas of the derived tables and kernel outputs as Arrow).
 
 pub mod als;
-pub mod blocks;
 pub mod l2a;
 pub mod lock;
 pub mod offsets;

@@ -2,7 +2,6 @@
 //! writes them), and the shots read back: positions in the ALS CRS, moved by their collocation
 //! offsets, and WGS84 positions.
 
-use std::collections::HashMap;
 use std::sync::Arc;
 
 use arrow::array::{Array, AsArray};
@@ -14,7 +13,7 @@ use super::read::{self, value};
 use super::{tables, Dataset};
 use crate::error::{Error, Result};
 use crate::kernels::gedi::N_ALGORITHMS;
-use crate::kernels::sim::{Footprint, Pulse, PulseReference, TransmitPulse};
+use crate::kernels::sim::Footprint;
 use crate::kernels::study::classes::ShotPosition;
 
 /// The files of the `shots/` table; an error naming the folder when there is none.
@@ -49,65 +48,20 @@ pub fn shot_footprints(ds: &Dataset) -> Result<Vec<(Footprint, Option<AppliedOff
     Ok(out)
 }
 
-/// The shots' recorded transmit pulses (`tx_waveform`, docs/pulse.md) at bin size `res` (m),
-/// placed at `reference`.
-#[derive(Debug, Clone, Default)]
-pub struct ShotPulses {
-    pub by_shot: HashMap<u64, Arc<Pulse>>,
-    /// Shots without a `tx_waveform`.
-    pub missing: usize,
-    /// Shots whose record holds no usable pulse (too short, non-finite, no pulse above the floor).
-    pub unusable: usize,
-}
-
-impl ShotPulses {
-    /// The mean of every shot's pulse (aligned at the reference point); `None` without any.
-    pub fn mean(&self) -> Option<Pulse> {
-        let mut all: Vec<(&u64, &Arc<Pulse>)> = self.by_shot.iter().collect();
-        all.sort_by_key(|(sn, _)| **sn);
-        Pulse::mean(&all.iter().map(|(_, p)| p.as_ref()).collect::<Vec<_>>())
-    }
-
-    /// One line on the shots that fell back to another pulse, if any.
-    pub fn note(&self) -> Option<String> {
-        (self.missing + self.unusable > 0).then(|| {
-            format!(
-                "recorded pulse: {} shot(s) without a transmit waveform and {} with no usable pulse use the mean \
-                 recorded pulse",
-                self.missing, self.unusable
-            )
-        })
-    }
-}
-
-/// Every shot's recorded transmit pulse from the `shots/` table (see [`ShotPulses`]).
-pub fn shot_pulses(ds: &Dataset, reference: PulseReference, res: f64) -> Result<ShotPulses> {
-    let mut out = ShotPulses::default();
-    for f in shot_files(ds)? {
-        read::for_each_batch(&f, Some(&["shot_number", "tx_waveform"]), None, |c| {
+/// Call `f` with every shot's number and its recorded transmit waveform (`tx_waveform`; `None`
+/// when the shot has none).
+pub fn for_each_transmit_record(ds: &Dataset, mut f: impl FnMut(u64, Option<Vec<f32>>)) -> Result<()> {
+    for file in shot_files(ds)? {
+        read::for_each_batch(&file, Some(&["shot_number", "tx_waveform"]), None, |c| {
             let sn = c.u64s("shot_number")?;
             for i in 0..c.num_rows() {
                 let Some(sn) = value(sn, i) else { continue };
-                match c.f32_list("tx_waveform", i)? {
-                    None => out.missing += 1,
-                    Some(tx) => match recorded_pulse(&tx, reference, res) {
-                        Some(p) => {
-                            out.by_shot.insert(sn, Arc::new(p));
-                        }
-                        None => out.unusable += 1,
-                    },
-                }
+                f(sn, c.f32_list("tx_waveform", i)?);
             }
             Ok(())
         })?;
     }
-    Ok(out)
-}
-
-/// A transmit record as a pulse at bin size `res` placed at `reference`; `None` when the record
-/// holds no usable pulse.
-pub fn recorded_pulse(tx: &[f32], reference: PulseReference, res: f64) -> Option<Pulse> {
-    TransmitPulse::from_record(tx).ok().map(|t| t.to_pulse(reference, res))
+    Ok(())
 }
 
 /// Each shot's number and WGS84 position (lon, lat): the lowest mode when valid, else the mean of

@@ -11,7 +11,6 @@ use arrow::record_batch::RecordBatch;
 use datafusion::prelude::SessionContext;
 
 use crate::dataset::als::DROPPED_CLASSES;
-use crate::dataset::blocks::{blocks, BlockSimulation};
 use crate::dataset::offsets::AppliedOffset;
 use crate::dataset::sim::{sim_batch, sim_metadata, sim_schema};
 use crate::dataset::{self, tables, AtomicParquet, Dataset};
@@ -24,6 +23,7 @@ use crate::kernels::sim::{
     self, AlsPoints, DensityCount, Footprint, Profile, PulseModel, PulseTiming, SimConfig, Weighting,
 };
 use crate::ops::progress::{Progress, Step};
+use crate::sql::blocks::{blocks, BlockSimulation};
 use crate::sql::simulate::{FootprintPartition, SimulatedShots};
 pub use crate::sql::Engine;
 
@@ -335,7 +335,7 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
                 None => (crate::dataset::shots::shot_footprints(&ds)?, ds.table_file(tables::SIMULATED, "shots")?),
             };
             if let PulseModel::Recorded(reference) = opts.pulse {
-                let pulses = crate::dataset::shots::shot_pulses(&ds, reference, cfg.res)?;
+                let pulses = crate::sql::pulses::shot_pulses(&ds, reference, cfg.res)?;
                 let mean = attach_recorded_pulses(&mut footprints, &pulses).ok_or_else(|| {
                     Error::file(
                         ds.root(),
@@ -393,7 +393,7 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
 /// without a usable record) the mean of them; returns that mean, `None` when no shot has a pulse.
 pub fn attach_recorded_pulses(
     footprints: &mut [(Footprint, Option<AppliedOffset>)],
-    pulses: &crate::dataset::shots::ShotPulses,
+    pulses: &crate::sql::pulses::ShotPulses,
 ) -> Option<std::sync::Arc<sim::Pulse>> {
     let mean = std::sync::Arc::new(pulses.mean()?);
     for (f, _) in footprints.iter_mut() {

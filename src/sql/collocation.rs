@@ -244,7 +244,7 @@ impl Collocation {
             // A shot without a usable transmit record keeps the Gaussian pulse.
             let pulse = recorded
                 .zip(tx)
-                .and_then(|(r, tx)| crate::dataset::shots::recorded_pulse(&tx, r, self.cfg.model.res))
+                .and_then(|(r, tx)| crate::sql::pulses::recorded_pulse(&tx, r, self.cfg.model.res))
                 .map(Arc::new);
             let Some(wave) = wave else {
                 skip("no_waveform");

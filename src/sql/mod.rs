@@ -2,6 +2,7 @@
 //! (thin wrappers over the kernels).
 
 pub mod args;
+pub mod blocks;
 #[cfg(feature = "cluster")]
 pub mod codec;
 pub mod collocate;
@@ -10,6 +11,7 @@ pub mod l2a;
 pub mod link_margin_twin;
 pub mod noise_twin;
 pub mod partitions;
+pub mod pulses;
 pub mod rh;
 pub mod rh_at;
 pub mod simulate;

@@ -1,5 +1,5 @@
 //! `gedi_simulate([profile])`: the simulation as a SQL table function. It streams the `sim`
-//! rows of every ingested shot, block by block ([`crate::dataset::blocks::BlockSimulation`]): each
+//! rows of every ingested shot, block by block ([`crate::sql::blocks::BlockSimulation`]): each
 //! block reads only the ALS row groups its footprints touch, then the simulation kernel. Shots are moved by
 //! their collocation offsets when the dataset has an `offsets/` table.
 //!
@@ -19,12 +19,12 @@ use datafusion::datasource::TableType;
 use datafusion::logical_expr::Expr;
 use datafusion::physical_plan::ExecutionPlan;
 
-use crate::dataset::blocks::{blocks, BlockSimulation};
 use crate::dataset::offsets::AppliedOffset;
 use crate::dataset::shots::shot_footprints;
 use crate::dataset::sim::sim_schema;
 use crate::dataset::Dataset;
 use crate::kernels::sim::{Footprint, Profile, SimConfig};
+use crate::sql::blocks::{blocks, BlockSimulation};
 use crate::sql::partitions::{to_df, PartitionBatches, PartitionExec, PartitionWork};
 
 /// Footprints simulated by one partition, each with the collocation offset applied to it.

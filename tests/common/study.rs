@@ -9,10 +9,11 @@ use arrow::array::{
     ArrayRef, Float32Builder, Float64Array, ListBuilder, RecordBatch, StringArray, UInt32Array, UInt64Array,
 };
 use arrow::datatypes::{DataType, Field, Schema};
-use gedisim::dataset::results::{results_batch, results_metadata, results_schema};
+use gedisim::dataset::results::{results_metadata, results_schema};
 use gedisim::dataset::{write_parquet, Dataset};
 use gedisim::kernels::study::align::VerticalReference;
 use gedisim::kernels::study::select::{ResultInput, StudyAlgorithm};
+use gedisim::ops::run::results_batch;
 
 /// Deterministic uniform numbers in [0, 1) (xorshift64*).
 pub struct Rng(u64);

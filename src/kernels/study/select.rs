@@ -407,7 +407,7 @@ impl StudyAlgorithm {
     }
 }
 
-/// What `run` knows about one shot × weighting × algorithm; [`results_batch`] derives the rest.
+/// What `run` knows about one shot × weighting × algorithm; `gedisim::ops::run::results_batch` derives the rest.
 #[derive(Debug, Clone)]
 pub struct ResultInput {
     pub shot_number: u64,
@@ -520,7 +520,7 @@ mod tests {
         assert_eq!(rows[8].slope_deg, Some(6.0), "the truths of the row's weighting");
         assert_eq!(rows[0].forest_type.as_deref(), Some("mixed"));
         assert_eq!(rows[0].vertical_reference, VerticalReference::Geoid { geoid_offset: 50.0 });
-        // What a results batch requires of every row (dataset::results checks it again).
+        // What a results batch requires of every row (`ops::run::results_batch` checks it again).
         assert!(rows.iter().all(|r| r.rh_sim.len() == RH_LEN && r.rh_gedi.len() == RH_LEN && r.sensitivity >= 0.9));
     }
 

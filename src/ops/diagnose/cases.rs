@@ -284,7 +284,7 @@ impl ShotPulseSource {
             ShotPulseSource::Fixed(p) => Some(p.clone()),
             ShotPulseSource::Recorded(r, res) => c
                 .f32_list("tx_waveform", i)?
-                .and_then(|tx| crate::dataset::shots::recorded_pulse(&tx, *r, *res))
+                .and_then(|tx| crate::sql::pulses::recorded_pulse(&tx, *r, *res))
                 .map(Arc::new),
         })
     }

@@ -49,7 +49,7 @@ pub(super) fn simulate_cases(
         })
         .collect();
     let mut cases = Vec::new();
-    for block in crate::dataset::blocks::blocks(items) {
+    for block in crate::sql::blocks::blocks(items) {
         let mut bb = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
         for (x, y) in block.iter().flat_map(|(_, (_, _, _, sites))| sites.iter().copied()) {
             bb = [bb[0].min(x - half), bb[1].min(y - half), bb[2].max(x + half), bb[3].max(y + half)];

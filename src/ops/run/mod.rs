@@ -25,6 +25,8 @@ mod plan;
 mod results;
 mod simulate;
 
+pub use results::results_batch;
+
 use std::path::{Path, PathBuf};
 
 use crate::dataset::{self, tables, Dataset};
