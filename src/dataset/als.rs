@@ -125,59 +125,110 @@ pub fn cell_key(x: f64, y: f64) -> u64 {
     ((iy as u64 & 0xffff_ffff) << 32) | (ix as u64 & 0xffff_ffff)
 }
 
+/// The names of the `als/` columns (docs/schemas.md), one constant each.
+pub mod col {
+    pub const X: &str = "x";
+    pub const Y: &str = "y";
+    pub const Z: &str = "z";
+    pub const INTENSITY: &str = "intensity";
+    pub const RETURN_NUMBER: &str = "return_number";
+    pub const NUMBER_OF_RETURNS: &str = "number_of_returns";
+    pub const CLASSIFICATION: &str = "classification";
+    pub const SCAN_ANGLE_DEG: &str = "scan_angle_deg";
+    pub const GPS_TIME: &str = "gps_time";
+    pub const POINT_SOURCE_ID: &str = "point_source_id";
+    pub const TILE: &str = "tile";
+    pub const CELL: &str = "cell";
+}
+
 /// Schema of the `als/` table.
 pub fn als_schema() -> SchemaRef {
     Arc::new(Schema::new(vec![
-        Field::new("x", DataType::Float64, false),
-        Field::new("y", DataType::Float64, false),
-        Field::new("z", DataType::Float64, false),
-        Field::new("intensity", DataType::UInt16, false),
-        Field::new("return_number", DataType::UInt8, false),
-        Field::new("number_of_returns", DataType::UInt8, false),
-        Field::new("classification", DataType::UInt8, false),
-        Field::new("scan_angle_deg", DataType::Float32, false),
-        Field::new("gps_time", DataType::Float64, true),
-        Field::new("point_source_id", DataType::UInt16, false),
-        Field::new("tile", DataType::Utf8, false),
-        Field::new("cell", DataType::UInt64, false),
+        Field::new(col::X, DataType::Float64, false),
+        Field::new(col::Y, DataType::Float64, false),
+        Field::new(col::Z, DataType::Float64, false),
+        Field::new(col::INTENSITY, DataType::UInt16, false),
+        Field::new(col::RETURN_NUMBER, DataType::UInt8, false),
+        Field::new(col::NUMBER_OF_RETURNS, DataType::UInt8, false),
+        Field::new(col::CLASSIFICATION, DataType::UInt8, false),
+        Field::new(col::SCAN_ANGLE_DEG, DataType::Float32, false),
+        Field::new(col::GPS_TIME, DataType::Float64, true),
+        Field::new(col::POINT_SOURCE_ID, DataType::UInt16, false),
+        Field::new(col::TILE, DataType::Utf8, false),
+        Field::new(col::CELL, DataType::UInt64, false),
     ]))
+}
+
+/// The names of the `tiles/` columns (docs/schemas.md), one constant each.
+pub mod tiles_col {
+    pub const TILE: &str = "tile";
+    pub const PATH: &str = "path";
+    pub const CONTENT_HASH: &str = "content_hash";
+    pub const LAS_VERSION: &str = "las_version";
+    pub const POINT_FORMAT: &str = "point_format";
+    pub const COMPRESSED: &str = "compressed";
+    pub const N_POINTS_HEADER: &str = "n_points_header";
+    pub const N_POINTS: &str = "n_points";
+    pub const N_DROPPED: &str = "n_dropped";
+    pub const XMIN: &str = "xmin";
+    pub const YMIN: &str = "ymin";
+    pub const ZMIN: &str = "zmin";
+    pub const XMAX: &str = "xmax";
+    pub const YMAX: &str = "ymax";
+    pub const ZMAX: &str = "zmax";
+    pub const EPSG: &str = "epsg";
+    pub const CRS_WKT: &str = "crs_wkt";
+    pub const EXTRA_BYTES: &str = "extra_bytes";
+    pub const INTENSITY_MIN: &str = "intensity_min";
+    pub const INTENSITY_MAX: &str = "intensity_max";
+    pub const INTENSITY_MEAN: &str = "intensity_mean";
+    pub const INTENSITY_P01: &str = "intensity_p01";
+    pub const INTENSITY_P50: &str = "intensity_p50";
+    pub const INTENSITY_P99: &str = "intensity_p99";
+    pub const GPS_TIME_MIN: &str = "gps_time_min";
+    pub const GPS_TIME_MAX: &str = "gps_time_max";
+    pub const ACQUISITION_START: &str = "acquisition_start";
+    pub const ACQUISITION_END: &str = "acquisition_end";
+    pub const COPC: &str = "copc";
+    pub const READ_CELLS: &str = "read_cells";
+    pub const READ_WINDOW: &str = "read_window";
 }
 
 /// Schema of the `tiles/` table.
 pub fn tiles_schema() -> SchemaRef {
     let ts = DataType::Timestamp(TimeUnit::Microsecond, Some("UTC".into()));
     Arc::new(Schema::new(vec![
-        Field::new("tile", DataType::Utf8, false),
-        Field::new("path", DataType::Utf8, false),
-        Field::new("content_hash", DataType::Utf8, false),
-        Field::new("las_version", DataType::Utf8, false),
-        Field::new("point_format", DataType::UInt8, false),
-        Field::new("compressed", DataType::Boolean, false),
-        Field::new("n_points_header", DataType::UInt64, false),
-        Field::new("n_points", DataType::UInt64, false),
-        Field::new("n_dropped", DataType::UInt64, false),
-        Field::new("xmin", DataType::Float64, true),
-        Field::new("ymin", DataType::Float64, true),
-        Field::new("zmin", DataType::Float64, true),
-        Field::new("xmax", DataType::Float64, true),
-        Field::new("ymax", DataType::Float64, true),
-        Field::new("zmax", DataType::Float64, true),
-        Field::new("epsg", DataType::UInt32, false),
-        Field::new("crs_wkt", DataType::Utf8, true),
-        Field::new("extra_bytes", DataType::Utf8, false),
-        Field::new("intensity_min", DataType::UInt16, true),
-        Field::new("intensity_max", DataType::UInt16, true),
-        Field::new("intensity_mean", DataType::Float64, true),
-        Field::new("intensity_p01", DataType::UInt16, true),
-        Field::new("intensity_p50", DataType::UInt16, true),
-        Field::new("intensity_p99", DataType::UInt16, true),
-        Field::new("gps_time_min", DataType::Float64, true),
-        Field::new("gps_time_max", DataType::Float64, true),
-        Field::new("acquisition_start", ts.clone(), true),
-        Field::new("acquisition_end", ts, true),
-        Field::new("copc", DataType::Boolean, false),
-        Field::new("read_cells", DataType::UInt64, true),
-        Field::new("read_window", DataType::Utf8, true),
+        Field::new(tiles_col::TILE, DataType::Utf8, false),
+        Field::new(tiles_col::PATH, DataType::Utf8, false),
+        Field::new(tiles_col::CONTENT_HASH, DataType::Utf8, false),
+        Field::new(tiles_col::LAS_VERSION, DataType::Utf8, false),
+        Field::new(tiles_col::POINT_FORMAT, DataType::UInt8, false),
+        Field::new(tiles_col::COMPRESSED, DataType::Boolean, false),
+        Field::new(tiles_col::N_POINTS_HEADER, DataType::UInt64, false),
+        Field::new(tiles_col::N_POINTS, DataType::UInt64, false),
+        Field::new(tiles_col::N_DROPPED, DataType::UInt64, false),
+        Field::new(tiles_col::XMIN, DataType::Float64, true),
+        Field::new(tiles_col::YMIN, DataType::Float64, true),
+        Field::new(tiles_col::ZMIN, DataType::Float64, true),
+        Field::new(tiles_col::XMAX, DataType::Float64, true),
+        Field::new(tiles_col::YMAX, DataType::Float64, true),
+        Field::new(tiles_col::ZMAX, DataType::Float64, true),
+        Field::new(tiles_col::EPSG, DataType::UInt32, false),
+        Field::new(tiles_col::CRS_WKT, DataType::Utf8, true),
+        Field::new(tiles_col::EXTRA_BYTES, DataType::Utf8, false),
+        Field::new(tiles_col::INTENSITY_MIN, DataType::UInt16, true),
+        Field::new(tiles_col::INTENSITY_MAX, DataType::UInt16, true),
+        Field::new(tiles_col::INTENSITY_MEAN, DataType::Float64, true),
+        Field::new(tiles_col::INTENSITY_P01, DataType::UInt16, true),
+        Field::new(tiles_col::INTENSITY_P50, DataType::UInt16, true),
+        Field::new(tiles_col::INTENSITY_P99, DataType::UInt16, true),
+        Field::new(tiles_col::GPS_TIME_MIN, DataType::Float64, true),
+        Field::new(tiles_col::GPS_TIME_MAX, DataType::Float64, true),
+        Field::new(tiles_col::ACQUISITION_START, ts.clone(), true),
+        Field::new(tiles_col::ACQUISITION_END, ts, true),
+        Field::new(tiles_col::COPC, DataType::Boolean, false),
+        Field::new(tiles_col::READ_CELLS, DataType::UInt64, true),
+        Field::new(tiles_col::READ_WINDOW, DataType::Utf8, true),
     ]))
 }
 
@@ -358,7 +409,7 @@ impl AlsTable {
         let f = &self.files[fi];
         let file = File::open(&f.path).map_err(|e| Error::file(&f.path, e))?;
         let builder = ParquetRecordBatchReaderBuilder::new_with_metadata(file, f.meta.clone());
-        let mask = ProjectionMask::columns(builder.parquet_schema(), ["x", "y", "z"]);
+        let mask = ProjectionMask::columns(builder.parquet_schema(), [col::X, col::Y, col::Z]);
         let reader = builder
             .with_projection(mask)
             .with_row_groups(vec![g])
@@ -368,13 +419,13 @@ impl AlsTable {
         let mut out = PointCloud::default();
         for batch in reader {
             let batch = batch.map_err(|e| Error::table(&f.path, e))?;
-            let col = |name: &str| {
+            let column = |name: &str| {
                 batch
                     .column_by_name(name)
                     .and_then(|c| c.as_primitive_opt::<Float64Type>())
                     .ok_or_else(|| Error::field(&f.path, name, "missing or not float64 in the ALS table"))
             };
-            let (x, y, z) = (col("x")?.values(), col("y")?.values(), col("z")?.values());
+            let (x, y, z) = (column(col::X)?.values(), column(col::Y)?.values(), column(col::Z)?.values());
             for i in 0..batch.num_rows() {
                 let (px, py) = (x[i], y[i]);
                 if boxes.iter().any(|b| px >= b[0] && px <= b[2] && py >= b[1] && py <= b[3]) {
@@ -438,26 +489,26 @@ impl AlsTable {
 
 /// The columns of `als/` that make an [`AlsPoints`].
 const POINT_COLUMNS: [&str; 10] = [
-    "x",
-    "y",
-    "z",
-    "intensity",
-    "return_number",
-    "number_of_returns",
-    "classification",
-    "scan_angle_deg",
-    "gps_time",
-    "point_source_id",
+    col::X,
+    col::Y,
+    col::Z,
+    col::INTENSITY,
+    col::RETURN_NUMBER,
+    col::NUMBER_OF_RETURNS,
+    col::CLASSIFICATION,
+    col::SCAN_ANGLE_DEG,
+    col::GPS_TIME,
+    col::POINT_SOURCE_ID,
 ];
 
 fn row_group_boxes(meta: &ParquetMetaData, path: &Path) -> Result<Vec<BBox>> {
     let schema = meta.file_metadata().schema_descr();
-    let col = |name: &str| {
+    let column = |name: &str| {
         (0..schema.num_columns())
             .find(|&i| schema.column(i).name() == name)
             .ok_or_else(|| Error::field(path, name, "column missing from the ALS table"))
     };
-    let (xi, yi) = (col("x")?, col("y")?);
+    let (xi, yi) = (column(col::X)?, column(col::Y)?);
     let range = |g: usize, i: usize, name: &str| match meta.row_group(g).column(i).statistics() {
         Some(Statistics::Double(s)) => match (s.min_opt(), s.max_opt()) {
             (Some(a), Some(b)) => Ok((*a, *b)),
@@ -467,8 +518,8 @@ fn row_group_boxes(meta: &ParquetMetaData, path: &Path) -> Result<Vec<BBox>> {
     };
     (0..meta.num_row_groups())
         .map(|g| {
-            let (x0, x1) = range(g, xi, "x")?;
-            let (y0, y1) = range(g, yi, "y")?;
+            let (x0, x1) = range(g, xi, col::X)?;
+            let (y0, y1) = range(g, yi, col::Y)?;
             Ok([x0, y0, x1, y1])
         })
         .collect()
@@ -476,10 +527,13 @@ fn row_group_boxes(meta: &ParquetMetaData, path: &Path) -> Result<Vec<BBox>> {
 
 /// Append the rows of `b` (those inside `keep`, when given) to `out`.
 fn append(out: &mut AlsPoints, b: &arrow::record_batch::RecordBatch, keep: Option<BBox>, path: &Path) -> Result<()> {
-    let col = |name: &str| {
+    let column = |name: &str| {
         b.column_by_name(name).ok_or_else(|| Error::field(path, name, "column missing from the ALS table"))
     };
-    let (x, y) = (col("x")?.as_primitive::<Float64Type>().values(), col("y")?.as_primitive::<Float64Type>().values());
+    let (x, y) = (
+        column(col::X)?.as_primitive::<Float64Type>().values(),
+        column(col::Y)?.as_primitive::<Float64Type>().values(),
+    );
     let rows: Vec<usize> = match keep {
         Some(k) => {
             (0..b.num_rows()).filter(|&i| x[i] >= k[0] && x[i] <= k[2] && y[i] >= k[1] && y[i] <= k[3]).collect()
@@ -495,14 +549,14 @@ fn append(out: &mut AlsPoints, b: &arrow::record_batch::RecordBatch, keep: Optio
     }
     put(&mut out.x, x, &rows);
     put(&mut out.y, y, &rows);
-    put(&mut out.z, col("z")?.as_primitive::<Float64Type>().values(), &rows);
-    put(&mut out.intensity, col("intensity")?.as_primitive::<UInt16Type>().values(), &rows);
-    put(&mut out.return_number, col("return_number")?.as_primitive::<UInt8Type>().values(), &rows);
-    put(&mut out.number_of_returns, col("number_of_returns")?.as_primitive::<UInt8Type>().values(), &rows);
-    put(&mut out.classification, col("classification")?.as_primitive::<UInt8Type>().values(), &rows);
-    put(&mut out.scan_angle_deg, col("scan_angle_deg")?.as_primitive::<Float32Type>().values(), &rows);
-    let gps = col("gps_time")?.as_primitive::<Float64Type>();
+    put(&mut out.z, column(col::Z)?.as_primitive::<Float64Type>().values(), &rows);
+    put(&mut out.intensity, column(col::INTENSITY)?.as_primitive::<UInt16Type>().values(), &rows);
+    put(&mut out.return_number, column(col::RETURN_NUMBER)?.as_primitive::<UInt8Type>().values(), &rows);
+    put(&mut out.number_of_returns, column(col::NUMBER_OF_RETURNS)?.as_primitive::<UInt8Type>().values(), &rows);
+    put(&mut out.classification, column(col::CLASSIFICATION)?.as_primitive::<UInt8Type>().values(), &rows);
+    put(&mut out.scan_angle_deg, column(col::SCAN_ANGLE_DEG)?.as_primitive::<Float32Type>().values(), &rows);
+    let gps = column(col::GPS_TIME)?.as_primitive::<Float64Type>();
     out.gps_time.extend(rows.iter().map(|&i| if gps.is_null(i) { f64::NAN } else { gps.value(i) }));
-    put(&mut out.point_source_id, col("point_source_id")?.as_primitive::<UInt16Type>().values(), &rows);
+    put(&mut out.point_source_id, column(col::POINT_SOURCE_ID)?.as_primitive::<UInt16Type>().values(), &rows);
     Ok(())
 }

@@ -11,25 +11,44 @@ use super::{list_f32, list_f32_builder};
 use crate::error::Result;
 use crate::kernels::waveform::l2a::{L2aOutcome, WaveformGeolocation};
 
+/// The names of the `l2a` table's columns (docs/schemas.md), one constant each.
+pub mod col {
+    pub const SHOT_NUMBER: &str = "shot_number";
+    pub const BEAM: &str = "beam";
+    pub const ALGORITHM: &str = "algorithm";
+    pub const STATUS: &str = "status";
+    pub const TOPLOC: &str = "toploc";
+    pub const BOTLOC: &str = "botloc";
+    pub const ZCROSS: &str = "zcross";
+    pub const ELEV_LOWESTMODE: &str = "elev_lowestmode";
+    pub const ELEV_HIGHESTRETURN: &str = "elev_highestreturn";
+    pub const LAT_LOWESTMODE: &str = "lat_lowestmode";
+    pub const LON_LOWESTMODE: &str = "lon_lowestmode";
+    pub const RH: &str = "rh";
+    pub const SENSITIVITY: &str = "sensitivity";
+    pub const ENERGY_TOTAL: &str = "energy_total";
+    pub const NUM_MODES: &str = "num_modes";
+}
+
 /// Schema of the `l2a` table.
 pub fn l2a_schema() -> SchemaRef {
     let f = |n: &str, t: DataType, null: bool| Field::new(n, t, null);
     Arc::new(Schema::new(vec![
-        f("shot_number", DataType::UInt64, false),
-        f("beam", DataType::Utf8, false),
-        f("algorithm", DataType::UInt8, false),
-        f("status", DataType::Utf8, false),
-        f("toploc", DataType::Float64, true),
-        f("botloc", DataType::Float64, true),
-        f("zcross", DataType::Float64, true),
-        f("elev_lowestmode", DataType::Float64, true),
-        f("elev_highestreturn", DataType::Float64, true),
-        f("lat_lowestmode", DataType::Float64, true),
-        f("lon_lowestmode", DataType::Float64, true),
-        f("rh", list_f32(), true),
-        f("sensitivity", DataType::Float32, true),
-        f("energy_total", DataType::Float32, true),
-        f("num_modes", DataType::UInt8, true),
+        f(col::SHOT_NUMBER, DataType::UInt64, false),
+        f(col::BEAM, DataType::Utf8, false),
+        f(col::ALGORITHM, DataType::UInt8, false),
+        f(col::STATUS, DataType::Utf8, false),
+        f(col::TOPLOC, DataType::Float64, true),
+        f(col::BOTLOC, DataType::Float64, true),
+        f(col::ZCROSS, DataType::Float64, true),
+        f(col::ELEV_LOWESTMODE, DataType::Float64, true),
+        f(col::ELEV_HIGHESTRETURN, DataType::Float64, true),
+        f(col::LAT_LOWESTMODE, DataType::Float64, true),
+        f(col::LON_LOWESTMODE, DataType::Float64, true),
+        f(col::RH, list_f32(), true),
+        f(col::SENSITIVITY, DataType::Float32, true),
+        f(col::ENERGY_TOTAL, DataType::Float32, true),
+        f(col::NUM_MODES, DataType::UInt8, true),
     ]))
 }
 

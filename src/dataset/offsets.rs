@@ -42,25 +42,44 @@ pub struct OffsetRow {
     pub dz_halfwidth: f64,
 }
 
+/// The names of the `offsets/` columns (docs/schemas.md), one constant each.
+pub mod col {
+    pub const SEGMENT_ID: &str = "segment_id";
+    pub const GRANULE: &str = "granule";
+    pub const BEAM: &str = "beam";
+    pub const LEVEL: &str = "level";
+    pub const SHOT_NUMBERS: &str = "shot_numbers";
+    pub const N_SHOTS: &str = "n_shots";
+    pub const DX: &str = "dx";
+    pub const DY: &str = "dy";
+    pub const DZ: &str = "dz";
+    pub const GEOID_OFFSET: &str = "geoid_offset";
+    pub const R_BEFORE: &str = "r_before";
+    pub const R_AFTER: &str = "r_after";
+    pub const DX_HALFWIDTH: &str = "dx_halfwidth";
+    pub const DY_HALFWIDTH: &str = "dy_halfwidth";
+    pub const DZ_HALFWIDTH: &str = "dz_halfwidth";
+}
+
 /// Schema of the offsets table.
 pub fn offsets_schema() -> SchemaRef {
     let f = |n: &str, t: DataType| Field::new(n, t, false);
     Arc::new(Schema::new(vec![
-        f("segment_id", DataType::Utf8),
-        f("granule", DataType::Utf8),
-        f("beam", DataType::Utf8),
-        f("level", DataType::Utf8),
-        f("shot_numbers", DataType::List(Arc::new(Field::new_list_field(DataType::UInt64, true)))),
-        f("n_shots", DataType::UInt32),
-        f("dx", DataType::Float64),
-        f("dy", DataType::Float64),
-        f("dz", DataType::Float64),
-        f("geoid_offset", DataType::Float64),
-        f("r_before", DataType::Float64),
-        f("r_after", DataType::Float64),
-        f("dx_halfwidth", DataType::Float64),
-        f("dy_halfwidth", DataType::Float64),
-        f("dz_halfwidth", DataType::Float64),
+        f(col::SEGMENT_ID, DataType::Utf8),
+        f(col::GRANULE, DataType::Utf8),
+        f(col::BEAM, DataType::Utf8),
+        f(col::LEVEL, DataType::Utf8),
+        f(col::SHOT_NUMBERS, DataType::List(Arc::new(Field::new_list_field(DataType::UInt64, true)))),
+        f(col::N_SHOTS, DataType::UInt32),
+        f(col::DX, DataType::Float64),
+        f(col::DY, DataType::Float64),
+        f(col::DZ, DataType::Float64),
+        f(col::GEOID_OFFSET, DataType::Float64),
+        f(col::R_BEFORE, DataType::Float64),
+        f(col::R_AFTER, DataType::Float64),
+        f(col::DX_HALFWIDTH, DataType::Float64),
+        f(col::DY_HALFWIDTH, DataType::Float64),
+        f(col::DZ_HALFWIDTH, DataType::Float64),
     ]))
 }
 
@@ -125,8 +144,8 @@ pub fn read_r_after(ds: &Dataset) -> Result<HashMap<String, f64>> {
         return Ok(out);
     }
     for path in dataset::table_files(&dir).map_err(|e| Error::file(&dir, e))? {
-        read::for_each_batch(&path, Some(&["segment_id", "r_after"]), None, |c| {
-            let (ids, r) = (c.strings("segment_id")?, c.f64s("r_after")?);
+        read::for_each_batch(&path, Some(&[col::SEGMENT_ID, col::R_AFTER]), None, |c| {
+            let (ids, r) = (c.strings(col::SEGMENT_ID)?, c.f64s(col::R_AFTER)?);
             for i in 0..c.num_rows() {
                 out.insert(ids.value(i).to_string(), r.value(i));
             }
@@ -138,13 +157,13 @@ pub fn read_r_after(ds: &Dataset) -> Result<HashMap<String, f64>> {
 
 fn read_file(path: &Path, out: &mut HashMap<u64, AppliedOffset>) -> Result<()> {
     read::for_each_batch(path, None, None, |c| {
-        let (ids, shots) = (c.strings("segment_id")?, c.lists("shot_numbers")?);
-        let (dx, dy, dz) = (c.f64s("dx")?, c.f64s("dy")?, c.f64s("dz")?);
+        let (ids, shots) = (c.strings(col::SEGMENT_ID)?, c.lists(col::SHOT_NUMBERS)?);
+        let (dx, dy, dz) = (c.f64s(col::DX)?, c.f64s(col::DY)?, c.f64s(col::DZ)?);
         for i in 0..c.num_rows() {
             let list = shots.value(i);
             let list = list
                 .as_primitive_opt::<UInt64Type>()
-                .ok_or_else(|| Error::field(path, "shot_numbers", "not a list of uint64"))?;
+                .ok_or_else(|| Error::field(path, col::SHOT_NUMBERS, "not a list of uint64"))?;
             for s in list.iter().flatten() {
                 let applied = AppliedOffset {
                     segment_id: ids.value(i).to_string(),
@@ -153,10 +172,10 @@ fn read_file(path: &Path, out: &mut HashMap<u64, AppliedOffset>) -> Result<()> {
                     dz: dz.value(i),
                 };
                 if !(applied.dx.is_finite() && applied.dy.is_finite()) {
-                    return Err(Error::field(path, "dx", format!("segment {}: not finite", applied.segment_id)));
+                    return Err(Error::field(path, col::DX, format!("segment {}: not finite", applied.segment_id)));
                 }
                 if out.insert(s, applied).is_some() {
-                    return Err(Error::field(path, "shot_numbers", format!("shot {s} is in two segments")));
+                    return Err(Error::field(path, col::SHOT_NUMBERS, format!("shot {s} is in two segments")));
                 }
             }
         }

@@ -13,34 +13,62 @@ use super::{list_f32, list_f32_builder};
 use crate::error::{Error, Result};
 use crate::kernels::sim::{Footprint, Profile, SimulatedFootprint, SkipReason, Weighting};
 
+/// The names of the `sim/` (and `simulated/`) columns (docs/schemas.md), one constant each.
+pub mod col {
+    pub const FOOTPRINT_ID: &str = "footprint_id";
+    pub const X: &str = "x";
+    pub const Y: &str = "y";
+    pub const WEIGHTING: &str = "weighting";
+    pub const STATUS: &str = "status";
+    pub const Z0: &str = "z0";
+    pub const DZ: &str = "dz";
+    pub const WAVE: &str = "wave";
+    pub const GROUND_WAVE: &str = "ground_wave";
+    pub const CANOPY_WAVE: &str = "canopy_wave";
+    pub const ALS_GROUND: &str = "als_ground";
+    pub const TRUE_TOP: &str = "true_top";
+    pub const SLOPE_DEG: &str = "slope_deg";
+    pub const ALS_COVER: &str = "als_cover";
+    pub const N_POINTS: &str = "n_points";
+    pub const POINT_DENSITY: &str = "point_density";
+    pub const PULSE_DENSITY: &str = "pulse_density";
+    pub const MEAN_SCAN_ANGLE_DEG: &str = "mean_scan_angle_deg";
+    pub const COVERED_FRACTION: &str = "covered_fraction";
+    pub const RH: &str = "rh";
+    pub const OFFSET_SEGMENT_ID: &str = "offset_segment_id";
+    pub const OFFSET_DX: &str = "offset_dx";
+    pub const OFFSET_DY: &str = "offset_dy";
+    pub const OFFSET_DZ: &str = "offset_dz";
+}
+
 /// Schema of the simulated-waveform table.
 pub fn sim_schema() -> SchemaRef {
     let f = |n: &str, t: DataType, null: bool| Field::new(n, t, null);
     Arc::new(Schema::new(vec![
-        f("footprint_id", DataType::Utf8, false),
-        f("x", DataType::Float64, false),
-        f("y", DataType::Float64, false),
-        f("weighting", DataType::Utf8, false),
-        f("status", DataType::Utf8, false),
-        f("z0", DataType::Float64, true),
-        f("dz", DataType::Float64, true),
-        f("wave", list_f32(), true),
-        f("ground_wave", list_f32(), true),
-        f("canopy_wave", list_f32(), true),
-        f("als_ground", DataType::Float64, true),
-        f("true_top", DataType::Float64, true),
-        f("slope_deg", DataType::Float64, true),
-        f("als_cover", DataType::Float64, true),
-        f("n_points", DataType::UInt32, true),
-        f("point_density", DataType::Float32, true),
-        f("pulse_density", DataType::Float32, true),
-        f("mean_scan_angle_deg", DataType::Float32, true),
-        f("covered_fraction", DataType::Float32, true),
-        f("rh", list_f32(), true),
-        f("offset_segment_id", DataType::Utf8, true),
-        f("offset_dx", DataType::Float64, true),
-        f("offset_dy", DataType::Float64, true),
-        f("offset_dz", DataType::Float64, true),
+        f(col::FOOTPRINT_ID, DataType::Utf8, false),
+        f(col::X, DataType::Float64, false),
+        f(col::Y, DataType::Float64, false),
+        f(col::WEIGHTING, DataType::Utf8, false),
+        f(col::STATUS, DataType::Utf8, false),
+        f(col::Z0, DataType::Float64, true),
+        f(col::DZ, DataType::Float64, true),
+        f(col::WAVE, list_f32(), true),
+        f(col::GROUND_WAVE, list_f32(), true),
+        f(col::CANOPY_WAVE, list_f32(), true),
+        f(col::ALS_GROUND, DataType::Float64, true),
+        f(col::TRUE_TOP, DataType::Float64, true),
+        f(col::SLOPE_DEG, DataType::Float64, true),
+        f(col::ALS_COVER, DataType::Float64, true),
+        f(col::N_POINTS, DataType::UInt32, true),
+        f(col::POINT_DENSITY, DataType::Float32, true),
+        f(col::PULSE_DENSITY, DataType::Float32, true),
+        f(col::MEAN_SCAN_ANGLE_DEG, DataType::Float32, true),
+        f(col::COVERED_FRACTION, DataType::Float32, true),
+        f(col::RH, list_f32(), true),
+        f(col::OFFSET_SEGMENT_ID, DataType::Utf8, true),
+        f(col::OFFSET_DX, DataType::Float64, true),
+        f(col::OFFSET_DY, DataType::Float64, true),
+        f(col::OFFSET_DZ, DataType::Float64, true),
     ]))
 }
 

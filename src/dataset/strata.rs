@@ -11,13 +11,21 @@ use super::{read, tables, Dataset};
 use crate::error::{Error, Result};
 use crate::kernels::study::classes::Stratum;
 
+/// The names of the `strata/` columns (docs/schemas.md), one constant each.
+pub mod col {
+    pub const SHOT_NUMBER: &str = "shot_number";
+    pub const FOREST_TYPE: &str = "forest_type";
+    pub const SOURCE: &str = "source";
+    pub const CLC_CODE: &str = "clc_code";
+}
+
 /// Schema of the `strata` table.
 pub fn strata_schema() -> SchemaRef {
     Arc::new(Schema::new(vec![
-        Field::new("shot_number", DataType::UInt64, false),
-        Field::new("forest_type", DataType::Utf8, false),
-        Field::new("source", DataType::Utf8, false),
-        Field::new("clc_code", DataType::UInt16, true),
+        Field::new(col::SHOT_NUMBER, DataType::UInt64, false),
+        Field::new(col::FOREST_TYPE, DataType::Utf8, false),
+        Field::new(col::SOURCE, DataType::Utf8, false),
+        Field::new(col::CLC_CODE, DataType::UInt16, true),
     ]))
 }
 
@@ -40,9 +48,9 @@ pub fn read_forest_types(ds: &Dataset) -> Result<HashMap<u64, String>> {
     }
     let dir = ds.root().join(tables::STRATA);
     for path in super::table_files(&dir).map_err(|e| Error::file(&dir, e))? {
-        read::for_each_batch(&path, Some(&["shot_number", "forest_type"]), None, |c| {
+        read::for_each_batch(&path, Some(&[col::SHOT_NUMBER, col::FOREST_TYPE]), None, |c| {
             for i in 0..c.num_rows() {
-                if let (Some(s), Some(f)) = (c.u64("shot_number", i)?, c.string("forest_type", i)?) {
+                if let (Some(s), Some(f)) = (c.u64(col::SHOT_NUMBER, i)?, c.string(col::FOREST_TYPE, i)?) {
                     out.insert(s, f);
                 }
             }

@@ -34,6 +34,11 @@ impl BeamType {
         }
     }
 
+    /// Parse a value of the `beam_type` column ([`Self::as_str`]).
+    pub fn from_label(label: &str) -> Option<Self> {
+        [BeamType::Coverage, BeamType::FullPower].into_iter().find(|b| b.as_str() == label)
+    }
+
     /// The value of the `beam_type` column: `coverage` or `full_power`.
     pub fn as_str(self) -> &'static str {
         match self {

@@ -26,10 +26,12 @@ use arrow::array::{
 use arrow::record_batch::RecordBatch;
 use rayon::prelude::*;
 
+use crate::dataset::als::tiles_col;
 use crate::dataset::als::{
     self as table, als_batch, als_schema, cell_key, meta, tiles_schema, ReadWindow, CELL_SIZE_M, DROPPED_CLASSES,
     MAX_ROW_GROUP_ROWS,
 };
+use crate::dataset::shots::col as shot_col;
 use crate::dataset::{self, read, tables, AtomicParquet, Dataset};
 use crate::error::{Error, Result};
 use crate::io::copc::{Attributes, CopcRead, CopcTile};
@@ -66,9 +68,9 @@ pub fn shot_windows(ds: &Dataset, half: f64) -> Result<Option<Windows>> {
     }
     let mut centres = Vec::new();
     for f in files {
-        read::for_each_batch(&f, Some(&["x", "y"]), None, |c| {
+        read::for_each_batch(&f, Some(&[shot_col::X, shot_col::Y]), None, |c| {
             for i in 0..c.num_rows() {
-                if let (Some(x), Some(y)) = (c.f64("x", i)?, c.f64("y", i)?) {
+                if let (Some(x), Some(y)) = (c.f64(shot_col::X, i)?, c.f64(shot_col::Y, i)?) {
                     centres.push((x, y));
                 }
             }
@@ -480,9 +482,9 @@ fn ingest_windows(t: &Target, opts: &AlsOptions, windows: &Windows, progress: &d
 /// The `n_dropped` and `read_cells` of a tile's `tiles/` row.
 fn tiles_row_window(path: &Path) -> Result<(u64, Option<u64>)> {
     let mut out = (0, None);
-    read::for_each_batch(path, Some(&["n_dropped", "read_cells"]), None, |c| {
+    read::for_each_batch(path, Some(&[tiles_col::N_DROPPED, tiles_col::READ_CELLS]), None, |c| {
         if c.num_rows() > 0 {
-            out = (c.u64("n_dropped", 0)?.unwrap_or(0), c.u64("read_cells", 0)?);
+            out = (c.u64(tiles_col::N_DROPPED, 0)?.unwrap_or(0), c.u64(tiles_col::READ_CELLS, 0)?);
         }
         Ok(())
     })?;

@@ -9,6 +9,7 @@ use arrow::datatypes::{Float32Type, Float64Type, UInt64Type};
 use rayon::prelude::*;
 
 use crate::dataset::l2a::{l2a_schema, status_text, L2aColumns};
+use crate::dataset::shots::col;
 use crate::dataset::{writer_properties, AtomicParquet};
 use crate::error::{Error, Result};
 use crate::kernels::waveform::l2a::{
@@ -53,14 +54,14 @@ pub fn l2a(l1b: &Path, algorithms: &[u8], out: &Path) -> Result<L2aReport> {
 /// ingest nulled, keeps its rows with `status` = `no_result: <reason>` and null values.
 fn l2a_batch(shots: &RecordBatch, settings: &[AlgorithmSettings], source: &Path) -> Result<RecordBatch> {
     let col = |n: &str| shots.column_by_name(n).ok_or_else(|| Error::field(source, n, "column missing"));
-    let sn = col("shot_number")?.as_primitive::<UInt64Type>().clone();
-    let beam = col("beam")?.as_string::<i32>().clone();
-    let waves = col("rx_waveform")?.as_list::<i32>().clone();
+    let sn = col(col::SHOT_NUMBER)?.as_primitive::<UInt64Type>().clone();
+    let beam = col(col::BEAM)?.as_string::<i32>().clone();
+    let waves = col(col::RX_WAVEFORM)?.as_list::<i32>().clone();
     let f64c = |n: &str| -> Result<Float64Array> { Ok(col(n)?.as_primitive::<Float64Type>().clone()) };
-    let (mean, sd) = (f64c("noise_mean_corrected")?, f64c("noise_stddev_corrected")?);
-    let (z0, zn) = (f64c("elevation_bin0")?, f64c("elevation_lastbin")?);
-    let (la0, lan) = (f64c("lat_bin0")?, f64c("lat_lastbin")?);
-    let (lo0, lon) = (f64c("lon_bin0")?, f64c("lon_lastbin")?);
+    let (mean, sd) = (f64c(col::NOISE_MEAN_CORRECTED)?, f64c(col::NOISE_STDDEV_CORRECTED)?);
+    let (z0, zn) = (f64c(col::ELEVATION_BIN0)?, f64c(col::ELEVATION_LASTBIN)?);
+    let (la0, lan) = (f64c(col::LAT_BIN0)?, f64c(col::LAT_LASTBIN)?);
+    let (lo0, lon) = (f64c(col::LON_BIN0)?, f64c(col::LON_LASTBIN)?);
     let l1b_rows: Vec<usize> = (0..shots.num_rows()).filter(|&i| !z0.is_null(i)).collect();
     let outcomes: Vec<(usize, Vec<L2aOutcome>, WaveformGeolocation)> = l1b_rows
         .par_iter()

@@ -22,6 +22,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::dataset::als::{AlsTable, BBox};
 use crate::dataset::offsets::OffsetRow;
+use crate::dataset::shots::col;
 use crate::dataset::{self, tables, Dataset};
 use crate::error::{Error, Result};
 use crate::kernels::collocate::profile::{real_profile, ProfileError};
@@ -421,8 +422,15 @@ fn along_track_steps(shots: &[ShotRecord], beams: &BTreeMap<&str, Vec<usize>>) -
 fn read_shot_records(path: &Path) -> Result<(String, Vec<ShotRecord>)> {
     let builder = crate::dataset::read::open(path)?;
     let schema = builder.schema().clone();
-    for required in ["shot_number", "x", "y", "rx_waveform", "elevation_bin0", "elevation_lastbin", "geoid_offset_used"]
-    {
+    for required in [
+        col::SHOT_NUMBER,
+        col::X,
+        col::Y,
+        col::RX_WAVEFORM,
+        col::ELEVATION_BIN0,
+        col::ELEVATION_LASTBIN,
+        col::GEOID_OFFSET_USED,
+    ] {
         if schema.field_with_name(required).is_err() {
             return Err(Error::field(
                 path,
@@ -432,17 +440,18 @@ fn read_shot_records(path: &Path) -> Result<(String, Vec<ShotRecord>)> {
         }
     }
     let wanted: Vec<&str> = [
-        "shot_number",
-        "x",
-        "y",
-        "granule",
-        "beam",
-        "delta_time",
-        "elevation_bin0",
-        "elevation_lastbin",
-        "geoid_offset_used",
-        "rx_sample_count",
-        "stale_return_flag",
+        col::SHOT_NUMBER,
+        col::X,
+        col::Y,
+        col::GRANULE,
+        col::BEAM,
+        col::DELTA_TIME,
+        col::ELEVATION_BIN0,
+        col::ELEVATION_LASTBIN,
+        col::GEOID_OFFSET_USED,
+        col::GEOID,
+        col::RX_SAMPLE_COUNT,
+        col::STALE_RETURN_FLAG,
     ]
     .into_iter()
     .filter(|c| schema.field_with_name(c).is_ok())
@@ -465,16 +474,18 @@ fn read_shot_records(path: &Path) -> Result<(String, Vec<ShotRecord>)> {
             }
         };
         let sn = b
-            .column_by_name("shot_number")
+            .column_by_name(col::SHOT_NUMBER)
             .and_then(|c| c.as_primitive_opt::<UInt64Type>().cloned())
-            .ok_or_else(|| Error::field(path, "shot_number", "not uint64"))?;
-        let (x, y, dt) = (f64s("x")?, f64s("y")?, f64s("delta_time")?);
-        let (e0, e1, geoid) = (f64s("elevation_bin0")?, f64s("elevation_lastbin")?, f64s("geoid_offset_used")?);
-        let count = b.column_by_name("rx_sample_count").and_then(|c| c.as_primitive_opt::<UInt32Type>().cloned());
-        let stale = b.column_by_name("stale_return_flag").and_then(|c| c.as_primitive_opt::<UInt8Type>().cloned());
-        let beams = b.column_by_name("beam").and_then(|c| c.as_string_opt::<i32>().cloned());
+            .ok_or_else(|| Error::field(path, col::SHOT_NUMBER, "not uint64"))?;
+        let (x, y, dt) = (f64s(col::X)?, f64s(col::Y)?, f64s(col::DELTA_TIME)?);
+        let (e0, e1) = (f64s(col::ELEVATION_BIN0)?, f64s(col::ELEVATION_LASTBIN)?);
+        // The table's one geoid policy (`ShotColumns::geoid_offset`): the offset ingest applied, else `geoid`.
+        let (geoid_used, geoid) = (f64s(col::GEOID_OFFSET_USED)?, f64s(col::GEOID)?);
+        let count = b.column_by_name(col::RX_SAMPLE_COUNT).and_then(|c| c.as_primitive_opt::<UInt32Type>().cloned());
+        let stale = b.column_by_name(col::STALE_RETURN_FLAG).and_then(|c| c.as_primitive_opt::<UInt8Type>().cloned());
+        let beams = b.column_by_name(col::BEAM).and_then(|c| c.as_string_opt::<i32>().cloned());
         if granule.is_none() {
-            granule = b.column_by_name("granule").and_then(|c| {
+            granule = b.column_by_name(col::GRANULE).and_then(|c| {
                 c.as_string_opt::<i32>().filter(|a| !a.is_empty() && a.is_valid(0)).map(|a| a.value(0).to_string())
             });
         }
@@ -483,7 +494,8 @@ fn read_shot_records(path: &Path) -> Result<(String, Vec<ShotRecord>)> {
         };
         for i in 0..b.num_rows() {
             let (px, py) = (get(&x, i), get(&y, i));
-            let (z_top, z_bottom, n) = (get(&e0, i), get(&e1, i), get(&geoid, i));
+            let (z_top, z_bottom) = (get(&e0, i), get(&e1, i));
+            let n = get(&geoid_used, i).or(get(&geoid, i));
             let has_wave = count.as_ref().is_none_or(|c| c.is_valid(i) && c.value(i) >= 2);
             let skip = if px.is_none() || py.is_none() {
                 Some("no_position")
@@ -530,16 +542,20 @@ fn read_waveforms(
         return Ok(Vec::new());
     }
     let mut out = Vec::with_capacity(rows.len());
-    let columns: &[&str] = if with_tx { &["rx_waveform", "tx_waveform"] } else { &["rx_waveform"] };
+    let columns: &[&str] = if with_tx { &[col::RX_WAVEFORM, col::TX_WAVEFORM] } else { &[col::RX_WAVEFORM] };
     crate::dataset::read::for_each_batch(path, Some(columns), Some(&rows), |c| {
         for i in 0..c.num_rows() {
-            let tx = if with_tx { c.f32_list("tx_waveform", i)? } else { None };
-            out.push((c.f32_list("rx_waveform", i)?, tx));
+            let tx = if with_tx { c.f32_list(col::TX_WAVEFORM, i)? } else { None };
+            out.push((c.f32_list(col::RX_WAVEFORM, i)?, tx));
         }
         Ok(())
     })?;
     if out.len() != rows.len() {
-        return Err(Error::field(path, "rx_waveform", format!("read {} waveforms for {} rows", out.len(), rows.len())));
+        return Err(Error::field(
+            path,
+            col::RX_WAVEFORM,
+            format!("read {} waveforms for {} rows", out.len(), rows.len()),
+        ));
     }
     Ok(out)
 }

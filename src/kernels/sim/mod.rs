@@ -119,8 +119,13 @@ impl Weighting {
     /// All weightings, in index order.
     pub const ALL: [Weighting; N_WEIGHTINGS] = [Weighting::Count, Weighting::Frac, Weighting::Int];
 
+    /// The names of [`Self::ALL`], in index order: the `weighting` values of the `sim` and
+    /// `results` tables.
+    pub const NAMES: [&'static str; N_WEIGHTINGS] =
+        [Weighting::Count.name(), Weighting::Frac.name(), Weighting::Int.name()];
+
     /// Lower-case name (`count`, `frac`, `int`).
-    pub fn name(self) -> &'static str {
+    pub const fn name(self) -> &'static str {
         match self {
             Weighting::Count => "count",
             Weighting::Frac => "frac",

@@ -17,7 +17,7 @@ pub const SLOPE_CLASSES: [&str; 4] = ["[0,10)", "[10,20)", "[20,30)", ">=30"];
 /// ALS canopy-cover classes (fraction).
 pub const COVER_CLASSES: [&str; 4] = ["[0,0.25)", "[0.25,0.5)", "[0.5,0.75)", "[0.75,1]"];
 /// Values of `algorithm`: `default` (the shot's selected algorithm) and `a1` … `a6`.
-pub const ALGORITHMS: [&str; 7] = ["default", "a1", "a2", "a3", "a4", "a5", "a6"];
+pub const ALGORITHMS: [&str; crate::gedi::N_ALGORITHMS + 1] = ["default", "a1", "a2", "a3", "a4", "a5", "a6"];
 
 /// `low` for 0.90 ≤ s ≤ 0.96, `high` for s > 0.96, `None` below 0.90 or when not finite (the
 /// study drops those shots).

@@ -17,7 +17,7 @@
 //!
 //! Pure: plain structs in, [`ResultInput`] rows and counts out.
 
-use crate::gedi::RH_LEN;
+use crate::gedi::{N_ALGORITHMS, RH_LEN};
 use crate::study::align::VerticalReference;
 use crate::study::classes::sensitivity_group;
 
@@ -30,9 +30,9 @@ pub const MIN_RH100: f64 = 5.0;
 /// Highest simulated RH100 kept (m).
 pub const MAX_RH100: f64 = 60.0;
 /// The weightings of the `sim` and `results` tables, in row order.
-pub const WEIGHTINGS: [&str; 3] = ["count", "frac", "int"];
+pub const WEIGHTINGS: [&str; crate::sim::N_WEIGHTINGS] = crate::sim::Weighting::NAMES;
 /// `default` then a1 … a6, in row order.
-pub const ALGORITHMS: [StudyAlgorithm; 7] = [
+pub const ALGORITHMS: [StudyAlgorithm; N_ALGORITHMS + 1] = [
     StudyAlgorithm::Default,
     StudyAlgorithm::A(1),
     StudyAlgorithm::A(2),
@@ -220,7 +220,7 @@ pub struct ShotFacts {
     /// N used for the shot (`geoid_offset_used`), m.
     pub geoid_offset: Option<f64>,
     /// `default`, a1 … a6 (the order of [`ALGORITHMS`]).
-    pub algorithms: [AlgorithmFacts; 7],
+    pub algorithms: [AlgorithmFacts; N_ALGORITHMS + 1],
 }
 
 /// One weighting of the shot's simulation (a `sim` row).

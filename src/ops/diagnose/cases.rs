@@ -8,6 +8,7 @@ use std::sync::Arc;
 use super::sites::simulate_cases;
 use crate::dataset::als::{AlsTable, BBox};
 use crate::dataset::read::{self, value};
+use crate::dataset::shots::{col, ShotColumns, ALGORITHMS};
 use crate::dataset::{self, tables, Dataset};
 use crate::error::{Error, Result};
 use crate::kernels::diagnose::case::{
@@ -15,7 +16,7 @@ use crate::kernels::diagnose::case::{
     SHORT_SEGMENT_SHOTS,
 };
 use crate::kernels::diagnose::{self, ShotCase};
-use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
+use crate::kernels::gedi::{N_ALGORITHMS, RH_LEN};
 use crate::kernels::sim::{self, Footprint, PulseModel, PulseReference};
 use crate::kernels::study::classes;
 use crate::kernels::waveform::l2a::Noise;
@@ -101,31 +102,23 @@ fn read_shots(
     out: &mut Vec<Pending>,
     report: &mut CaseReport,
 ) -> Result<()> {
-    let (granule, beam, beam_type) = (c.strings("granule")?, c.strings("beam")?, c.strings("beam_type")?);
-    let sn = c.u64s("shot_number")?;
-    let (x, y) = (c.f64s("x")?, c.f64s("y")?);
-    let (bin0, lastbin) = (c.f64s("elevation_bin0")?, c.f64s("elevation_lastbin")?);
-    let (nmean, nsd) = (c.f64s("noise_mean_corrected")?, c.f64s("noise_stddev_corrected")?);
-    let (geoid, geoid_used) = (c.f64s("geoid")?, c.f64s("geoid_offset_used")?);
-    let degrade = c.u8s("degrade_flag")?;
-    let selected = c.u8s("selected_algorithm")?;
-    let leaf_off = c.u8s("leaf_off_flag")?;
-    let mut alg_cols = Vec::new();
-    for a in 1..=N_ALGORITHMS {
-        alg_cols.push((
-            c.f64s(&format!("elev_lowestmode_a{a}"))?,
-            format!("rh_a{a}"),
-            c.f64s(&format!("sensitivity_a{a}"))?,
-            c.u8s(&format!("quality_flag_a{a}"))?,
-        ));
-    }
+    let shots = ShotColumns(c);
+    let (granule, beam) = (c.strings(col::GRANULE)?, c.strings(col::BEAM)?);
+    let sn = c.u64s(col::SHOT_NUMBER)?;
+    let (x, y) = (c.f64s(col::X)?, c.f64s(col::Y)?);
+    let (bin0, lastbin) = (c.f64s(col::ELEVATION_BIN0)?, c.f64s(col::ELEVATION_LASTBIN)?);
+    let (nmean, nsd) = (c.f64s(col::NOISE_MEAN_CORRECTED)?, c.f64s(col::NOISE_STDDEV_CORRECTED)?);
+    let degrade = c.u8s(col::DEGRADE_FLAG)?;
+    let selected = c.u8s(col::SELECTED_ALGORITHM)?;
+    let leaf_off = c.u8s(col::LEAF_OFF_FLAG)?;
+    let alg_cols = ALGORITHMS.iter().map(|(a, _)| shots.algorithm(a)).collect::<Result<Vec<_>>>()?;
     for i in 0..c.num_rows() {
         report.shots_read += 1;
         let (Some(px), Some(py)) = (value(x, i), value(y, i)) else {
             count_dropped(report, "no position");
             continue;
         };
-        let Some(wave) = c.f32_list("rx_waveform", i)?.filter(|w| w.len() > 1) else {
+        let Some(wave) = c.f32_list(col::RX_WAVEFORM, i)?.filter(|w| w.len() > 1) else {
             count_dropped(report, "no L1B waveform");
             continue;
         };
@@ -135,26 +128,22 @@ fn read_shots(
             count_dropped(report, "no record geolocation or noise");
             continue;
         };
-        let Some(n_geoid) = value(geoid_used, i).or(value(geoid, i)) else {
+        let Some(n_geoid) = shots.geoid_offset(i)? else {
             count_dropped(report, "no geoid");
             continue;
         };
-        let Some(bt) = BeamType::from_name(beam.value(i)).or(match beam_type.value(i) {
-            "coverage" => Some(BeamType::Coverage),
-            "full_power" => Some(BeamType::FullPower),
-            _ => None,
-        }) else {
+        let Some(bt) = shots.beam_type(i)? else {
             count_dropped(report, "unknown beam type");
             continue;
         };
         let shot = sn.value(i);
         let algorithms: [Option<RealAlgorithm>; N_ALGORITHMS] = std::array::from_fn(|a| {
-            let (elev, rh, sens, q) = &alg_cols[a];
-            if !classes::passes_quality(value(q, i), value(degrade, i), value(sens, i)) {
+            let cols = &alg_cols[a];
+            if !classes::passes_quality(value(cols.quality_flag, i), value(degrade, i), value(cols.sensitivity, i)) {
                 return None;
             }
-            let ground = value(elev, i)?;
-            let rh = c.f32_list(rh, i).ok().flatten().filter(|r| r.len() == RH_LEN)?;
+            let ground = value(cols.elev_lowestmode, i)?;
+            let rh = shots.rh(&ALGORITHMS[a].0, i).ok().flatten().filter(|r| r.len() == RH_LEN)?;
             ground.is_finite().then_some(RealAlgorithm { ground: ground - n_geoid, rh })
         });
         if algorithms.iter().all(Option::is_none) {
@@ -162,7 +151,7 @@ fn read_shots(
             continue;
         }
         let sel = value(selected, i).filter(|s| (1..=N_ALGORITHMS as u8).contains(s)).unwrap_or(1);
-        let sens_sel = value(alg_cols[usize::from(sel) - 1].2, i).unwrap_or(f64::NAN);
+        let sens_sel = value(alg_cols[usize::from(sel) - 1].sensitivity, i).unwrap_or(f64::NAN);
         let energy: f64 = wave.iter().map(|&v| f64::from(v) - mean).sum();
         let (dx, dy) = offsets.get(&shot).map_or((0.0, 0.0), |o| (o.dx, o.dy));
         let collocation_dz = offsets.get(&shot).map(|o| o.dz).filter(|dz| dz.is_finite());
@@ -187,7 +176,7 @@ fn read_shots(
                 forest_type: forest.get(&shot).cloned().unwrap_or_else(|| classes::UNKNOWN.to_string()),
                 phenology: classes::phenology(value(leaf_off, i)).to_string(),
                 sensitivity_group: classes::sensitivity_group(sens_sel).unwrap_or(classes::UNKNOWN).to_string(),
-                beam_type: beam_type.value(i).to_string(),
+                beam_type: bt.as_str().to_string(),
                 ..Default::default()
             },
         };
@@ -283,7 +272,7 @@ impl ShotPulseSource {
             ShotPulseSource::Gaussian => None,
             ShotPulseSource::Fixed(p) => Some(p.clone()),
             ShotPulseSource::Recorded(r, res) => c
-                .f32_list("tx_waveform", i)?
+                .f32_list(col::TX_WAVEFORM, i)?
                 .and_then(|tx| crate::sql::pulses::recorded_pulse(&tx, *r, *res))
                 .map(Arc::new),
         })

@@ -9,9 +9,10 @@ use arrow::datatypes::{
 
 use super::join::Row;
 use crate::dataset::shots::VERTICAL_DATUM;
+use crate::dataset::shots::{col, ALGORITHMS};
 use crate::error::{Error, Result};
 use crate::io::gedi::{L1bBeam, L2aBeam};
-use crate::kernels::gedi::{BeamType, N_ALGORITHMS, RH_LEN};
+use crate::kernels::gedi::{BeamType, RH_LEN};
 
 /// Everything needed to turn rows of one beam into a batch.
 pub(super) struct BatchContext<'a> {
@@ -68,72 +69,71 @@ impl BatchContext<'_> {
         let a2 = |r: &Row| l2.zip(r.l2a);
 
         let mut cols: Vec<(String, ArrayRef)> = vec![
-            ("granule".into(), strings(rows, |_| Some(self.granule))),
-            ("shot_number".into(), prim::<UInt64Type>(rows, |r| Some(r.shot_number))),
-            ("beam".into(), strings(rows, |_| Some(self.beam))),
-            ("beam_type".into(), strings(rows, |_| Some(self.beam_type.as_str()))),
-            ("in_l1b".into(), Arc::new(rows.iter().map(|r| Some(r.l1b.is_some())).collect::<BooleanArray>())),
-            ("in_l2a".into(), Arc::new(rows.iter().map(|r| Some(r.l2a.is_some())).collect::<BooleanArray>())),
+            (col::GRANULE.into(), strings(rows, |_| Some(self.granule))),
+            (col::SHOT_NUMBER.into(), prim::<UInt64Type>(rows, |r| Some(r.shot_number))),
+            (col::BEAM.into(), strings(rows, |_| Some(self.beam))),
+            (col::BEAM_TYPE.into(), strings(rows, |_| Some(self.beam_type.as_str()))),
+            (col::IN_L1B.into(), Arc::new(rows.iter().map(|r| Some(r.l1b.is_some())).collect::<BooleanArray>())),
+            (col::IN_L2A.into(), Arc::new(rows.iter().map(|r| Some(r.l2a.is_some())).collect::<BooleanArray>())),
             (
-                "delta_time".into(),
+                col::DELTA_TIME.into(),
                 f64s(rows, |r| {
                     a1(r)
                         .and_then(|(b, i)| at(&b.delta_time, Some(i)))
                         .or_else(|| a2(r).and_then(|(b, i)| at(&b.delta_time, Some(i))))
                 }),
             ),
-            ("lat_bin0".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.lat_bin0[i]))),
-            ("lon_bin0".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.lon_bin0[i]))),
-            ("lat_lastbin".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.lat_lastbin[i]))),
-            ("lon_lastbin".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.lon_lastbin[i]))),
-            ("lat_lowestmode".into(), f64s(rows, |r| a2(r).and_then(|(b, i)| b.lowestmode(i)).map(|p| p.0))),
-            ("lon_lowestmode".into(), f64s(rows, |r| a2(r).and_then(|(b, i)| b.lowestmode(i)).map(|p| p.1))),
-            ("x".into(), f64s(rows, |r| r.xy.map(|p| p.0))),
-            ("y".into(), f64s(rows, |r| r.xy.map(|p| p.1))),
-            ("xy_source".into(), strings(rows, |r| r.xy.map(|p| p.2.as_str()))),
-            ("elevation_bin0".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.elevation_bin0[i]))),
-            ("elevation_lastbin".into(), f64s(rows, |r| a1(r).map(|(b, i)| b.elevation_lastbin[i]))),
-            ("rx_waveform".into(), lists(rows, |r| a1(r).and_then(|(b, i)| b.rx.get(i)))),
-            ("rx_sample_count".into(), prim::<UInt32Type>(rows, |r| a1(r).map(|(b, i)| b.rx.spans[i].1 as u32))),
-            ("tx_waveform".into(), lists(rows, |r| a1(r).and_then(|(b, i)| b.tx.as_ref()?.get(i)))),
-            ("noise_mean_corrected".into(), f64s(rows, |r| a1(r).and_then(|(b, i)| at(&b.noise_mean, Some(i))))),
-            ("noise_stddev_corrected".into(), f64s(rows, |r| a1(r).and_then(|(b, i)| at(&b.noise_stddev, Some(i))))),
+            (col::LAT_BIN0.into(), f64s(rows, |r| a1(r).map(|(b, i)| b.lat_bin0[i]))),
+            (col::LON_BIN0.into(), f64s(rows, |r| a1(r).map(|(b, i)| b.lon_bin0[i]))),
+            (col::LAT_LASTBIN.into(), f64s(rows, |r| a1(r).map(|(b, i)| b.lat_lastbin[i]))),
+            (col::LON_LASTBIN.into(), f64s(rows, |r| a1(r).map(|(b, i)| b.lon_lastbin[i]))),
+            (col::LAT_LOWESTMODE.into(), f64s(rows, |r| a2(r).and_then(|(b, i)| b.lowestmode(i)).map(|p| p.0))),
+            (col::LON_LOWESTMODE.into(), f64s(rows, |r| a2(r).and_then(|(b, i)| b.lowestmode(i)).map(|p| p.1))),
+            (col::X.into(), f64s(rows, |r| r.xy.map(|p| p.0))),
+            (col::Y.into(), f64s(rows, |r| r.xy.map(|p| p.1))),
+            (col::XY_SOURCE.into(), strings(rows, |r| r.xy.map(|p| p.2.as_str()))),
+            (col::ELEVATION_BIN0.into(), f64s(rows, |r| a1(r).map(|(b, i)| b.elevation_bin0[i]))),
+            (col::ELEVATION_LASTBIN.into(), f64s(rows, |r| a1(r).map(|(b, i)| b.elevation_lastbin[i]))),
+            (col::RX_WAVEFORM.into(), lists(rows, |r| a1(r).and_then(|(b, i)| b.rx.get(i)))),
+            (col::RX_SAMPLE_COUNT.into(), prim::<UInt32Type>(rows, |r| a1(r).map(|(b, i)| b.rx.spans[i].1 as u32))),
+            (col::TX_WAVEFORM.into(), lists(rows, |r| a1(r).and_then(|(b, i)| b.tx.as_ref()?.get(i)))),
+            (col::NOISE_MEAN_CORRECTED.into(), f64s(rows, |r| a1(r).and_then(|(b, i)| at(&b.noise_mean, Some(i))))),
+            (col::NOISE_STDDEV_CORRECTED.into(), f64s(rows, |r| a1(r).and_then(|(b, i)| at(&b.noise_stddev, Some(i))))),
             (
-                "stale_return_flag".into(),
+                col::STALE_RETURN_FLAG.into(),
                 prim::<UInt8Type>(rows, |r| a1(r).and_then(|(b, i)| at(&b.stale_return_flag, Some(i)))),
             ),
-            ("degrade".into(), prim::<Int8Type>(rows, |r| a1(r).and_then(|(b, i)| at(&b.degrade, Some(i))))),
-            ("geoid".into(), f64s(rows, |r| a1(r).and_then(|(b, i)| at(&b.geoid, Some(i))))),
+            (col::DEGRADE.into(), prim::<Int8Type>(rows, |r| a1(r).and_then(|(b, i)| at(&b.degrade, Some(i))))),
+            (col::GEOID.into(), f64s(rows, |r| a1(r).and_then(|(b, i)| at(&b.geoid, Some(i))))),
             (
-                "geoid_offset_used".into(),
+                col::GEOID_OFFSET_USED.into(),
                 f64s(rows, |r| self.geoid_offset.or_else(|| a1(r).and_then(|(b, i)| at(&b.geoid, Some(i))))),
             ),
-            ("vertical_datum".into(), strings(rows, |_| Some(VERTICAL_DATUM))),
-            ("quality_flag".into(), prim::<UInt8Type>(rows, |r| a2(r).map(|(b, i)| b.quality_flag[i]))),
-            ("degrade_flag".into(), prim::<UInt8Type>(rows, |r| a2(r).map(|(b, i)| b.degrade_flag[i]))),
-            ("sensitivity".into(), f64s(rows, |r| a2(r).map(|(b, i)| b.sensitivity[i]))),
-            ("selected_algorithm".into(), prim::<UInt8Type>(rows, |r| a2(r).map(|(b, i)| b.selected_algorithm[i]))),
-            ("elev_lowestmode".into(), f64s(rows, |r| a2(r).map(|(b, i)| b.elev_lowestmode[i]))),
-            ("rh".into(), lists(rows, |r| a2(r).map(|(b, i)| rh_row(&b.rh, i)))),
-            ("energy_total".into(), f64s(rows, |r| a2(r).and_then(|(b, i)| at(&b.energy_total, Some(i))))),
+            (col::VERTICAL_DATUM.into(), strings(rows, |_| Some(VERTICAL_DATUM))),
+            (col::QUALITY_FLAG.into(), prim::<UInt8Type>(rows, |r| a2(r).map(|(b, i)| b.quality_flag[i]))),
+            (col::DEGRADE_FLAG.into(), prim::<UInt8Type>(rows, |r| a2(r).map(|(b, i)| b.degrade_flag[i]))),
+            (col::SENSITIVITY.into(), f64s(rows, |r| a2(r).map(|(b, i)| b.sensitivity[i]))),
+            (col::SELECTED_ALGORITHM.into(), prim::<UInt8Type>(rows, |r| a2(r).map(|(b, i)| b.selected_algorithm[i]))),
+            (col::ELEV_LOWESTMODE.into(), f64s(rows, |r| a2(r).map(|(b, i)| b.elev_lowestmode[i]))),
+            (col::RH.into(), lists(rows, |r| a2(r).map(|(b, i)| rh_row(&b.rh, i)))),
+            (col::ENERGY_TOTAL.into(), f64s(rows, |r| a2(r).and_then(|(b, i)| at(&b.energy_total, Some(i))))),
         ];
-        for a in 0..N_ALGORITHMS {
-            let n = a + 1;
+        for (a, (names, window)) in ALGORITHMS.iter().enumerate() {
             let alg = |r: &Row| a2(r).map(|(b, i)| (&b.algorithms[a], i));
             cols.extend([
                 (
-                    format!("elev_lowestmode_a{n}"),
+                    names.elev_lowestmode.into(),
                     f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.elev_lowestmode, Some(i)))),
                 ),
-                (format!("rh_a{n}"), lists(rows, |r| alg(r).and_then(|(g, i)| Some(rh_row(g.rh.as_ref()?, i))))),
-                (format!("sensitivity_a{n}"), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.sensitivity, Some(i))))),
+                (names.rh.into(), lists(rows, |r| alg(r).and_then(|(g, i)| Some(rh_row(g.rh.as_ref()?, i))))),
+                (names.sensitivity.into(), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.sensitivity, Some(i))))),
                 (
-                    format!("quality_flag_a{n}"),
+                    names.quality_flag.into(),
                     prim::<UInt8Type>(rows, |r| alg(r).and_then(|(g, i)| at(&g.quality_flag, Some(i)))),
                 ),
-                (format!("toploc_a{n}"), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.toploc, Some(i))))),
-                (format!("botloc_a{n}"), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.botloc, Some(i))))),
-                (format!("zcross_a{n}"), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.zcross, Some(i))))),
+                (window.toploc.into(), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.toploc, Some(i))))),
+                (window.botloc.into(), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.botloc, Some(i))))),
+                (window.zcross.into(), f64s(rows, |r| alg(r).and_then(|(g, i)| at(&g.zcross, Some(i))))),
             ]);
         }
         let u8_lc = |f: fn(&L2aBeam) -> &Option<Vec<u8>>| {
@@ -143,13 +143,13 @@ impl BatchContext<'_> {
             prim::<Int16Type>(rows, move |r| a2(r).and_then(|(b, i)| at(f(b), Some(i))))
         };
         cols.extend([
-            ("leaf_off_flag".into(), u8_lc(|b| &b.leaf_off_flag)),
-            ("leaf_off_doy".into(), i16_lc(|b| &b.leaf_off_doy)),
-            ("leaf_on_doy".into(), i16_lc(|b| &b.leaf_on_doy)),
-            ("pft_class".into(), u8_lc(|b| &b.pft_class)),
-            ("region_class".into(), u8_lc(|b| &b.region_class)),
-            ("urban_proportion".into(), u8_lc(|b| &b.urban_proportion)),
-            ("landsat_water_persistence".into(), u8_lc(|b| &b.landsat_water_persistence)),
+            (col::LEAF_OFF_FLAG.into(), u8_lc(|b| &b.leaf_off_flag)),
+            (col::LEAF_OFF_DOY.into(), i16_lc(|b| &b.leaf_off_doy)),
+            (col::LEAF_ON_DOY.into(), i16_lc(|b| &b.leaf_on_doy)),
+            (col::PFT_CLASS.into(), u8_lc(|b| &b.pft_class)),
+            (col::REGION_CLASS.into(), u8_lc(|b| &b.region_class)),
+            (col::URBAN_PROPORTION.into(), u8_lc(|b| &b.urban_proportion)),
+            (col::LANDSAT_WATER_PERSISTENCE.into(), u8_lc(|b| &b.landsat_water_persistence)),
         ]);
 
         // Order the columns by the schema, so the schema stays the single definition of order.

@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::dataset::als::tiles_col;
 use crate::dataset::{self, tables, Dataset};
 use crate::error::{Error, Result};
 use crate::io::las::read_header;
@@ -69,15 +70,20 @@ pub(crate) fn dataset_extents(ds: &Dataset) -> Result<Vec<[f64; 4]>> {
             out.push(e);
             continue;
         }
-        dataset::read::for_each_batch(&f, Some(&["xmin", "ymin", "xmax", "ymax"]), None, |c| {
-            for i in 0..c.num_rows() {
-                let v = ["xmin", "ymin", "xmax", "ymax"].map(|k| c.f64(k, i));
-                if let [Some(x0), Some(y0), Some(x1), Some(y1)] = v.map(|r| r.ok().flatten()) {
-                    out.push([x0, y0, x1, y1]);
+        dataset::read::for_each_batch(
+            &f,
+            Some(&[tiles_col::XMIN, tiles_col::YMIN, tiles_col::XMAX, tiles_col::YMAX]),
+            None,
+            |c| {
+                for i in 0..c.num_rows() {
+                    let v = [tiles_col::XMIN, tiles_col::YMIN, tiles_col::XMAX, tiles_col::YMAX].map(|k| c.f64(k, i));
+                    if let [Some(x0), Some(y0), Some(x1), Some(y1)] = v.map(|r| r.ok().flatten()) {
+                        out.push([x0, y0, x1, y1]);
+                    }
                 }
-            }
-            Ok(())
-        })?;
+                Ok(())
+            },
+        )?;
     }
     Ok(out)
 }

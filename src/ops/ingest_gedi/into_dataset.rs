@@ -12,6 +12,7 @@ use super::join::ShotOwners;
 use super::pairs::{expand_granule_inputs, pair_granules};
 use super::{granule_key, read_granule};
 use super::{BeamReport, GediOptions, GranulePair, IngestReport, ShotChoice};
+use crate::dataset::shots::granules_col;
 use crate::dataset::shots::{granules_schema, shots_schema, VERTICAL_DATUM};
 use crate::error::{Error, Result};
 use crate::kernels::geo::area::ShotArea;
@@ -263,9 +264,9 @@ pub fn previous_record(record: &Path) -> Result<Option<(Hashes, String)>> {
     let mut out = None;
     crate::dataset::read::for_each_batch(record, None, None, |c| {
         if out.is_none() && c.num_rows() > 0 {
-            let has_area = c.batch().schema().column_with_name("shot_area").is_some();
-            let area = if has_area { c.string("shot_area", 0)? } else { None };
-            let hashes = (c.string("l1b_hash", 0)?, c.string("l2a_hash", 0)?);
+            let has_area = c.batch().schema().column_with_name(granules_col::SHOT_AREA).is_some();
+            let area = if has_area { c.string(granules_col::SHOT_AREA, 0)? } else { None };
+            let hashes = (c.string(granules_col::L1B_HASH, 0)?, c.string(granules_col::L2A_HASH, 0)?);
             out = Some((hashes, area.unwrap_or_else(|| ShotArea::All.key())));
         }
         Ok(())

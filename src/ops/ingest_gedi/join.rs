@@ -8,6 +8,7 @@ use std::sync::Arc;
 use arrow::array::RecordBatch;
 
 use super::{BeamReport, GediOptions, GranulePair};
+use crate::dataset::shots::col;
 use crate::error::{Error, Result};
 use crate::io::gedi::{L1bBeam, L2aBeam};
 use crate::kernels::geo::projection::Projector;
@@ -74,8 +75,8 @@ impl ShotOwners {
         for f in crate::dataset::table_files(shots_dir).map_err(|e| Error::file(shots_dir, e))? {
             let k = keys.len();
             keys.push(f.file_stem().and_then(|s| s.to_str()).unwrap_or_default().to_string());
-            crate::dataset::read::for_each_batch(&f, Some(&["shot_number"]), None, |c| {
-                stored.extend(c.u64s("shot_number")?.values().iter().map(|&s| (s, k)));
+            crate::dataset::read::for_each_batch(&f, Some(&[col::SHOT_NUMBER]), None, |c| {
+                stored.extend(c.u64s(col::SHOT_NUMBER)?.values().iter().map(|&s| (s, k)));
                 Ok(())
             })?;
         }
@@ -87,13 +88,13 @@ impl ShotOwners {
     /// granule or another granule holds (the granule's own earlier rows are replaced by this
     /// ingest).
     pub(super) fn claim(&self, pair: &GranulePair, key: &Arc<str>, batch: &RecordBatch) -> Result<()> {
-        let (Some(sn), Some(beams)) = (batch.column_by_name("shot_number"), batch.column_by_name("beam")) else {
+        let (Some(sn), Some(beams)) = (batch.column_by_name(col::SHOT_NUMBER), batch.column_by_name(col::BEAM)) else {
             return Ok(());
         };
         use arrow::array::AsArray;
         let (sn, beams) = (sn.as_primitive::<arrow::datatypes::UInt64Type>(), beams.as_string::<i32>());
         let path = pair.l1b.as_deref().or(pair.l2a.as_deref()).unwrap_or(Path::new(&pair.granule));
-        let refuse = |why: String| Err(Error::field(path, "shot_number", why));
+        let refuse = |why: String| Err(Error::field(path, col::SHOT_NUMBER, why));
         let in_granule = |shot: u64, other: &str| {
             refuse(format!(
                 "shot {shot} is also in granule {other}: a shot number is unique across GEDI (a copy of that \

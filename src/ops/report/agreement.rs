@@ -12,11 +12,9 @@ use plotters::prelude::*;
 use super::figures::{font, tick, Figure, COLORS, LIGHT};
 use super::{floats, strings, AnyFigure, FigureData, TableOutput};
 use crate::error::Result;
+use crate::kernels::study::select::WEIGHTINGS;
 
 type DrawResult = std::result::Result<(), Box<dyn StdError>>;
-
-/// The weightings, in the order the study reports them.
-const WEIGHTINGS: [&str; 3] = ["count", "frac", "int"];
 
 /// The weighting and algorithm the map shows (the report's baseline, as in its other figures).
 const MAP_WEIGHTING: &str = "count";

@@ -169,7 +169,7 @@ impl Headline {
             "MSD of simulated vs real RH1–RH99, all sensitivities: MSD m² (SB / SDSD / LCS % of \
             MSD)"
         );
-        let weightings = ["count", "frac", "int"];
+        let weightings = crate::kernels::study::select::WEIGHTINGS;
         let mut line = format!("{:<10} {:>6}", "algorithm", "n");
         for w in weightings {
             line += &format!("   {w:<21}");

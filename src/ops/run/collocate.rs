@@ -7,6 +7,7 @@ use arrow::array::{AsArray, BooleanArray, RecordBatch};
 
 use super::granules::GranuleFile;
 use super::{RunOptions, RunReport, META_GRANULES};
+use crate::dataset::offsets::col as offsets_col;
 use crate::dataset::offsets::offsets_schema;
 use crate::dataset::{self, read, tables, Dataset};
 use crate::error::{Error, Result};
@@ -33,10 +34,11 @@ pub(super) fn collocate(
             Ok(())
         })?;
     }
-    let granule_col = |b: &RecordBatch| b.column_by_name("granule").and_then(|c| c.as_string_opt::<i32>().cloned());
+    let granule_col =
+        |b: &RecordBatch| b.column_by_name(offsets_col::GRANULE).and_then(|c| c.as_string_opt::<i32>().cloned());
     let mut present = HashSet::new();
     for b in &existing {
-        let g = granule_col(b).ok_or_else(|| Error::field(&dest, "granule", "missing or not a string"))?;
+        let g = granule_col(b).ok_or_else(|| Error::field(&dest, offsets_col::GRANULE, "missing or not a string"))?;
         present.extend(g.iter().flatten().map(str::to_string));
     }
     let recorded: Option<BTreeMap<String, String>> = meta.get(META_GRANULES).and_then(|s| serde_json::from_str(s).ok());
@@ -60,11 +62,11 @@ pub(super) fn collocate(
     let mut batches = Vec::new();
     let mut kept_levels = HashSet::new();
     for b in existing {
-        let g = granule_col(&b).ok_or_else(|| Error::field(&dest, "granule", "missing or not a string"))?;
+        let g = granule_col(&b).ok_or_else(|| Error::field(&dest, offsets_col::GRANULE, "missing or not a string"))?;
         let keep: BooleanArray =
             g.iter().map(|v| Some(v.is_some_and(|v| current.contains(v) && !replaced.contains(v)))).collect();
         let b = arrow::compute::filter_record_batch(&b, &keep).map_err(|e| Error::table(&dest, e))?;
-        if let Some(l) = b.column_by_name("level").and_then(|c| c.as_string_opt::<i32>().cloned()) {
+        if let Some(l) = b.column_by_name(offsets_col::LEVEL).and_then(|c| c.as_string_opt::<i32>().cloned()) {
             kept_levels.extend(l.iter().flatten().map(str::to_string));
         }
         batches.push(b);

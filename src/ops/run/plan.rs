@@ -8,8 +8,10 @@ use sha2::{Digest, Sha256};
 
 use super::granules::GranuleFile;
 use super::{GranuleRun, META_COUNTS, META_INPUT, RUN_FORMAT};
+use crate::dataset::als::tiles_col;
 use crate::dataset::als::AlsTable;
 use crate::dataset::offsets::{read_offsets, read_r_after, AppliedOffset};
+use crate::dataset::shots::col;
 use crate::dataset::{self, read, tables, Dataset};
 use crate::error::{Error, Result};
 use crate::kernels::sim::{Footprint, Profile, SimConfig};
@@ -57,14 +59,14 @@ pub(super) fn read_tiles(ds: &Dataset) -> Result<Vec<(TileWindow, String)>> {
         read::for_each_batch(&path, None, None, |c| {
             for i in 0..c.num_rows() {
                 let w = TileWindow {
-                    xmin: c.f64("xmin", i)?.unwrap_or(f64::NAN),
-                    ymin: c.f64("ymin", i)?.unwrap_or(f64::NAN),
-                    xmax: c.f64("xmax", i)?.unwrap_or(f64::NAN),
-                    ymax: c.f64("ymax", i)?.unwrap_or(f64::NAN),
-                    start_us: c.timestamp("acquisition_start", i)?,
-                    end_us: c.timestamp("acquisition_end", i)?,
+                    xmin: c.f64(tiles_col::XMIN, i)?.unwrap_or(f64::NAN),
+                    ymin: c.f64(tiles_col::YMIN, i)?.unwrap_or(f64::NAN),
+                    xmax: c.f64(tiles_col::XMAX, i)?.unwrap_or(f64::NAN),
+                    ymax: c.f64(tiles_col::YMAX, i)?.unwrap_or(f64::NAN),
+                    start_us: c.timestamp(tiles_col::ACQUISITION_START, i)?,
+                    end_us: c.timestamp(tiles_col::ACQUISITION_END, i)?,
                 };
-                out.push((w, c.string("content_hash", i)?.unwrap_or_default()));
+                out.push((w, c.string(tiles_col::CONTENT_HASH, i)?.unwrap_or_default()));
             }
             Ok(())
         })?;
@@ -103,11 +105,11 @@ pub(super) fn plan_granule(
 ) -> Result<GranulePlan> {
     let mut covered = Vec::new();
     let mut n = 0;
-    read::for_each_batch(&file.path, Some(&["shot_number", "x", "y"]), None, |c| {
+    read::for_each_batch(&file.path, Some(&[col::SHOT_NUMBER, col::X, col::Y]), None, |c| {
         for i in 0..c.num_rows() {
             let row = n + i;
-            let Some(sn) = c.u64("shot_number", i)? else { continue };
-            let (Some(x), Some(y)) = (c.f64("x", i)?, c.f64("y", i)?) else { continue };
+            let Some(sn) = c.u64(col::SHOT_NUMBER, i)? else { continue };
+            let (Some(x), Some(y)) = (c.f64(col::X, i)?, c.f64(col::Y, i)?) else { continue };
             let offset = inputs.offsets.get(&sn).cloned();
             let (dx, dy) = offset.as_ref().map_or((0.0, 0.0), |o| (o.dx, o.dy));
             let (x, y) = (x + dx, y + dy);

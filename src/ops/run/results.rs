@@ -11,6 +11,8 @@ use arrow::record_batch::RecordBatch;
 use super::plan::{GranulePlan, StudyInputs};
 use super::{META_COUNTS, META_INPUT};
 use crate::dataset::results::{results_metadata, results_schema};
+use crate::dataset::shots::{col, AlgorithmColumns, ShotColumns, ALGORITHMS, SELECTED};
+use crate::dataset::sim::col as sim_col;
 use crate::dataset::{self, read};
 use crate::error::{Error, Result};
 use crate::kernels::gedi::RH_LEN;
@@ -76,55 +78,47 @@ pub(super) fn read_shot_facts(path: &Path, rows: impl Iterator<Item = usize>) ->
     if rows.is_empty() {
         return Ok(Vec::new());
     }
-    let mut names: Vec<String> = [
-        "shot_number",
-        "granule",
-        "beam",
-        "beam_type",
-        "delta_time",
-        "degrade_flag",
-        "leaf_off_flag",
-        "selected_algorithm",
-        "geoid_offset_used",
-        "quality_flag",
-        "sensitivity",
-        "elev_lowestmode",
-        "rh",
-    ]
-    .map(String::from)
-    .to_vec();
-    for n in 1..=6 {
-        names.extend([
-            format!("quality_flag_a{n}"),
-            format!("sensitivity_a{n}"),
-            format!("elev_lowestmode_a{n}"),
-            format!("rh_a{n}"),
-        ]);
+    let mut names = vec![
+        col::SHOT_NUMBER,
+        col::GRANULE,
+        col::BEAM,
+        col::BEAM_TYPE,
+        col::DELTA_TIME,
+        col::DEGRADE_FLAG,
+        col::LEAF_OFF_FLAG,
+        col::SELECTED_ALGORITHM,
+    ];
+    names.extend(ShotColumns::GEOID_COLUMNS);
+    for a in std::iter::once(&SELECTED).chain(ALGORITHMS.iter().map(|(a, _)| a)) {
+        names.extend([a.quality_flag, a.sensitivity, a.elev_lowestmode, a.rh]);
     }
-    let names: Vec<&str> = names.iter().map(String::as_str).collect();
     let mut out = Vec::with_capacity(rows.len());
     read::for_each_batch(path, Some(&names), Some(&rows), |c| {
+        let shots = ShotColumns(c);
         for i in 0..c.num_rows() {
-            let alg = |suffix: &str| -> Result<AlgorithmFacts> {
+            let alg = |a: &AlgorithmColumns| -> Result<AlgorithmFacts> {
                 Ok(AlgorithmFacts {
-                    quality_flag: c.u8(&format!("quality_flag{suffix}"), i)?,
-                    sensitivity: c.f64(&format!("sensitivity{suffix}"), i)?,
-                    elev_lowestmode: c.f64(&format!("elev_lowestmode{suffix}"), i)?,
-                    rh: c.f32_list(&format!("rh{suffix}"), i)?,
+                    quality_flag: c.u8(a.quality_flag, i)?,
+                    sensitivity: c.f64(a.sensitivity, i)?,
+                    elev_lowestmode: c.f64(a.elev_lowestmode, i)?,
+                    rh: c.f32_list(a.rh, i)?,
                 })
             };
-            let algorithms = [alg("")?, alg("_a1")?, alg("_a2")?, alg("_a3")?, alg("_a4")?, alg("_a5")?, alg("_a6")?];
+            let mut algorithms = vec![alg(&SELECTED)?];
+            for (a, _) in &ALGORITHMS {
+                algorithms.push(alg(a)?);
+            }
             out.push(ShotFacts {
-                shot_number: c.u64("shot_number", i)?.ok_or_else(|| Error::field(path, "shot_number", "null"))?,
-                granule: c.string("granule", i)?.unwrap_or_default(),
-                beam: c.string("beam", i)?.unwrap_or_default(),
-                beam_type: c.string("beam_type", i)?.unwrap_or_default(),
-                delta_time: c.f64("delta_time", i)?,
-                degrade_flag: c.u8("degrade_flag", i)?,
-                leaf_off_flag: c.u8("leaf_off_flag", i)?,
-                selected_algorithm: c.u8("selected_algorithm", i)?,
-                geoid_offset: c.f64("geoid_offset_used", i)?,
-                algorithms,
+                shot_number: c.u64(col::SHOT_NUMBER, i)?.ok_or_else(|| Error::field(path, col::SHOT_NUMBER, "null"))?,
+                granule: c.string(col::GRANULE, i)?.unwrap_or_default(),
+                beam: c.string(col::BEAM, i)?.unwrap_or_default(),
+                beam_type: shots.beam_type(i)?.map(|b| b.as_str().to_string()).unwrap_or_default(),
+                delta_time: c.f64(col::DELTA_TIME, i)?,
+                degrade_flag: c.u8(col::DEGRADE_FLAG, i)?,
+                leaf_off_flag: c.u8(col::LEAF_OFF_FLAG, i)?,
+                selected_algorithm: c.u8(col::SELECTED_ALGORITHM, i)?,
+                geoid_offset: shots.geoid_offset(i)?,
+                algorithms: algorithms.try_into().expect("the selected algorithm and a1…a6"),
             });
         }
         Ok(())
@@ -137,23 +131,32 @@ pub(super) fn read_shot_facts(path: &Path, rows: impl Iterator<Item = usize>) ->
 
 /// Shot → the three weightings' simulation facts of a `sim/` file.
 pub(super) fn read_sim_facts(path: &Path) -> Result<HashMap<u64, [SimFacts; 3]>> {
-    let columns = ["footprint_id", "weighting", "status", "als_ground", "slope_deg", "als_cover", "rh"];
+    let columns = [
+        sim_col::FOOTPRINT_ID,
+        sim_col::WEIGHTING,
+        sim_col::STATUS,
+        sim_col::ALS_GROUND,
+        sim_col::SLOPE_DEG,
+        sim_col::ALS_COVER,
+        sim_col::RH,
+    ];
     let mut out: HashMap<u64, [SimFacts; 3]> = HashMap::new();
     read::for_each_batch(path, Some(&columns), None, |c| {
         for i in 0..c.num_rows() {
-            let id = c.string("footprint_id", i)?.unwrap_or_default();
-            let sn: u64 =
-                id.parse().map_err(|_| Error::field(path, "footprint_id", format!("`{id}` is not a shot number")))?;
-            let w = c.string("weighting", i)?.unwrap_or_default();
+            let id = c.string(sim_col::FOOTPRINT_ID, i)?.unwrap_or_default();
+            let sn: u64 = id
+                .parse()
+                .map_err(|_| Error::field(path, sim_col::FOOTPRINT_ID, format!("`{id}` is not a shot number")))?;
+            let w = c.string(sim_col::WEIGHTING, i)?.unwrap_or_default();
             let Some(k) = WEIGHTINGS.iter().position(|x| *x == w) else {
-                return Err(Error::field(path, "weighting", format!("`{w}` is not count, frac or int")));
+                return Err(Error::field(path, sim_col::WEIGHTING, format!("`{w}` is not count, frac or int")));
             };
             out.entry(sn).or_default()[k] = SimFacts {
-                ok: c.string("status", i)?.as_deref() == Some("ok"),
-                als_ground: c.f64("als_ground", i)?,
-                slope_deg: c.f64("slope_deg", i)?,
-                als_cover: c.f64("als_cover", i)?,
-                rh: c.f32_list("rh", i)?,
+                ok: c.string(sim_col::STATUS, i)?.as_deref() == Some("ok"),
+                als_ground: c.f64(sim_col::ALS_GROUND, i)?,
+                slope_deg: c.f64(sim_col::SLOPE_DEG, i)?,
+                als_cover: c.f64(sim_col::ALS_COVER, i)?,
+                rh: c.f32_list(sim_col::RH, i)?,
             };
         }
         Ok(())
@@ -181,7 +184,7 @@ pub fn results_batch(rows: &[ResultInput]) -> Result<RecordBatch> {
                 return Err(bad(r, name, format!("{} values, expected {RH_LEN}", rh.len())));
             }
         }
-        if !["count", "frac", "int"].contains(&r.weighting.as_str()) {
+        if !WEIGHTINGS.contains(&r.weighting.as_str()) {
             return Err(bad(r, "weighting", format!("`{}` is not count, frac or int", r.weighting)));
         }
         if let StudyAlgorithm::A(k) = r.algorithm {
