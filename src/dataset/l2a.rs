@@ -52,20 +52,23 @@ pub fn l2a_schema() -> SchemaRef {
     ]))
 }
 
+/// The struct field of `gedi_l2a` that says why a waveform gave no result (the table's `status`).
+pub const NO_RESULT_REASON: &str = "no_result_reason";
+
 /// Fields of the struct returned by the `gedi_l2a` SQL function, in order. Types are those of the
 /// same columns of the `l2a` table, so that both give identical values.
 pub fn l2a_struct_fields() -> Fields {
     let f = |n: &str, t: DataType| Field::new(n, t, true);
     Fields::from(vec![
-        f("toploc", DataType::Float64),
-        f("botloc", DataType::Float64),
-        f("zcross", DataType::Float64),
-        f("elev_lowestmode", DataType::Float64),
-        f("rh", list_f32()),
-        f("sensitivity", DataType::Float32),
-        f("energy_total", DataType::Float32),
-        f("num_modes", DataType::UInt8),
-        f("no_result_reason", DataType::Utf8),
+        f(col::TOPLOC, DataType::Float64),
+        f(col::BOTLOC, DataType::Float64),
+        f(col::ZCROSS, DataType::Float64),
+        f(col::ELEV_LOWESTMODE, DataType::Float64),
+        f(col::RH, list_f32()),
+        f(col::SENSITIVITY, DataType::Float32),
+        f(col::ENERGY_TOTAL, DataType::Float32),
+        f(col::NUM_MODES, DataType::UInt8),
+        f(NO_RESULT_REASON, DataType::Utf8),
     ])
 }
 

@@ -61,6 +61,23 @@ pub mod col {
     pub const DZ_HALFWIDTH: &str = "dz_halfwidth";
 }
 
+/// Key-value metadata of an `offsets/` file: the collocation's level (`mixed` when the file holds
+/// segments of several), its search half-width and step (m).
+pub fn offsets_metadata(level: &str, max_shift_m: f64, step_m: f64) -> HashMap<String, String> {
+    HashMap::from([
+        (meta::LEVEL.to_string(), level.to_string()),
+        (meta::MAX_SHIFT.to_string(), max_shift_m.to_string()),
+        (meta::STEP.to_string(), step_m.to_string()),
+    ])
+}
+
+/// Parquet key-value metadata keys of an `offsets/` file.
+pub mod meta {
+    pub const LEVEL: &str = "gedisim:collocate_level";
+    pub const MAX_SHIFT: &str = "gedisim:max_shift_m";
+    pub const STEP: &str = "gedisim:step_m";
+}
+
 /// Schema of the offsets table.
 pub fn offsets_schema() -> SchemaRef {
     let f = |n: &str, t: DataType| Field::new(n, t, false);

@@ -81,7 +81,7 @@ pub fn results_metadata() -> HashMap<String, String> {
 /// `default` algorithm).
 pub fn vertical_references(dataset: &super::Dataset) -> Result<std::collections::BTreeMap<String, usize>> {
     let mut counts = std::collections::BTreeMap::new();
-    let files = dataset.visible_files("results").map_err(|e| Error::file(dataset.root(), e))?;
+    let files = dataset.visible_files(super::tables::RESULTS).map_err(|e| Error::file(dataset.root(), e))?;
     for path in files {
         let columns = [col::WEIGHTING, col::ALGORITHM, col::VERTICAL_REFERENCE];
         super::read::for_each_batch(&path, Some(&columns), None, |c| {

@@ -316,10 +316,8 @@ pub fn shots_schema(epsg: u32) -> SchemaRef {
         f(col::URBAN_PROPORTION, UInt8, true),
         f(col::LANDSAT_WATER_PERSISTENCE, UInt8, true),
     ]);
-    let metadata = [
-        ("gedisim:crs_epsg".to_string(), epsg.to_string()),
-        ("gedisim:vertical_reference".to_string(), VERTICAL_DATUM.to_string()),
-    ];
+    let metadata =
+        [(meta::EPSG.to_string(), epsg.to_string()), (meta::VERTICAL.to_string(), VERTICAL_DATUM.to_string())];
     Arc::new(Schema::new(fields).with_metadata(metadata.into_iter().collect()))
 }
 
@@ -349,6 +347,14 @@ pub fn granules_schema() -> SchemaRef {
         Field::new(granules_col::SHOT_AREA, DataType::Utf8, true),
         Field::new(granules_col::SHOTS_OUTSIDE_AREA, DataType::UInt64, true),
     ]))
+}
+
+/// Parquet key-value metadata keys of a `shots/` file.
+pub mod meta {
+    /// The horizontal CRS of `x`, `y` (the ALS tiles').
+    pub const EPSG: &str = "gedisim:crs_epsg";
+    /// The vertical reference of every GEDI height ([`super::VERTICAL_DATUM`]).
+    pub const VERTICAL: &str = "gedisim:vertical_reference";
 }
 
 /// Value of the `vertical_datum` column: every GEDI height stays WGS84-ellipsoidal.

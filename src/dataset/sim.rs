@@ -84,10 +84,13 @@ pub fn sim_metadata(profile: Profile) -> HashMap<String, String> {
     ])
 }
 
+/// The `status` of a simulated footprint; a skipped one's names why.
+pub const STATUS_OK: &str = "ok";
+
 /// Text of a skip reason in the `status` column (`ok` for a simulated footprint).
 pub fn status(r: &std::result::Result<SimulatedFootprint, SkipReason>) -> String {
     match r {
-        Ok(_) => "ok".to_string(),
+        Ok(_) => STATUS_OK.to_string(),
         Err(SkipReason::NoPoints) => "no_points".to_string(),
         Err(SkipReason::NoSignal) => "no_signal".to_string(),
         Err(SkipReason::PartlyCovered { covered_fraction }) => format!("partly_covered:{covered_fraction:.3}"),

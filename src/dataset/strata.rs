@@ -29,6 +29,11 @@ pub fn strata_schema() -> SchemaRef {
     ]))
 }
 
+/// Key-value metadata of a `strata/` file: where the forest types came from.
+pub fn strata_metadata(source: &str) -> HashMap<String, String> {
+    HashMap::from([("gedisim:strata_source".to_string(), source.to_string())])
+}
+
 /// Strata rows as a record batch.
 pub fn strata_batch(strata: &[Stratum], source: &str) -> Result<RecordBatch> {
     let columns: Vec<ArrayRef> = vec![

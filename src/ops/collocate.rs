@@ -10,7 +10,7 @@ use std::sync::Arc;
 use arrow::array::RecordBatch;
 use futures::StreamExt;
 
-use crate::dataset::offsets::{offsets_batch, offsets_schema};
+use crate::dataset::offsets::{offsets_batch, offsets_metadata, offsets_schema};
 use crate::dataset::{self, tables, Dataset};
 use crate::error::{Error, Result};
 use crate::ops::progress::{Progress, Step};
@@ -33,10 +33,7 @@ pub fn collocate_on(
     let ds = &ds.as_writer()?;
     let (batches, mut report) = solve(engine, Collocation::plan(ds, opts)?, ds, opts, progress)?;
     let dest = ds.table_file(tables::OFFSETS, "offsets")?;
-    let mut metadata = HashMap::new();
-    metadata.insert("gedisim:collocate_level".to_string(), opts.level.name().to_string());
-    metadata.insert("gedisim:max_shift_m".to_string(), opts.max_shift.to_string());
-    metadata.insert("gedisim:step_m".to_string(), opts.step.to_string());
+    let metadata = offsets_metadata(opts.level.name(), opts.max_shift, opts.step);
     dataset::write_parquet(&dest, offsets_schema(), &batches, &metadata)?;
     report.table = dest;
     Ok(report)

@@ -26,10 +26,9 @@ use arrow::array::{
 use arrow::record_batch::RecordBatch;
 use rayon::prelude::*;
 
-use crate::dataset::als::tiles_col;
 use crate::dataset::als::{
-    self as table, als_batch, als_schema, cell_key, meta, tiles_schema, ReadWindow, CELL_SIZE_M, DROPPED_CLASSES,
-    MAX_ROW_GROUP_ROWS,
+    self as table, als_batch, als_schema, cell_key, meta, tiles_col, tiles_schema, ReadWindow, CELL_SIZE_M,
+    DROPPED_CLASSES, MAX_ROW_GROUP_ROWS,
 };
 use crate::dataset::shots::col as shot_col;
 use crate::dataset::{self, read, tables, AtomicParquet, Dataset};
@@ -375,7 +374,7 @@ fn keep_point(path: &Path, chunk: &AlsPoints, i: usize, opts: &AlsOptions, stats
         stats.dropped += 1;
         return Ok(false);
     }
-    for (name, v) in [("x", chunk.x[i]), ("y", chunk.y[i]), ("z", chunk.z[i])] {
+    for (name, v) in [(table::col::X, chunk.x[i]), (table::col::Y, chunk.y[i]), (table::col::Z, chunk.z[i])] {
         if !v.is_finite() {
             return Err(Error::field(
                 path,
@@ -564,14 +563,14 @@ fn als_writer_properties(
     props: parquet::file::properties::WriterProperties,
 ) -> parquet::file::properties::WriterProperties {
     use parquet::schema::types::ColumnPath;
-    let cell_col = als_schema().index_of("cell").expect("cell column");
+    let cell_col = als_schema().index_of(table::col::CELL).expect("cell column");
     let mut builder = props.into_builder().set_sorting_columns(Some(vec![parquet::file::metadata::SortingColumn {
         column_idx: cell_col as i32,
         descending: false,
         nulls_first: false,
     }]));
-    for col in ["x", "y", "z", "gps_time"] {
-        builder = builder.set_column_dictionary_enabled(ColumnPath::from(col), false);
+    for name in [table::col::X, table::col::Y, table::col::Z, table::col::GPS_TIME] {
+        builder = builder.set_column_dictionary_enabled(ColumnPath::from(name), false);
     }
     builder.build()
 }

@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use crate::dataset::shots::shot_positions;
-use crate::dataset::strata::{strata_batch, strata_schema};
+use crate::dataset::strata::{strata_batch, strata_metadata, strata_schema};
 use crate::dataset::{self, tables, Dataset};
 use crate::error::{Error, Result};
 use crate::io::landcover::{read_strata_csv, LandCoverRaster};
@@ -73,8 +73,7 @@ fn strata_of(ds: &Dataset, landcover: &Path, on_shots: &dyn Fn(u64, u64)) -> Res
     report.rows = strata.len();
     let batch = strata_batch(&strata, &source)?;
     let dest = ds.table_file(tables::STRATA, "strata")?;
-    let meta = HashMap::from([("gedisim:strata_source".to_string(), source)]);
-    report.path = dataset::write_parquet(&dest, strata_schema(), &[batch], &meta)?;
+    report.path = dataset::write_parquet(&dest, strata_schema(), &[batch], &strata_metadata(&source))?;
     Ok(report)
 }
 

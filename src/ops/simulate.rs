@@ -12,7 +12,7 @@ use datafusion::prelude::SessionContext;
 
 use crate::dataset::als::DROPPED_CLASSES;
 use crate::dataset::offsets::AppliedOffset;
-use crate::dataset::sim::{sim_batch, sim_metadata, sim_schema};
+use crate::dataset::sim::{col as sim_col, sim_batch, sim_metadata, sim_schema, STATUS_OK};
 use crate::dataset::{self, tables, AtomicParquet, Dataset};
 use crate::error::{Error, Result};
 use crate::io::copc::{Attributes, CopcRead, CopcTile};
@@ -608,11 +608,11 @@ pub async fn simulate_groups(
 /// Footprints simulated (`status` ok) and skipped among the `sim` rows of `batch` (read from `path`).
 pub fn status_counts(path: &Path, batch: &RecordBatch) -> Result<(usize, usize)> {
     let columns = crate::dataset::read::Columns::new(path, batch);
-    let (ids, status) = (columns.strings("footprint_id")?, columns.strings("status")?);
+    let (ids, status) = (columns.strings(sim_col::FOOTPRINT_ID)?, columns.strings(sim_col::STATUS)?);
     let (mut all, mut ok) = (HashSet::new(), HashSet::new());
     for j in 0..batch.num_rows() {
         all.insert(ids.value(j));
-        if status.value(j) == "ok" {
+        if status.value(j) == STATUS_OK {
             ok.insert(ids.value(j));
         }
     }

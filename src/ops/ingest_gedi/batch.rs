@@ -8,8 +8,7 @@ use arrow::datatypes::{
 };
 
 use super::join::Row;
-use crate::dataset::shots::VERTICAL_DATUM;
-use crate::dataset::shots::{col, ALGORITHMS};
+use crate::dataset::shots::{col, ALGORITHMS, VERTICAL_DATUM};
 use crate::error::{Error, Result};
 use crate::io::gedi::{L1bBeam, L2aBeam};
 use crate::kernels::gedi::{BeamType, RH_LEN};

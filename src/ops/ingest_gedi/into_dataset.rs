@@ -12,8 +12,7 @@ use super::join::ShotOwners;
 use super::pairs::{expand_granule_inputs, pair_granules};
 use super::{granule_key, read_granule};
 use super::{BeamReport, GediOptions, GranulePair, IngestReport, ShotChoice};
-use crate::dataset::shots::granules_col;
-use crate::dataset::shots::{granules_schema, shots_schema, VERTICAL_DATUM};
+use crate::dataset::shots::{self, granules_col, granules_schema, shots_schema, VERTICAL_DATUM};
 use crate::error::{Error, Result};
 use crate::kernels::geo::area::ShotArea;
 use crate::ops::progress::{Progress, Step};
@@ -171,8 +170,8 @@ pub fn ingest_into_dataset(
             }
             let schema = shots_schema(opts.epsg);
             let mut metadata = std::collections::HashMap::new();
-            metadata.insert("gedisim:crs_epsg".to_string(), opts.epsg.to_string());
-            metadata.insert("gedisim:vertical_reference".to_string(), VERTICAL_DATUM.to_string());
+            metadata.insert(shots::meta::EPSG.to_string(), opts.epsg.to_string());
+            metadata.insert(shots::meta::VERTICAL.to_string(), VERTICAL_DATUM.to_string());
             let props = dataset::writer_properties(&metadata, 1 << 16);
             let mut writer = AtomicParquet::create(&shots_dir.join(format!("{key}.parquet")), schema, props)?;
             let owner: Arc<str> = Arc::from(key.as_str());

@@ -8,7 +8,7 @@ use arrow::array::{AsArray, BooleanArray, RecordBatch};
 use super::granules::GranuleFile;
 use super::{RunOptions, RunReport, META_GRANULES};
 use crate::dataset::offsets::col as offsets_col;
-use crate::dataset::offsets::offsets_schema;
+use crate::dataset::offsets::{offsets_metadata, offsets_schema};
 use crate::dataset::{self, read, tables, Dataset};
 use crate::error::{Error, Result};
 use crate::ops::collocate::{solve_granules, CollocateReport};
@@ -80,13 +80,8 @@ pub(super) fn collocate(
     }
     let level = opts.collocate.level.name();
     kept_levels.insert(level.to_string());
-    let mut out_meta = HashMap::new();
-    out_meta.insert(
-        "gedisim:collocate_level".to_string(),
-        if kept_levels.len() > 1 { "mixed".to_string() } else { level.to_string() },
-    );
-    out_meta.insert("gedisim:max_shift_m".to_string(), opts.collocate.max_shift.to_string());
-    out_meta.insert("gedisim:step_m".to_string(), opts.collocate.step.to_string());
+    let level = if kept_levels.len() > 1 { "mixed" } else { level };
+    let mut out_meta = offsets_metadata(level, opts.collocate.max_shift, opts.collocate.step);
     out_meta.insert(META_GRANULES.to_string(), serde_json::to_string(&map).map_err(|e| Error::table(&dest, e))?);
     dataset::write_parquet(&dest, offsets_schema(), &batches, &out_meta)?;
     report.collocation = Some(CollocateReport { table: dest, ..collocation });

@@ -8,8 +8,7 @@ use sha2::{Digest, Sha256};
 
 use super::granules::GranuleFile;
 use super::{GranuleRun, META_COUNTS, META_INPUT, RUN_FORMAT};
-use crate::dataset::als::tiles_col;
-use crate::dataset::als::AlsTable;
+use crate::dataset::als::{tiles_col, AlsTable};
 use crate::dataset::offsets::{read_offsets, read_r_after, AppliedOffset};
 use crate::dataset::shots::col;
 use crate::dataset::{self, read, tables, Dataset};

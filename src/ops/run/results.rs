@@ -10,12 +10,13 @@ use arrow::record_batch::RecordBatch;
 
 use super::plan::{GranulePlan, StudyInputs};
 use super::{META_COUNTS, META_INPUT};
+use crate::dataset::results::col;
 use crate::dataset::results::{results_metadata, results_schema};
-use crate::dataset::shots::{col, AlgorithmColumns, ShotColumns, ALGORITHMS, SELECTED};
-use crate::dataset::sim::col as sim_col;
+use crate::dataset::shots::{col as shot_col, AlgorithmColumns, ShotColumns, ALGORITHMS, SELECTED};
+use crate::dataset::sim::{col as sim_col, STATUS_OK};
 use crate::dataset::{self, read};
 use crate::error::{Error, Result};
-use crate::kernels::gedi::RH_LEN;
+use crate::kernels::gedi::{N_ALGORITHMS, RH_LEN};
 use crate::kernels::study::align::align_rh;
 use crate::kernels::study::classes;
 use crate::kernels::study::select::{
@@ -79,14 +80,14 @@ pub(super) fn read_shot_facts(path: &Path, rows: impl Iterator<Item = usize>) ->
         return Ok(Vec::new());
     }
     let mut names = vec![
-        col::SHOT_NUMBER,
-        col::GRANULE,
-        col::BEAM,
-        col::BEAM_TYPE,
-        col::DELTA_TIME,
-        col::DEGRADE_FLAG,
-        col::LEAF_OFF_FLAG,
-        col::SELECTED_ALGORITHM,
+        shot_col::SHOT_NUMBER,
+        shot_col::GRANULE,
+        shot_col::BEAM,
+        shot_col::BEAM_TYPE,
+        shot_col::DELTA_TIME,
+        shot_col::DEGRADE_FLAG,
+        shot_col::LEAF_OFF_FLAG,
+        shot_col::SELECTED_ALGORITHM,
     ];
     names.extend(ShotColumns::GEOID_COLUMNS);
     for a in std::iter::once(&SELECTED).chain(ALGORITHMS.iter().map(|(a, _)| a)) {
@@ -109,14 +110,16 @@ pub(super) fn read_shot_facts(path: &Path, rows: impl Iterator<Item = usize>) ->
                 algorithms.push(alg(a)?);
             }
             out.push(ShotFacts {
-                shot_number: c.u64(col::SHOT_NUMBER, i)?.ok_or_else(|| Error::field(path, col::SHOT_NUMBER, "null"))?,
-                granule: c.string(col::GRANULE, i)?.unwrap_or_default(),
-                beam: c.string(col::BEAM, i)?.unwrap_or_default(),
+                shot_number: c
+                    .u64(shot_col::SHOT_NUMBER, i)?
+                    .ok_or_else(|| Error::field(path, shot_col::SHOT_NUMBER, "null"))?,
+                granule: c.string(shot_col::GRANULE, i)?.unwrap_or_default(),
+                beam: c.string(shot_col::BEAM, i)?.unwrap_or_default(),
                 beam_type: shots.beam_type(i)?.map(|b| b.as_str().to_string()).unwrap_or_default(),
-                delta_time: c.f64(col::DELTA_TIME, i)?,
-                degrade_flag: c.u8(col::DEGRADE_FLAG, i)?,
-                leaf_off_flag: c.u8(col::LEAF_OFF_FLAG, i)?,
-                selected_algorithm: c.u8(col::SELECTED_ALGORITHM, i)?,
+                delta_time: c.f64(shot_col::DELTA_TIME, i)?,
+                degrade_flag: c.u8(shot_col::DEGRADE_FLAG, i)?,
+                leaf_off_flag: c.u8(shot_col::LEAF_OFF_FLAG, i)?,
+                selected_algorithm: c.u8(shot_col::SELECTED_ALGORITHM, i)?,
                 geoid_offset: shots.geoid_offset(i)?,
                 algorithms: algorithms.try_into().expect("the selected algorithm and a1…a6"),
             });
@@ -152,7 +155,7 @@ pub(super) fn read_sim_facts(path: &Path) -> Result<HashMap<u64, [SimFacts; 3]>>
                 return Err(Error::field(path, sim_col::WEIGHTING, format!("`{w}` is not count, frac or int")));
             };
             out.entry(sn).or_default()[k] = SimFacts {
-                ok: c.string(sim_col::STATUS, i)?.as_deref() == Some("ok"),
+                ok: c.string(sim_col::STATUS, i)?.as_deref() == Some(STATUS_OK),
                 als_ground: c.f64(sim_col::ALS_GROUND, i)?,
                 slope_deg: c.f64(sim_col::SLOPE_DEG, i)?,
                 als_cover: c.f64(sim_col::ALS_COVER, i)?,
@@ -179,21 +182,21 @@ pub fn results_batch(rows: &[ResultInput]) -> Result<RecordBatch> {
     let mut groups = Vec::with_capacity(n);
     let mut gedi_ground = Vec::with_capacity(n);
     for r in rows {
-        for (name, rh) in [("rh_sim", &r.rh_sim), ("rh_gedi", &r.rh_gedi)] {
+        for (name, rh) in [(col::RH_SIM, &r.rh_sim), (col::RH_GEDI, &r.rh_gedi)] {
             if rh.len() != RH_LEN {
                 return Err(bad(r, name, format!("{} values, expected {RH_LEN}", rh.len())));
             }
         }
         if !WEIGHTINGS.contains(&r.weighting.as_str()) {
-            return Err(bad(r, "weighting", format!("`{}` is not count, frac or int", r.weighting)));
+            return Err(bad(r, col::WEIGHTING, format!("`{}` is not count, frac or int", r.weighting)));
         }
         if let StudyAlgorithm::A(k) = r.algorithm {
-            if !(1..=6).contains(&k) {
-                return Err(bad(r, "algorithm", format!("a{k} is not a GEDI algorithm (1..6)")));
+            if !(1..=N_ALGORITHMS as u8).contains(&k) {
+                return Err(bad(r, col::ALGORITHM, format!("a{k} is not a GEDI algorithm (1..{N_ALGORITHMS})")));
             }
         }
         let group = classes::sensitivity_group(r.sensitivity).ok_or_else(|| {
-            bad(r, "sensitivity", format!("{} is below the study's 0.90 (apply the filter first)", r.sensitivity))
+            bad(r, col::SENSITIVITY, format!("{} is below the study's 0.90 (apply the filter first)", r.sensitivity))
         })?;
         groups.push(group);
         let ground = r.vertical_reference.to_als_datum(r.elev_lowestmode);
