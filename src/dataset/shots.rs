@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use arrow::array::{Array, AsArray, Float64Array, ListArray, UInt8Array};
+use arrow::array::{Array, AsArray, Float64Array, UInt8Array};
 use arrow::datatypes::{DataType, Field, Float64Type, Schema, SchemaRef};
 
 use super::list_f32;
@@ -118,11 +118,11 @@ pub const ALGORITHMS: [(AlgorithmColumns, WindowColumns); N_ALGORITHMS] =
 #[derive(Clone, Copy)]
 pub struct ShotColumns<'a>(pub read::Columns<'a>);
 
-/// One algorithm's columns of a batch ([`AlgorithmColumns`]).
+/// One algorithm's per-shot values of a batch ([`AlgorithmColumns`]; its RH list is read by row,
+/// `read::Columns::f32_list`).
 #[derive(Clone, Copy)]
 pub struct AlgorithmArrays<'a> {
     pub elev_lowestmode: &'a Float64Array,
-    pub rh: &'a ListArray,
     pub sensitivity: &'a Float64Array,
     pub quality_flag: &'a UInt8Array,
 }
@@ -130,12 +130,6 @@ pub struct AlgorithmArrays<'a> {
 impl<'a> ShotColumns<'a> {
     /// The columns to project for [`Self::geoid_offset`].
     pub const GEOID_COLUMNS: [&'static str; 2] = [col::GEOID_OFFSET_USED, col::GEOID];
-    /// The columns to project for [`Self::beam_type`].
-    pub const BEAM_TYPE_COLUMNS: [&'static str; 2] = [col::BEAM, col::BEAM_TYPE];
-
-    pub fn num_rows(&self) -> usize {
-        self.0.num_rows()
-    }
 
     /// Row `i`'s beam type: the `beam_type` column, else the beam's name; `None` when neither is
     /// a GEDI beam's.
@@ -154,15 +148,9 @@ impl<'a> ShotColumns<'a> {
     pub fn algorithm(&self, a: &AlgorithmColumns) -> Result<AlgorithmArrays<'a>> {
         Ok(AlgorithmArrays {
             elev_lowestmode: self.0.f64s(a.elev_lowestmode)?,
-            rh: self.0.lists(a.rh)?,
             sensitivity: self.0.f64s(a.sensitivity)?,
             quality_flag: self.0.u8s(a.quality_flag)?,
         })
-    }
-
-    /// Row `i` of an algorithm's RH list (null items as NaN); `None` when null.
-    pub fn rh(&self, a: &AlgorithmColumns, i: usize) -> Result<Option<Vec<f32>>> {
-        self.0.f32_list(a.rh, i)
     }
 }
 

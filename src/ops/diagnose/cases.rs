@@ -143,7 +143,7 @@ fn read_shots(
                 return None;
             }
             let ground = value(cols.elev_lowestmode, i)?;
-            let rh = shots.rh(&ALGORITHMS[a].0, i).ok().flatten().filter(|r| r.len() == RH_LEN)?;
+            let rh = c.f32_list(ALGORITHMS[a].0.rh, i).ok().flatten().filter(|r| r.len() == RH_LEN)?;
             ground.is_finite().then_some(RealAlgorithm { ground: ground - n_geoid, rh })
         });
         if algorithms.iter().all(Option::is_none) {
