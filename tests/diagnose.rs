@@ -137,12 +137,18 @@ fn check_contract(d: &Value) {
     }
     assert_eq!(t["twins"].as_u64().unwrap(), TWINS.parse::<u64>().unwrap());
     assert!(t["named"]["recovered"].as_u64().is_some(), "{t:#}");
-    // The study's question first: every weighting × both pulses (scenario shots carry recorded
-    // transmit pulses), the choice, its held-out comparison with the study's configuration, and
-    // the ground bias of each algorithm.
+    // The study's question first: every weighting (the intensity share too) × both pulses
+    // (scenario shots carry recorded transmit pulses) with equal reflectances, and a choice (on
+    // all tracks or a fold's) with the reference's; the choice, its held-out comparison with the
+    // study's configuration, and the ground bias of each algorithm.
     let c = &d["configuration"];
-    assert_eq!(c["configurations"].as_array().unwrap().len(), 6, "{c:#}");
-    assert!(c["configurations"].as_array().unwrap().iter().any(|r| r["configuration"] == c["chosen"]));
+    let rows = c["configurations"].as_array().unwrap();
+    assert_eq!(rows.iter().filter(|r| r["reflectance"] == "equal").count(), 8, "{c:#}");
+    assert!(rows.len() <= 11, "{c:#}");
+    let chosen = rows.iter().find(|r| r["configuration"] == c["chosen"]).expect("the choice is a row");
+    assert_eq!(chosen["reflectance"], c["reflectance"]);
+    let rho = if c["reflectance"] == "equal" { 1.0 } else { 0.40 / 0.57 };
+    assert!((num(&c["rho_ground_over_veg"]) - rho).abs() < 1e-12, "{c:#}");
     assert!(num(&c["held_out"]["mean_abs_bias_rh1_99_before"]).is_finite());
     assert_eq!(c["ground_by_algorithm"].as_array().unwrap().len(), 6);
     assert!(c["least_biased_algorithm"].is_u64());

@@ -403,7 +403,7 @@ fn demo_runs_on_the_bundled_tiles_and_prints_the_headline_tables() {
         "<h2 id=\"diagnosis\">",
         "Verdict: ",
         "<th>bias (m)</th>",
-        "<h3>Configuration (weighting × pulse)</h3>",
+        "<h3>Configuration (weighting × pulse × reflectances)</h3>",
         " (chosen)</td>",
         "<th>ground bias, GEDI − ALS (m)</th>",
         "<h3>Self-test</h3>",

@@ -126,6 +126,9 @@ def score(world, truth, d, diag_name):
             key, nominal = MAIN[name]
             want = next(e for e in truth["effects"] if e["name"] == name and not is_configuration(e))["params"].get(key)
             got = trial["params"].get(key)
+            if name == "weighting" and isinstance(got, (int, float)):
+                # The effect's ratio is relative to the chosen configuration's reflectances.
+                got *= (d.get("configuration") or {}).get("rho_ground_over_veg", 1.0)
             if isinstance(want, (int, float)) and isinstance(got, (int, float)) and want != nominal:
                 row["param_rel_err"] = abs(got - want) / abs(want - nominal)
                 row["param"] = (got, want)

@@ -164,7 +164,7 @@ pub fn simulate(a: SimulateArgs) -> Result<()> {
         let n = r.simulated + r.skipped;
         println!(
             "simulate: {n} footprints × {} weightings, {s:.3} s, {:.1} footprints/s, peak RSS {:.1} MB",
-            gedisim::kernels::sim::N_WEIGHTINGS,
+            gedisim::kernels::sim::N_STUDY_WEIGHTINGS,
             n as f64 / s,
             peak_rss_mb()
         );

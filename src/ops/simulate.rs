@@ -451,7 +451,7 @@ pub fn simulate_direct(
             let n_ok = results.iter().filter(|r| r.is_ok()).count();
             ok += n_ok;
             skipped += results.len() - n_ok;
-            writer.write(&sim_batch(&fps[start..start + results.len()], &results, &Weighting::ALL, &[])?)?;
+            writer.write(&sim_batch(&fps[start..start + results.len()], &results, &Weighting::STUDY, &[])?)?;
             progress.advance(results.len() as u64);
             Ok(())
         })?;
@@ -583,8 +583,8 @@ pub async fn simulate_groups(
         }
     }
     for (rows, n) in rows.iter().zip(&sizes) {
-        if rows.len() != n * Weighting::ALL.len() {
-            let got = rows.len() / Weighting::ALL.len();
+        if rows.len() != n * Weighting::STUDY.len() {
+            let got = rows.len() / Weighting::STUDY.len();
             return Err(Error::Usage(format!("simulation on the cluster: {got} of {n} footprints came back")));
         }
     }

@@ -108,7 +108,7 @@ pub struct SimulatedBlock {
 impl SimulatedBlock {
     /// The block's `sim` rows.
     pub fn batch(&self) -> Result<arrow::record_batch::RecordBatch> {
-        sim_batch(&self.footprints, &self.results, &Weighting::ALL, &self.applied)
+        sim_batch(&self.footprints, &self.results, &Weighting::STUDY, &self.applied)
     }
 }
 

@@ -38,35 +38,74 @@ pub enum PulseChoice {
     Recorded,
 }
 
+/// The ground and vegetation reflectances a configuration weighs the ALS returns with
+/// (docs/diagnosis.md, "Reflectances").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Reflectance {
+    /// Ground and vegetation alike (gediRat's waveforms).
+    #[default]
+    Equal,
+    /// The reference simulator's reflectances at 1064 nm, ρv 0.57 and ρg 0.40: the ratio its
+    /// gediMetric computes the ALS cover with (docs/simulator-reference.md §2); GEDI's L2B cover
+    /// assumes ρv/ρg 1.5.
+    Reference,
+}
+
+/// ρg/ρv of [`Reflectance::Reference`].
+pub const REFERENCE_RHO_GROUND_OVER_VEG: f64 = 0.40 / 0.57;
+
+impl Reflectance {
+    /// ρg/ρv: what the ground returns' weight is multiplied by.
+    pub fn rho_ground_over_veg(self) -> f64 {
+        match self {
+            Reflectance::Equal => 1.0,
+            Reflectance::Reference => REFERENCE_RHO_GROUND_OVER_VEG,
+        }
+    }
+
+    /// `equal` or `reference`: the `reflectance` value of diagnosis.json's configurations.
+    pub fn name(self) -> &'static str {
+        match self {
+            Reflectance::Equal => "equal",
+            Reflectance::Reference => "reference",
+        }
+    }
+}
+
 /// The simulator configuration a hypothesis starts from — the study's own question (docs/diagnosis.md,
-/// "Configuration first"): the return weighting and the transmit pulse. A configuration is chosen
-/// before any effect is ranked, and is never reported as an unmodelled effect.
+/// "Configuration first"): the return weighting, the transmit pulse and the reflectances. A
+/// configuration is chosen before any effect is ranked, and is never reported as an unmodelled effect.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct Configuration {
     pub weighting: Weighting,
     pub pulse: PulseChoice,
+    pub reflectance: Reflectance,
 }
 
 impl Default for Configuration {
-    /// The nominal chain's: `frac` (`NOMINAL_WEIGHTING`) and each shot's recorded pulse.
+    /// The nominal chain's: `frac` (`NOMINAL_WEIGHTING`), each shot's recorded pulse, equal
+    /// reflectances.
     fn default() -> Self {
-        Configuration { weighting: NOMINAL_WEIGHTING, pulse: PulseChoice::Recorded }
+        Configuration { weighting: NOMINAL_WEIGHTING, pulse: PulseChoice::Recorded, reflectance: Reflectance::Equal }
     }
 }
 
 impl Configuration {
-    /// The study's baseline: `count` weighting and the 15 ns Gaussian.
+    /// The study's baseline: `count` weighting, the 15 ns Gaussian, equal reflectances.
     pub fn study() -> Configuration {
-        Configuration { weighting: Weighting::Count, pulse: PulseChoice::Gaussian }
+        Configuration { weighting: Weighting::Count, pulse: PulseChoice::Gaussian, reflectance: Reflectance::Equal }
     }
 
-    /// e.g. `int + recorded pulse`.
+    /// e.g. `int + recorded pulse`, `frac + recorded pulse + reference reflectances`.
     pub fn label(&self) -> String {
         let pulse = match self.pulse {
             PulseChoice::Gaussian => "Gaussian 15 ns",
             PulseChoice::Recorded => "recorded pulse",
         };
-        format!("{} + {pulse}", self.weighting.name())
+        match self.reflectance {
+            Reflectance::Equal => format!("{} + {pulse}", self.weighting.name()),
+            Reflectance::Reference => format!("{} + {pulse} + reference reflectances", self.weighting.name()),
+        }
     }
 }
 
@@ -226,20 +265,24 @@ impl Model {
         }
     }
 
-    /// Weighting and ρg/ρv: the configuration's weighting, unless a `weighting` effect names
-    /// another method (`ratio` scales the configuration's own).
+    /// Weighting and ρg/ρv: the configuration's weighting and reflectances, unless a `weighting`
+    /// effect names another method; an effect's ρ multiplies the configuration's (`ratio` scales
+    /// the configuration's own weighting).
     pub fn weighting(&self) -> (Weighting, f64) {
+        let rho = self.config.reflectance.rho_ground_over_veg();
         self.effects
             .iter()
             .rev()
             .find_map(|e| match *e {
                 Effect::Weighting { method: WeightMethod::Ratio, rho_ground_over_veg } => {
-                    Some((self.config.weighting, rho_ground_over_veg))
+                    Some((self.config.weighting, rho * rho_ground_over_veg))
                 }
-                Effect::Weighting { method, rho_ground_over_veg } => Some((method.weighting(), rho_ground_over_veg)),
+                Effect::Weighting { method, rho_ground_over_veg } => {
+                    Some((method.weighting(), rho * rho_ground_over_veg))
+                }
                 _ => None,
             })
-            .unwrap_or((self.config.weighting, 1.0))
+            .unwrap_or((self.config.weighting, rho))
     }
 }
 
@@ -754,9 +797,15 @@ mod tests {
         assert_eq!(m.extra_pulse_sigma(), 0.0);
         assert_eq!(Model::default().weighting(), (NOMINAL_WEIGHTING, 1.0));
         // A ratio scales the configuration's own weighting: count stays count.
-        let count = Model::configured(Configuration { weighting: Weighting::Count, pulse: PulseChoice::Gaussian });
+        let count = Model::configured(Configuration { weighting: Weighting::Count, ..Configuration::study() });
         let ratio = count.with(Effect::Weighting { method: WeightMethod::Ratio, rho_ground_over_veg: 0.6 });
         assert_eq!(ratio.weighting(), (Weighting::Count, 0.6));
         assert_eq!(count.weighting(), (Weighting::Count, 1.0));
+        // The configuration's reflectances multiply an effect's ratio.
+        let reference =
+            Model::configured(Configuration { reflectance: Reflectance::Reference, ..Configuration::study() });
+        assert_eq!(reference.weighting(), (Weighting::Count, REFERENCE_RHO_GROUND_OVER_VEG));
+        let ratio = reference.with(Effect::Weighting { method: WeightMethod::Ratio, rho_ground_over_veg: 0.5 });
+        assert_eq!(ratio.weighting(), (Weighting::Count, 0.5 * REFERENCE_RHO_GROUND_OVER_VEG));
     }
 }

@@ -1,7 +1,8 @@
 //! The study's configuration first (docs/diagnosis.md, "Configuration first"): which simulator
-//! configuration — return weighting (`count`, `frac`, `int`) × transmit pulse (the study's
-//! Gaussian, each shot's recorded one) — reproduces the real waveforms, chosen on calibration
-//! tracks and scored on held-out ones, with the ground bias of each L2A algorithm under it.
+//! configuration — return weighting (`count`, `frac`, `int`, `share`) × transmit pulse (the
+//! study's Gaussian, each shot's recorded one) × reflectances (equal, the reference's) —
+//! reproduces the real waveforms, chosen on calibration tracks and scored on held-out ones, with
+//! the ground bias of each L2A algorithm under it.
 //! Effects are ranked on top of the chosen configuration (`super::rank`), so a configuration
 //! difference is never reported as an unmodelled effect.
 //!
@@ -15,7 +16,7 @@
 //! judged on top of the choice.
 
 use super::case::ShotCase;
-use super::chain::{reposition, Configuration, Model, PulseChoice};
+use super::chain::{reposition, Configuration, Model, PulseChoice, Reflectance, REFERENCE_RHO_GROUND_OVER_VEG};
 use super::fit::{minimise, ShotGap, RHO_GRID};
 use super::gap::{Frame, GapMetrics};
 use super::profile::{self, ProfileSums};
@@ -24,14 +25,16 @@ use crate::gedi::N_ALGORITHMS;
 use crate::scenario::effects::{Effect, WeightMethod};
 use crate::sim::Weighting;
 
-/// The configurations tried: every weighting × the Gaussian and, when some shot has one, the
-/// recorded pulse.
+/// The configurations tried: every weighting (the study's three and the intensity share) × the
+/// Gaussian and, when some shot has one, the recorded pulse, with equal reflectances.
 pub fn candidates(recorded: bool) -> Vec<Configuration> {
     let pulses: &[PulseChoice] =
         if recorded { &[PulseChoice::Gaussian, PulseChoice::Recorded] } else { &[PulseChoice::Gaussian] };
-    [Weighting::Count, Weighting::Frac, Weighting::Int]
+    Weighting::ALL
         .into_iter()
-        .flat_map(|weighting| pulses.iter().map(move |&pulse| Configuration { weighting, pulse }))
+        .flat_map(|weighting| {
+            pulses.iter().map(move |&pulse| Configuration { weighting, pulse, reflectance: Reflectance::Equal })
+        })
         .collect()
 }
 
@@ -92,23 +95,84 @@ fn pick(chi2: &[f64], study: usize) -> usize {
     (0..chi2.len()).fold(study, |b, i| if chi2[i] < chi2[b] - 1e-9 { i } else { b })
 }
 
-/// The waveform-level gap of every candidate on `cases`, each at its best ground/vegetation ratio
-/// ρ (grid and golden section on ln ρ, as the `weighting` fit) and re-placed for it at ρ = 1,
-/// against the between-shot variance of the study's configuration (index `study`).
-fn profiled_chi2(cases: &[&ShotCase], candidates: &[Configuration], study: usize) -> Vec<f64> {
+/// The waveform-level gaps of one candidate: at its best ground/vegetation ratio, and at each
+/// configuration's reflectances.
+#[derive(Debug, Clone, Copy)]
+struct Scores {
+    profiled: f64,
+    equal: f64,
+    reference: f64,
+}
+
+impl Scores {
+    /// The reflectances whose gap is less (a tie keeps them equal, as gediRat simulates).
+    fn reflectance(&self) -> Reflectance {
+        if self.reference < self.equal - 1e-9 {
+            Reflectance::Reference
+        } else {
+            Reflectance::Equal
+        }
+    }
+}
+
+/// The grid (m) of the vertical shift of the real waveforms the configurations are compared at.
+const SHIFT_GRID: [f64; 7] = [-1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5];
+
+/// `ln ρ` as a ground/vegetation ratio on the configuration's own weighting.
+fn ratio(ln_rho: f64) -> Effect {
+    Effect::Weighting { method: WeightMethod::Ratio, rho_ground_over_veg: ln_rho.exp() }
+}
+
+/// The vertical shift of the real waveforms (as a datum shifts them, `Effect::Datum`) that best
+/// matches them with the nominal configuration at its best ratio. The configurations are compared
+/// at it: otherwise a datum offset, which moves every real waveform against the ALS ground, chooses
+/// the configuration whose waveforms it resembles (the study's wider Gaussian, or the reference's
+/// reflectances), and is then no longer what remains to explain.
+fn vertical_shift(cases: &[&ShotCase], reference: &ProfileSums) -> f64 {
+    let base = reposition(cases, &Model::configured(Configuration::default()));
+    let grid: Vec<f64> = RHO_GRID.iter().map(|r: &f64| r.ln()).collect();
+    let mut at = |dz: f64| {
+        let placed = profile::AfterPulse::new(cases, &base.with(Effect::Datum { dz_m: dz }));
+        minimise(&mut |lr| placed.sums(&ratio(lr)).chi2_against(reference), &grid, 6).1
+    };
+    minimise(&mut at, &SHIFT_GRID, 5).0
+}
+
+/// The waveform-level gaps of every candidate on `cases` (re-placed for it with equal
+/// reflectances, the real waveforms at their [`vertical_shift`]), against the between-shot
+/// variance of the study's configuration (index `study`): at its best ground/vegetation ratio ρ
+/// (grid and golden section on ln ρ, as the `weighting` fit), with equal reflectances and with the
+/// reference's.
+fn scores(cases: &[&ShotCase], candidates: &[Configuration], study: usize) -> Vec<Scores> {
     if cases.is_empty() {
-        return vec![0.0; candidates.len()];
+        return vec![Scores { profiled: 0.0, equal: 0.0, reference: 0.0 }; candidates.len()];
     }
     let reference = profile::sums(cases, &reposition(cases, &Model::configured(candidates[study])));
+    let shift = Effect::Datum { dz_m: vertical_shift(cases, &reference) };
     let grid: Vec<f64> = RHO_GRID.iter().map(|r: &f64| r.ln()).collect();
     candidates
         .iter()
         .map(|&config| {
-            let placed = profile::AfterPulse::new(cases, &reposition(cases, &Model::configured(config)));
-            let ratio = |lr: f64| Effect::Weighting { method: WeightMethod::Ratio, rho_ground_over_veg: lr.exp() };
-            minimise(&mut |lr| placed.sums(&ratio(lr)).chi2_against(&reference), &grid, 6).1
+            let config = Configuration { reflectance: Reflectance::Equal, ..config };
+            let placed =
+                profile::AfterPulse::new(cases, &reposition(cases, &Model::configured(config)).with(shift.clone()));
+            let mut chi2 = |lr: f64| placed.sums(&ratio(lr)).chi2_against(&reference);
+            Scores {
+                profiled: minimise(&mut chi2, &grid, 6).1,
+                equal: chi2(0.0),
+                reference: chi2(REFERENCE_RHO_GROUND_OVER_VEG.ln()),
+            }
         })
         .collect()
+}
+
+/// The configuration chosen on `cases`: the weighting and pulse of the least gap at their best
+/// ratio, then the reflectances of the lesser gap for them.
+fn chosen(cases: &[&ShotCase], candidates: &[Configuration], study: usize) -> (Configuration, Vec<Scores>) {
+    let scores = scores(cases, candidates, study);
+    let profiled: Vec<f64> = scores.iter().map(|s| s.profiled).collect();
+    let i = pick(&profiled, study);
+    (Configuration { reflectance: scores[i].reflectance(), ..candidates[i] }, scores)
 }
 
 /// Evaluate every candidate, choose per fold and on all tracks, and score the choice held out.
@@ -119,33 +183,36 @@ pub fn choose(folds: &Folds, candidates: &[Configuration], on_step: &dyn Fn(&str
         candidates.insert(0, Configuration::study());
     }
     let study = candidates.iter().position(|c| *c == Configuration::study()).unwrap_or(0);
-    let mut trials: Vec<ConfigurationTrial> = candidates
-        .iter()
-        .map(|&config| {
-            on_step(&format!("configuration {}", config.label()));
-            let m = Model::configured(config);
-            let gaps = folds.held_out(&[m.clone(), m]);
-            let metrics = super::fit::total(&gaps).metrics();
-            ConfigurationTrial { config, metrics, waveform_chi2: f64::NAN, waveform_chi2_profiled: f64::NAN, gaps }
-        })
-        .collect();
+    let trial = |config: Configuration| {
+        on_step(&format!("configuration {}", config.label()));
+        let m = Model::configured(config);
+        let gaps = folds.held_out(&[m.clone(), m]);
+        let metrics = super::fit::total(&gaps).metrics();
+        ConfigurationTrial { config, metrics, waveform_chi2: f64::NAN, waveform_chi2_profiled: f64::NAN, gaps }
+    };
+    let mut trials: Vec<ConfigurationTrial> = candidates.iter().map(|&c| trial(c)).collect();
+    on_step("configuration choice");
+    let (chosen, all) = self::chosen(&folds.cases, &candidates, study);
+    let fold_chosen: [Configuration; 2] = std::array::from_fn(|f| self::chosen(&folds.of(1 - f), &candidates, study).0);
+    // A choice with the reference's reflectances is evaluated through the chain too.
+    for c in std::iter::once(chosen).chain(fold_chosen) {
+        if !trials.iter().any(|t| t.config == c) {
+            trials.push(trial(c));
+        }
+    }
     let reference: ProfileSums = trials[study].gaps.iter().filter_map(|g| g.profile.as_ref()).collect();
     for t in &mut trials {
         let sums: ProfileSums = t.gaps.iter().filter_map(|g| g.profile.as_ref()).collect();
         t.waveform_chi2 = sums.chi2_against(&reference);
+        let same = |c: &Configuration| c.weighting == t.config.weighting && c.pulse == t.config.pulse;
+        t.waveform_chi2_profiled = candidates.iter().position(same).map_or(f64::NAN, |i| all[i].profiled);
     }
-    on_step("configuration choice");
-    let profiled = profiled_chi2(&folds.cases, &candidates, study);
-    for (t, &chi2) in trials.iter_mut().zip(&profiled) {
-        t.waveform_chi2_profiled = chi2;
-    }
-    let chosen = trials[pick(&profiled, study)].config;
-    let fold_pick: [usize; 2] =
-        std::array::from_fn(|f| pick(&profiled_chi2(&folds.of(1 - f), &candidates, study), study));
-    let gaps: Vec<ShotGap> = (0..folds.cases.len()).map(|i| trials[fold_pick[folds.fold[i]]].gaps[i].clone()).collect();
+    let at = |c: Configuration| trials.iter().position(|t| t.config == c).expect("every choice is a trial");
+    let gaps: Vec<ShotGap> =
+        (0..folds.cases.len()).map(|i| trials[at(fold_chosen[folds.fold[i]])].gaps[i].clone()).collect();
     let held_out = compare(folds, &trials[study].gaps, &gaps, "configuration", Frame::Both);
     let ground = (0..N_ALGORITHMS).map(|a| algorithm_ground(folds, &gaps, a)).collect();
-    ConfigurationChoice { fold_chosen: fold_pick.map(|i| trials[i].config), trials, chosen, held_out, gaps, ground }
+    ConfigurationChoice { fold_chosen, trials, chosen, held_out, gaps, ground }
 }
 
 /// `config` taken as chosen, without trying others: its held-out gaps (what effects are ranked
@@ -196,11 +263,11 @@ mod tests {
     #[test]
     fn candidates_cover_every_weighting_and_the_pulses_there_are() {
         let all = candidates(true);
-        assert_eq!(all.len(), 6);
+        assert_eq!(all.len(), 8);
         assert!(all.contains(&Configuration::study()));
         assert!(all.contains(&Configuration::default()));
         let gaussian = candidates(false);
-        assert_eq!(gaussian.len(), 3);
+        assert_eq!(gaussian.len(), 4);
         assert!(gaussian.iter().all(|c| c.pulse == PulseChoice::Gaussian));
     }
 

@@ -252,6 +252,14 @@ pub struct TrialJson {
     pub ground_test: Option<GroundTestJson>,
 }
 
+fn equal() -> String {
+    super::chain::Reflectance::Equal.name().to_string()
+}
+
+fn one() -> f64 {
+    1.0
+}
+
 /// The configuration stage ([`ConfigurationChoice`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ConfigurationJson {
@@ -260,6 +268,13 @@ pub struct ConfigurationJson {
     pub weighting: String,
     /// `gaussian` (the study's 15 ns) or `recorded` (each shot's L1B transmit pulse).
     pub pulse: String,
+    /// `equal` (ground and vegetation alike) or `reference` (the reference simulator's ρv 0.57,
+    /// ρg 0.40).
+    #[serde(default = "equal")]
+    pub reflectance: String,
+    /// ρg/ρv of those reflectances: a `weighting` effect's ratio multiplies it.
+    #[serde(default = "one")]
+    pub rho_ground_over_veg: f64,
     /// The configuration chosen on each fold's calibration set.
     pub fold_chosen: Vec<String>,
     /// The study's configuration (count + Gaussian 15 ns, before) against the cross-fitted
@@ -278,6 +293,8 @@ pub struct ConfigurationRowJson {
     pub configuration: String,
     pub weighting: String,
     pub pulse: String,
+    #[serde(default = "equal")]
+    pub reflectance: String,
     /// Mean over RH1..RH99 of the bias, simulated − GEDI (m), RH frame.
     pub mean_bias_rh_frame: Option<f64>,
     pub mean_abs_bias_rh1_99: Option<f64>,
@@ -541,6 +558,8 @@ impl ConfigurationJson {
             chosen: c.chosen.label(),
             weighting: c.chosen.weighting.name().to_string(),
             pulse: pulse(c.chosen.pulse).to_string(),
+            reflectance: c.chosen.reflectance.name().to_string(),
+            rho_ground_over_veg: c.chosen.reflectance.rho_ground_over_veg(),
             fold_chosen: c.fold_chosen.iter().map(|k| k.label()).collect(),
             held_out: HeldOut::of(&c.held_out),
             configurations: c
@@ -552,6 +571,7 @@ impl ConfigurationJson {
                         configuration: t.config.label(),
                         weighting: t.config.weighting.name().to_string(),
                         pulse: pulse(t.config.pulse).to_string(),
+                        reflectance: t.config.reflectance.name().to_string(),
                         mean_bias_rh_frame: finite(m.bias_rh.iter().sum::<f64>() / N_PCT as f64),
                         mean_abs_bias_rh1_99: finite(m.mean_abs_bias),
                         systematic_gap: finite(m.systematic),

@@ -160,6 +160,9 @@ pub struct PulseIndex {
     /// (more than one when two pulses share a key, e.g. the same tile mosaicked twice).
     starts: Vec<u32>,
     firsts: Vec<(f64, f64)>,
+    /// Per point: its intensity over its pulse's (0 read as 1; NaN without a pulse key), the
+    /// weight [`crate::sim::Weighting::Share`] gives it.
+    share: Vec<f32>,
 }
 
 /// [`PulseIndex`] value of a point without a pulse key.
@@ -178,10 +181,16 @@ impl PulseIndex {
             pulse: vec![NO_PULSE; n],
             starts: vec![0],
             firsts: Vec::new(),
+            share: vec![f32::NAN; n],
         };
+        let intensity = |i: u32| f64::from(points.intensity[i as usize].max(1));
         for group in keyed.chunk_by(|a, b| a.0 == b.0) {
             let id = (index.starts.len() - 1) as u32;
             let start = index.firsts.len();
+            let total: f64 = group.iter().map(|&(_, i)| intensity(i)).sum();
+            for &(_, i) in group {
+                index.share[i as usize] = (intensity(i) / total) as f32;
+            }
             for &(_, i) in group {
                 index.pulse[i as usize] = id;
                 if points.return_number[i as usize] == 1 {
@@ -197,6 +206,11 @@ impl PulseIndex {
             index.starts.push(index.firsts.len() as u32);
         }
         index
+    }
+
+    /// Point `i`'s share of its pulse's intensity; `None` without a pulse key.
+    pub fn intensity_share(&self, i: usize) -> Option<f32> {
+        self.share.get(i).copied().filter(|s| !s.is_nan())
     }
 
     /// Position of the first return of point `i`, at (x, y), if exactly one of its pulse's first

@@ -101,7 +101,8 @@ pub struct Quirks {
     pub printed_metrics: bool,
 }
 
-/// Return weighting of a waveform (docs/simulator-reference.md §1.3).
+/// Return weighting of a waveform (docs/simulator-reference.md §1.3; `share`: docs/diagnosis.md,
+/// "Intensity share").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Weighting {
     /// Each return weighted by the footprint intensity at its position.
@@ -110,26 +111,38 @@ pub enum Weighting {
     Frac = 1,
     /// Count weight times the return's intensity (0 read as 1).
     Int = 2,
+    /// Count weight times the return's share of its pulse's intensity (0 read as 1): the pulse's
+    /// unit of energy split among its returns as their intensities split it. Needs each return's
+    /// pulse (GPS time and flight line), so it is simulated only where the density is counted by
+    /// pulse ([`SimConfig::counts_pulses`]): the diagnosis's chain, not the study's tables.
+    Share = 3,
 }
 
-/// Number of weightings.
-pub const N_WEIGHTINGS: usize = 3;
+/// Number of weightings a footprint can be simulated with ([`Weighting::ALL`]).
+pub const N_WEIGHTINGS: usize = 4;
+
+/// Number of the study's weightings ([`Weighting::STUDY`]).
+pub const N_STUDY_WEIGHTINGS: usize = 3;
 
 impl Weighting {
     /// All weightings, in index order.
-    pub const ALL: [Weighting; N_WEIGHTINGS] = [Weighting::Count, Weighting::Frac, Weighting::Int];
+    pub const ALL: [Weighting; N_WEIGHTINGS] = [Weighting::Count, Weighting::Frac, Weighting::Int, Weighting::Share];
 
-    /// The names of [`Self::ALL`], in index order: the `weighting` values of the `sim` and
+    /// The study's weightings (gediRat's), in index order: those of the `sim` and `results` tables.
+    pub const STUDY: [Weighting; N_STUDY_WEIGHTINGS] = [Weighting::Count, Weighting::Frac, Weighting::Int];
+
+    /// The names of [`Self::STUDY`], in index order: the `weighting` values of the `sim` and
     /// `results` tables.
-    pub const NAMES: [&'static str; N_WEIGHTINGS] =
+    pub const NAMES: [&'static str; N_STUDY_WEIGHTINGS] =
         [Weighting::Count.name(), Weighting::Frac.name(), Weighting::Int.name()];
 
-    /// Lower-case name (`count`, `frac`, `int`).
+    /// Lower-case name (`count`, `frac`, `int`, `share`).
     pub const fn name(self) -> &'static str {
         match self {
             Weighting::Count => "count",
             Weighting::Frac => "frac",
             Weighting::Int => "int",
+            Weighting::Share => "share",
         }
     }
 }
@@ -230,6 +243,15 @@ pub struct WeightedWave {
     pub truth: Truth,
     /// RH0 … RH100 (m above `truth.als_ground`); `None` without ground.
     pub rh: Option<[f32; N_RH]>,
+}
+
+impl WeightedWave {
+    /// A weighting the footprint was not simulated with ([`Weighting::Share`] without pulses):
+    /// no bins, no truths.
+    fn not_simulated() -> WeightedWave {
+        let truth = Truth { als_ground: None, true_top: None, slope_deg: None, als_cover: -1.0 };
+        WeightedWave { wave: Vec::new(), ground: Vec::new(), canopy: Vec::new(), truth, rh: None }
+    }
 }
 
 /// One simulated footprint.
@@ -644,6 +666,8 @@ fn gather(job: &Job, widths: &[Width]) -> Vec<std::result::Result<Gathered, Skip
             w[Weighting::Count as usize] = r;
             w[Weighting::Frac as usize] = r * frac_hit;
             w[Weighting::Int as usize] = intensity as f32 * r;
+            // A return without a pulse shares it as frac does.
+            w[Weighting::Share as usize] = r * pulses.and_then(|ps| ps.intensity_share(i)).unwrap_or(frac_hit);
             g.contributions.push(Contribution { z: p.z[i], w, ground: p.classification[i] == 2 });
             sums[k].0 += r * p.scan_angle_deg[i].abs();
             sums[k].1 += r;
@@ -668,7 +692,7 @@ fn gather(job: &Job, widths: &[Width]) -> Vec<std::result::Result<Gathered, Skip
 /// The waveforms of one width from what [`gather`] found: binned, convolved with the pulse,
 /// cleaned, normalised, and their truths and RH.
 fn finish<T: Sample>(job: &Job, fsigma: f32, g: Gathered) -> Outcome {
-    let Job { footprint: fp, cfg, .. } = *job;
+    let Job { footprint: fp, cfg, pulses, .. } = *job;
     let q = cfg.quirks;
     let Gathered { contributions, z_range: (z_lo, z_hi), densities, covered_fraction, mean_scan_angle_deg } = g;
 
@@ -702,7 +726,7 @@ fn finish<T: Sample>(job: &Job, fsigma: f32, g: Gathered) -> Outcome {
         None => ((top - z) / dz).floor() as i64,
     };
 
-    let mut waves = WaveSet::<T>::zeros(n_bins);
+    let mut waves = WaveSet::<T>::zeros(n_bins, pulses.is_some());
     match cfg.pulse_timing {
         PulseTiming::AfterBinning => {
             for c in &contributions {
@@ -741,6 +765,9 @@ fn finish<T: Sample>(job: &Job, fsigma: f32, g: Gathered) -> Outcome {
     let weightings = Weighting::ALL.map(|k| {
         let (wave, ground, canopy) =
             (to_f32(&waves.total[k as usize]), to_f32(&waves.ground[k as usize]), to_f32(&waves.canopy[k as usize]));
+        if wave.is_empty() {
+            return WeightedWave::not_simulated();
+        }
         let (truth, rh) = if q.printed_metrics {
             // gediMetric reads the ASCII file: labels and canopy/ground as %f, totals as %.10f,
             // pulse and footprint widths from the %f header.
@@ -895,7 +922,7 @@ mod tests {
             let out = simulate(&p, &[fp("a", 30.0, 30.0), fp("far", 500.0, 500.0)], &SimConfig::new(profile)).unwrap();
             assert_eq!(out[1], Err(SkipReason::NoPoints));
             let s = out[0].as_ref().unwrap();
-            for w in Weighting::ALL {
+            for w in Weighting::STUDY {
                 let ww = s.get(w);
                 let sum: f32 = ww.wave.iter().sum::<f32>() * s.dz as f32;
                 assert!((sum - 1.0).abs() < 1e-4, "{profile:?} {w:?} integral {sum}");
@@ -985,6 +1012,48 @@ mod tests {
         // Without GPS times no pulse is found: each return uses its own cell (first returns).
         let no_gps = ground_share(&slanted_scene(true, true), DensityCount::Pulses);
         assert!((no_gps - per_pulse).abs() > 0.03, "{no_gps} vs {per_pulse}");
+    }
+
+    #[test]
+    fn share_splits_each_pulse_by_its_returns_intensities() {
+        // A flat ground with a canopy return 10 m above every fourth pulse, three times as bright
+        // as that pulse's ground return; every pulse its own GPS time.
+        let mut p = AlsPoints::with_capacity(100_000);
+        let mut pulse = 0.0;
+        for i in 0..300 {
+            for j in 0..300 {
+                let (x, y) = (i as f64 * 0.2, j as f64 * 0.2);
+                pulse += 1.0;
+                if (i + j) % 4 == 0 {
+                    push_return(&mut p, (x, y, 110.0), (1, 2, 5), 0.0, pulse);
+                    push_return(&mut p, (x, y, 100.0), (2, 2, 2), 0.0, pulse);
+                    *p.intensity.last_mut().unwrap() = 33;
+                } else {
+                    push_return(&mut p, (x, y, 100.0), (1, 1, 2), 0.0, pulse);
+                }
+            }
+        }
+        let ground_shares = |density_count| {
+            let cfg = SimConfig { density_count, ..SimConfig::new(Profile::Default) };
+            let out = simulate(&p, &[fp("a", 30.0, 30.0)], &cfg).unwrap();
+            let s = out[0].as_ref().unwrap().clone();
+            let share = |w: Weighting| {
+                let w = s.get(w);
+                let sum = |a: &[f32]| a.iter().map(|&v| f64::from(v)).sum::<f64>();
+                (!w.wave.is_empty()).then(|| sum(&w.ground) / sum(&w.wave))
+            };
+            (share(Weighting::Frac).unwrap(), share(Weighting::Share))
+        };
+        // Both give each pulse a unit of energy: with b the two-return pulses' part of it, the
+        // ground holds 1 − b/2 of it under frac (half of such a pulse) and 1 − b·100/133 under
+        // share (its intensity's share, 33 of 133).
+        let (frac, share) = ground_shares(DensityCount::Pulses);
+        let b = 2.0 * (1.0 - frac);
+        assert!((0.2..0.3).contains(&b), "two-return pulses' part {b}");
+        let share = share.expect("simulated where pulses are counted");
+        assert!((share - (1.0 - b * 100.0 / 133.0)).abs() < 1e-3, "share {share}, frac {frac}");
+        // Without pulses (gediRat's density) it is not simulated.
+        assert_eq!(ground_shares(DensityCount::LastReturns).1, None);
     }
 
     #[test]

@@ -45,8 +45,8 @@ impl Sample for f64 {
     }
 }
 
-/// The nine arrays of a footprint: total, ground (class 2) and canopy (other classes) waves per
-/// weighting, bin 0 at the top.
+/// The arrays of a footprint: total, ground (class 2) and canopy (other classes) waves per
+/// weighting, bin 0 at the top. [`Weighting::Share`]'s are empty unless it is simulated.
 #[derive(Debug, Clone)]
 pub struct WaveSet<T> {
     /// Total waveforms, indexed by [`Weighting`].
@@ -69,10 +69,16 @@ pub struct Contribution {
 }
 
 impl<T: Sample> WaveSet<T> {
-    /// Nine zeroed arrays of `n` bins.
-    pub fn zeros(n: usize) -> WaveSet<T> {
-        let z = || std::array::from_fn(|_| vec![T::default(); n]);
+    /// Zeroed arrays of `n` bins: nine, and three more for [`Weighting::Share`] if `share`.
+    pub fn zeros(n: usize, share: bool) -> WaveSet<T> {
+        let len = |k: usize| if k != Weighting::Share as usize || share { n } else { 0 };
+        let z = || std::array::from_fn(|k| vec![T::default(); len(k)]);
         WaveSet { total: z(), ground: z(), canopy: z() }
+    }
+
+    /// The weightings whose arrays are simulated.
+    fn simulated(&self) -> impl Iterator<Item = usize> + '_ {
+        (0..N_WEIGHTINGS).filter(|&k| !self.total[k].is_empty())
     }
 
     /// Number of bins.
@@ -97,6 +103,12 @@ impl<T: Sample> WaveSet<T> {
             let v = T::from_f32(c.w[k as usize] * scale);
             self.total[k as usize][b] += v;
             part[k as usize][b] += v;
+        }
+        let share = Weighting::Share as usize;
+        if let Some(t) = self.total[share].get_mut(b) {
+            let v = T::from_f32(c.w[share] * scale);
+            *t += v;
+            part[share][b] += v;
         }
     }
 
@@ -132,7 +144,7 @@ impl<T: Sample> WaveSet<T> {
         let hi = (support.end as i64 - omin).min(n);
         let taps: Vec<(i64, T)> = offsets.iter().zip(y).map(|(&o, &y)| (o, T::from_f32(y))).collect();
         let arrays = self.total.iter_mut().chain(&mut self.ground).chain(&mut self.canopy);
-        for a in arrays {
+        for a in arrays.filter(|a| !a.is_empty()) {
             let mut out = vec![T::default(); a.len()];
             for i in lo..hi {
                 let (mut sum, mut count) = (T::default(), 0f32);
@@ -207,10 +219,10 @@ impl<T: Sample> WaveSet<T> {
     }
 
     fn zero(&mut self, bins: std::ops::Range<usize>, split_cleaned: &[Weighting]) {
-        for a in &mut self.total {
+        for a in self.total.iter_mut().filter(|a| !a.is_empty()) {
             a[bins.clone()].fill(T::default());
         }
-        for &k in split_cleaned {
+        for &k in split_cleaned.iter().filter(|&&k| !self.total[k as usize].is_empty()) {
             self.ground[k as usize][bins.clone()].fill(T::default());
             self.canopy[k as usize][bins.clone()].fill(T::default());
         }
@@ -220,7 +232,7 @@ impl<T: Sample> WaveSet<T> {
     /// is when that integral is not positive).
     pub fn normalise(&mut self, res: f32) {
         let r = T::from_f32(res);
-        for k in 0..N_WEIGHTINGS {
+        for k in self.simulated().collect::<Vec<_>>() {
             let mut tot = T::default();
             for &v in &self.total[k] {
                 tot += v * r;

@@ -30,7 +30,7 @@ pub const MIN_RH100: f64 = 5.0;
 /// Highest simulated RH100 kept (m).
 pub const MAX_RH100: f64 = 60.0;
 /// The weightings of the `sim` and `results` tables, in row order.
-pub const WEIGHTINGS: [&str; crate::sim::N_WEIGHTINGS] = crate::sim::Weighting::NAMES;
+pub const WEIGHTINGS: [&str; crate::sim::N_STUDY_WEIGHTINGS] = crate::sim::Weighting::NAMES;
 /// `default` then a1 … a6, in row order.
 pub const ALGORITHMS: [StudyAlgorithm; N_ALGORITHMS + 1] = [
     StudyAlgorithm::Default,

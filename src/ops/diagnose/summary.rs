@@ -48,13 +48,15 @@ fn configuration_lines(c: &crate::kernels::diagnose::configuration::Configuratio
         .collect();
     let mut lines = vec![
         format!(
-            "Configuration first (weighting × pulse, chosen on calibration tracks by the waveforms at the best \
-             ground/vegetation ratio, scored on held-out ones): {}{folds}; from the study's count + Gaussian 15 ns \
-             the held-out gap goes {:.2} → {:.2} m at ρ = 1 ({}). A configuration is never reported as an effect: \
-             the causes below, a ratio ρ among them, are ranked on top of it.",
+            "Configuration first (weighting × pulse chosen on calibration tracks by the waveforms at the best \
+             ground/vegetation ratio, then equal or the reference's reflectances, scored on held-out ones): \
+             {}{folds}; from the study's count + Gaussian 15 ns the held-out gap goes {:.2} → {:.2} m at ρg/ρv = \
+             {:.2} ({}). A configuration is never reported as an effect: the causes below, a ratio ρ among them \
+             (relative to these reflectances), are ranked on top of it.",
             c.chosen.label(),
             h.before.mean_abs_bias,
             h.after.mean_abs_bias,
+            c.chosen.reflectance.rho_ground_over_veg(),
             shrink_text(h)
         ),
         format!("  every configuration (mean |RH bias| RH1–RH99, MSD, RH98 bias): {}.", rows.join("; ")),

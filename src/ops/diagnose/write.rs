@@ -80,6 +80,7 @@ pub(super) fn write_tables(d: &Diagnosis, out: &Path) -> Result<Vec<PathBuf>> {
         &batch(vec![
             ("configuration", texts(t.iter().map(|t| t.config.label()))),
             ("weighting", texts(t.iter().map(|t| t.config.weighting.name()))),
+            ("reflectance", texts(t.iter().map(|t| t.config.reflectance.name()))),
             (
                 "chosen",
                 Arc::new(arrow::array::BooleanArray::from(t.iter().map(|t| t.config == c.chosen).collect::<Vec<_>>())),

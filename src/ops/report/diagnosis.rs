@@ -124,9 +124,10 @@ fn configuration_tables(c: &ConfigurationJson) -> String {
     let num = |v: Option<f64>| v.map_or("–".to_string(), |x| format!("{x:.2}"));
     let signed = |v: Option<f64>| v.map_or("–".to_string(), |x| format!("{x:+.2}"));
     let mut s = format!(
-        "<h3>Configuration (weighting × pulse)</h3>\n<p>Chosen: <strong>{}</strong>, on calibration tracks by the \
-         waveforms at each one's best ground/vegetation ratio ρ; effects (a ratio ρ among them) are ranked on top of \
-         it.</p>\n<table>\n<thead><tr><th>configuration</th>\
+        "<h3>Configuration (weighting × pulse × reflectances)</h3>\n<p>Chosen: <strong>{}</strong>, on calibration \
+         tracks by the waveforms at each one's best ground/vegetation ratio ρ, then equal reflectances or the \
+         reference simulator's (ρg/ρv 0.40/0.57) by the waveforms; effects (a ratio ρ among them, relative to the \
+         chosen reflectances) are ranked on top of it.</p>\n<table>\n<thead><tr><th>configuration</th>\
          <th>mean |RH bias| RH1–99 (m)</th><th>MSD (m²)</th><th>RH98 bias (m)</th><th>RH50 bias (m)</th>\
          <th>ground bias (m)</th><th>waveform χ²</th><th>at the best ρ</th></tr></thead>\n<tbody>\n",
         escape(&c.chosen)
