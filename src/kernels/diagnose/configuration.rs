@@ -46,7 +46,8 @@ pub struct ConfigurationTrial {
     pub metrics: GapMetrics,
     /// The waveform-level gap against the study configuration's between-shot variance.
     pub waveform_chi2: f64,
-    /// The same at the configuration's best ground/vegetation ratio: what the choice is made by.
+    /// The same at the configuration's best ground/vegetation ratio, the real waveforms at their
+    /// best vertical shift: what the choice of weighting and pulse is made by.
     pub waveform_chi2_profiled: f64,
     /// Per-shot gaps, in case order.
     pub gaps: Vec<ShotGap>,

@@ -305,7 +305,8 @@ pub struct ConfigurationRowJson {
     pub ground_bias_m: Option<f64>,
     /// Waveform-level gap against the study configuration's between-shot variance.
     pub waveform_chi2: Option<f64>,
-    /// The same at the configuration's best ground/vegetation ratio: what the choice is made by.
+    /// The same at the configuration's best ground/vegetation ratio, the real waveforms at their
+    /// best vertical shift: what the choice of weighting and pulse is made by.
     pub waveform_chi2_profiled: Option<f64>,
 }
 
