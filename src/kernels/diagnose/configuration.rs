@@ -169,7 +169,7 @@ fn scores(cases: &[&ShotCase], candidates: &[Configuration], study: usize) -> Ve
 
 /// The configuration chosen on `cases`: the weighting and pulse of the least gap at their best
 /// ratio, then the reflectances of the lesser gap for them.
-fn chosen(cases: &[&ShotCase], candidates: &[Configuration], study: usize) -> (Configuration, Vec<Scores>) {
+fn choice_on(cases: &[&ShotCase], candidates: &[Configuration], study: usize) -> (Configuration, Vec<Scores>) {
     let scores = scores(cases, candidates, study);
     let profiled: Vec<f64> = scores.iter().map(|s| s.profiled).collect();
     let i = pick(&profiled, study);
@@ -193,8 +193,8 @@ pub fn choose(folds: &Folds, candidates: &[Configuration], on_step: &dyn Fn(&str
     };
     let mut trials: Vec<ConfigurationTrial> = candidates.iter().map(|&c| trial(c)).collect();
     on_step("configuration choice");
-    let (chosen, all) = self::chosen(&folds.cases, &candidates, study);
-    let fold_chosen: [Configuration; 2] = std::array::from_fn(|f| self::chosen(&folds.of(1 - f), &candidates, study).0);
+    let (chosen, all) = choice_on(&folds.cases, &candidates, study);
+    let fold_chosen: [Configuration; 2] = std::array::from_fn(|f| choice_on(&folds.of(1 - f), &candidates, study).0);
     // A choice with the reference's reflectances is evaluated through the chain too.
     for c in std::iter::once(chosen).chain(fold_chosen) {
         if !trials.iter().any(|t| t.config == c) {

@@ -183,15 +183,13 @@ impl PulseIndex {
             firsts: Vec::new(),
             share: vec![f32::NAN; n],
         };
-        let intensity = |i: u32| f64::from(points.intensity[i as usize].max(1));
+        let intensity = |i: u32| f64::from(points.intensity_or_one(i as usize));
         for group in keyed.chunk_by(|a, b| a.0 == b.0) {
             let id = (index.starts.len() - 1) as u32;
             let start = index.firsts.len();
             let total: f64 = group.iter().map(|&(_, i)| intensity(i)).sum();
             for &(_, i) in group {
                 index.share[i as usize] = (intensity(i) / total) as f32;
-            }
-            for &(_, i) in group {
                 index.pulse[i as usize] = id;
                 if points.return_number[i as usize] == 1 {
                     index.firsts.push((points.x[i as usize], points.y[i as usize]));

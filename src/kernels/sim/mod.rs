@@ -659,7 +659,7 @@ fn gather(job: &Job, widths: &[Width]) -> Vec<std::result::Result<Gathered, Skip
                     r /= n as f32;
                 }
             }
-            let intensity = if p.intensity[i] > 0 { p.intensity[i] } else { 1 };
+            let intensity = p.intensity_or_one(i);
             let n_ret = p.number_of_returns[i];
             let frac_hit = if n_ret > 0 { (1.0 / n_ret as f64) as f32 } else { 1.0 };
             let mut w = [0f32; N_WEIGHTINGS];

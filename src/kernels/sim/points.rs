@@ -22,6 +22,11 @@ pub struct AlsPoints {
 }
 
 impl AlsPoints {
+    /// Intensity of point `i`, 0 read as 1 (the `int` and `share` weightings).
+    pub fn intensity_or_one(&self, i: usize) -> u16 {
+        self.intensity[i].max(1)
+    }
+
     /// Number of points.
     pub fn len(&self) -> usize {
         self.x.len()

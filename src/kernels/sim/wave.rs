@@ -76,11 +76,6 @@ impl<T: Sample> WaveSet<T> {
         WaveSet { total: z(), ground: z(), canopy: z() }
     }
 
-    /// The weightings whose arrays are simulated.
-    fn simulated(&self) -> impl Iterator<Item = usize> + '_ {
-        (0..N_WEIGHTINGS).filter(|&k| !self.total[k].is_empty())
-    }
-
     /// Number of bins.
     pub fn len(&self) -> usize {
         self.total[0].len()
@@ -229,10 +224,10 @@ impl<T: Sample> WaveSet<T> {
     }
 
     /// Divides each weighting's three arrays by the integral Σ total·res of its total (left as
-    /// is when that integral is not positive).
+    /// is when that integral is not positive, as for arrays not simulated).
     pub fn normalise(&mut self, res: f32) {
         let r = T::from_f32(res);
-        for k in self.simulated().collect::<Vec<_>>() {
+        for k in 0..N_WEIGHTINGS {
             let mut tot = T::default();
             for &v in &self.total[k] {
                 tot += v * r;
