@@ -149,6 +149,8 @@ fn check_contract(d: &Value) {
     assert_eq!(chosen["reflectance"], c["reflectance"]);
     let rho = if c["reflectance"] == "equal" { 1.0 } else { 0.40 / 0.57 };
     assert!((num(&c["rho_ground_over_veg"]) - rho).abs() < 1e-12, "{c:#}");
+    // …compared at the real waveforms' best vertical shift, within its grid.
+    assert!(num(&c["vertical_shift_m"]).abs() <= 1.5, "{c:#}");
     assert!(num(&c["held_out"]["mean_abs_bias_rh1_99_before"]).is_finite());
     assert_eq!(c["ground_by_algorithm"].as_array().unwrap().len(), 6);
     assert!(c["least_biased_algorithm"].is_u64());
@@ -191,6 +193,9 @@ fn datum_world_names_datum_and_recovers_dz() {
     let d = diagnose_world(tmp.path(), "datum", &["--magnitude", "2", "--seed", "11"]);
     assert_named_first(&d, "datum");
     assert_param(&d, "dz_m", 1.0, 0.2);
+    // The configurations were compared with the real waveforms shifted as the datum shifts them.
+    let shift = num(&d["configuration"]["vertical_shift_m"]);
+    assert!((shift - 1.0).abs() < 0.3, "vertical shift {shift}");
     // GEDI's heights planted 1 m above the ALS datum: GEDI ground − ALS ground is positive, and
     // in the ALS frame GEDI's RH points stand higher than the simulated ones (simulated − GEDI < 0
     // by the ground bias more than in the RH frame).

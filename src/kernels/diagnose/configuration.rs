@@ -81,6 +81,9 @@ pub struct ConfigurationChoice {
     pub gaps: Vec<ShotGap>,
     /// Ground bias of each algorithm under the cross-fitted choice.
     pub ground: Vec<AlgorithmGround>,
+    /// The vertical shift (m) of the real waveforms, on all tracks, the configurations were
+    /// compared at ([`vertical_shift`]; `None` when none was compared).
+    pub vertical_shift_m: Option<f64>,
 }
 
 impl ConfigurationChoice {
@@ -144,14 +147,16 @@ fn vertical_shift(cases: &[&ShotCase], reference: &ProfileSums) -> f64 {
 /// variance of the study's configuration (index `study`): at its best ground/vegetation ratio ρ
 /// (grid and golden section on ln ρ, as the `weighting` fit), with equal reflectances and with the
 /// reference's.
-fn scores(cases: &[&ShotCase], candidates: &[Configuration], study: usize) -> Vec<Scores> {
+/// Returns them with the shift (`None` without cases).
+fn scores(cases: &[&ShotCase], candidates: &[Configuration], study: usize) -> (Vec<Scores>, Option<f64>) {
     if cases.is_empty() {
-        return vec![Scores { profiled: 0.0, equal: 0.0, reference: 0.0 }; candidates.len()];
+        return (vec![Scores { profiled: 0.0, equal: 0.0, reference: 0.0 }; candidates.len()], None);
     }
     let reference = profile::sums(cases, &reposition(cases, &Model::configured(candidates[study])));
-    let shift = Effect::Datum { dz_m: vertical_shift(cases, &reference) };
+    let dz_m = vertical_shift(cases, &reference);
+    let shift = Effect::Datum { dz_m };
     let grid: Vec<f64> = RHO_GRID.iter().map(|r: &f64| r.ln()).collect();
-    candidates
+    let scores = candidates
         .iter()
         .map(|&config| {
             let config = Configuration { reflectance: Reflectance::Equal, ..config };
@@ -164,16 +169,22 @@ fn scores(cases: &[&ShotCase], candidates: &[Configuration], study: usize) -> Ve
                 reference: chi2(REFERENCE_RHO_GROUND_OVER_VEG.ln()),
             }
         })
-        .collect()
+        .collect();
+    (scores, Some(dz_m))
 }
 
 /// The configuration chosen on `cases`: the weighting and pulse of the least gap at their best
-/// ratio, then the reflectances of the lesser gap for them.
-fn choice_on(cases: &[&ShotCase], candidates: &[Configuration], study: usize) -> (Configuration, Vec<Scores>) {
-    let scores = scores(cases, candidates, study);
+/// ratio, then the reflectances of the lesser gap for them; with every candidate's scores and the
+/// vertical shift they were compared at.
+fn choice_on(
+    cases: &[&ShotCase],
+    candidates: &[Configuration],
+    study: usize,
+) -> (Configuration, Vec<Scores>, Option<f64>) {
+    let (scores, shift) = scores(cases, candidates, study);
     let profiled: Vec<f64> = scores.iter().map(|s| s.profiled).collect();
     let i = pick(&profiled, study);
-    (Configuration { reflectance: scores[i].reflectance(), ..candidates[i] }, scores)
+    (Configuration { reflectance: scores[i].reflectance(), ..candidates[i] }, scores, shift)
 }
 
 /// Evaluate every candidate, choose per fold and on all tracks, and score the choice held out.
@@ -193,7 +204,7 @@ pub fn choose(folds: &Folds, candidates: &[Configuration], on_step: &dyn Fn(&str
     };
     let mut trials: Vec<ConfigurationTrial> = candidates.iter().map(|&c| trial(c)).collect();
     on_step("configuration choice");
-    let (chosen, all) = choice_on(&folds.cases, &candidates, study);
+    let (chosen, all, vertical_shift_m) = choice_on(&folds.cases, &candidates, study);
     let fold_chosen: [Configuration; 2] = std::array::from_fn(|f| choice_on(&folds.of(1 - f), &candidates, study).0);
     // A choice with the reference's reflectances is evaluated through the chain too.
     for c in std::iter::once(chosen).chain(fold_chosen) {
@@ -213,7 +224,7 @@ pub fn choose(folds: &Folds, candidates: &[Configuration], on_step: &dyn Fn(&str
         (0..folds.cases.len()).map(|i| trials[at(fold_chosen[folds.fold[i]])].gaps[i].clone()).collect();
     let held_out = compare(folds, &trials[study].gaps, &gaps, "configuration", Frame::Both);
     let ground = (0..N_ALGORITHMS).map(|a| algorithm_ground(folds, &gaps, a)).collect();
-    ConfigurationChoice { fold_chosen, trials, chosen, held_out, gaps, ground }
+    ConfigurationChoice { fold_chosen, trials, chosen, held_out, gaps, ground, vertical_shift_m }
 }
 
 /// `config` taken as chosen, without trying others: its held-out gaps (what effects are ranked
@@ -233,7 +244,15 @@ pub fn fixed(folds: &Folds, config: Configuration) -> ConfigurationChoice {
         waveform_chi2_profiled: f64::NAN,
         gaps: gaps.clone(),
     };
-    ConfigurationChoice { trials: vec![trial], chosen: config, fold_chosen: [config; 2], held_out, gaps, ground }
+    ConfigurationChoice {
+        trials: vec![trial],
+        chosen: config,
+        fold_chosen: [config; 2],
+        held_out,
+        gaps,
+        ground,
+        vertical_shift_m: None,
+    }
 }
 
 /// Mean ground difference of algorithm index `a` over the shots that have it, with its

@@ -275,6 +275,10 @@ pub struct ConfigurationJson {
     /// ρg/ρv of those reflectances: a `weighting` effect's ratio multiplies it.
     #[serde(default = "one")]
     pub rho_ground_over_veg: f64,
+    /// The vertical shift (m) of the real waveforms the configurations were compared at: the
+    /// nominal configuration's best match, as a datum would shift them (docs/diagnosis.md).
+    #[serde(default)]
+    pub vertical_shift_m: Option<f64>,
     /// The configuration chosen on each fold's calibration set.
     pub fold_chosen: Vec<String>,
     /// The study's configuration (count + Gaussian 15 ns, before) against the cross-fitted
@@ -561,6 +565,7 @@ impl ConfigurationJson {
             pulse: pulse(c.chosen.pulse).to_string(),
             reflectance: c.chosen.reflectance.name().to_string(),
             rho_ground_over_veg: c.chosen.reflectance.rho_ground_over_veg(),
+            vertical_shift_m: c.vertical_shift_m.and_then(finite),
             fold_chosen: c.fold_chosen.iter().map(|k| k.label()).collect(),
             held_out: HeldOut::of(&c.held_out),
             configurations: c

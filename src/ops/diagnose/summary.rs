@@ -46,10 +46,14 @@ fn configuration_lines(c: &crate::kernels::diagnose::configuration::Configuratio
         .filter(|g| g.n > 0)
         .map(|g| format!("a{} {:+.2} m ({:+.2} to {:+.2})", g.algorithm, g.bias_m, g.ci95[0], g.ci95[1]))
         .collect();
+    let shift = c
+        .vertical_shift_m
+        .map(|dz| format!(" and the real waveforms' best vertical shift, {dz:+.2} m"))
+        .unwrap_or_default();
     let mut lines = vec![
         format!(
             "Configuration first (weighting × pulse chosen on calibration tracks by the waveforms at the best \
-             ground/vegetation ratio, then equal or the reference's reflectances, scored on held-out ones): \
+             ground/vegetation ratio{shift}, then equal or the reference's reflectances, scored on held-out ones): \
              {}{folds}; from the study's count + Gaussian 15 ns the held-out gap goes {:.2} → {:.2} m at ρg/ρv = \
              {:.2} ({}). A configuration is never reported as an effect: the causes below, a ratio ρ among them \
              (relative to these reflectances), are ranked on top of it.",
