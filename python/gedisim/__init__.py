@@ -1,0 +1,271 @@
+"""gedisim from Python: the study's dataset, the simulator, L2A and the diagnosis over Arrow.
+
+Every call is a thin wrapper over the operation the ``gedisim`` command runs (the same Rust code,
+in the extension module ``gedisim._native``), with the command line's defaults; tables come back
+as ``pyarrow.Table`` through the Arrow C data interface (no copy), so pandas, polars and DuckDB take
+them directly. Errors raise :class:`GedisimError` with the command line's one-line message.
+docs/python.md in the repository describes the API; ``examples/study.ipynb`` runs the study.
+
+>>> import gedisim
+>>> gedisim.__version__
+'0.1.0'
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+import sysconfig
+import tempfile
+from pathlib import Path
+from typing import Any, Iterable, Mapping, Sequence, Union
+
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.csv as pacsv
+import pyarrow.parquet as pq
+
+from . import _native
+from ._native import GedisimError
+from ._progress import progress_callback
+
+__version__: str = _native.__version__
+__all__ = ["Dataset", "GedisimError", "simulate", "l2a", "rh", "command", "__version__"]
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+def command() -> str | None:
+    """Path of the ``gedisim`` command installed with this package (``None`` if it is missing).
+
+    >>> import os
+    >>> os.access(gedisim.command(), os.X_OK)
+    True
+    """
+    exe = "gedisim.exe" if sys.platform == "win32" else "gedisim"
+    scripts = Path(sysconfig.get_path("scripts")) / exe
+    if scripts.is_file():
+        return str(scripts)
+    beside = Path(sys.executable).parent / exe
+    if beside.is_file():
+        return str(beside)
+    return shutil.which("gedisim")
+
+
+# Granules are read in child processes of the installed command, as the command line reads them: a corrupt granule
+# that crashes the HDF5 library becomes a GedisimError instead of ending the Python process.
+_cmd = command()
+if _cmd is not None:
+    _native.read_granules_with(_cmd)
+
+
+def _paths(p: PathLike | Iterable[PathLike] | None) -> list[str]:
+    if p is None:
+        return []
+    if isinstance(p, (str, os.PathLike)):
+        return [os.fspath(p)]
+    return [os.fspath(x) for x in p]
+
+
+def _progress(progress: bool | None):
+    return progress_callback() if progress in (None, True) else None
+
+
+class Dataset:
+    """A gedisim dataset: a directory of Parquet tables (docs/schemas.md), created by :meth:`run`.
+
+    >>> ds = gedisim.Dataset(demo / "dataset")
+    >>> ds.sql("SELECT count(*) AS n FROM shots").column("n")[0].as_py() > 0
+    True
+    """
+
+    def __init__(self, path: PathLike):
+        self.path = Path(path)
+
+    def __repr__(self) -> str:
+        return f"gedisim.Dataset({str(self.path)!r})"
+
+    def __fspath__(self) -> str:
+        return str(self.path)
+
+    def sql(self, query: str) -> pa.Table:
+        """The result of ``query`` on the dataset's tables, with gedisim's SQL functions (read-only, as
+        ``gedisim sql``). Statements are separated by ``;``; exactly one may have a result.
+
+        >>> ds.sql("SELECT weighting, count(*) AS n FROM results GROUP BY weighting ORDER BY weighting").num_rows
+        3
+        """
+        return _native.sql(str(self.path), query)
+
+    def table(self, name: str) -> pa.Table:
+        """A whole table of the dataset (``shots``, ``sim``, ``results``, …; docs/schemas.md).
+
+        >>> ds.table("tiles").num_rows > 0
+        True
+        """
+        quoted = '"' + name.replace('"', '""') + '"'
+        return self.sql(f"SELECT * FROM {quoted}")
+
+    def run(
+        self,
+        als: PathLike | Iterable[PathLike] | None = None,
+        l1b: PathLike | Iterable[PathLike] | None = None,
+        l2a: PathLike | Iterable[PathLike] | None = None,
+        *,
+        epsg: int | None = None,
+        landcover: PathLike | None = None,
+        geoid_offset: float | None = None,
+        all_shots: bool = False,
+        progress: bool | None = None,
+    ) -> dict[str, Any]:
+        """``gedisim run``: ingest ALS tiles and GEDI granules (files or folders), collocate, simulate
+        and write the study's tables into the dataset (created if needed). Returns what it did.
+
+        >>> gedisim.Dataset(tmp / "ds").run(als=demo / "world/als", l1b=demo / "world/gedi",
+        ...                                 l2a=demo / "world/gedi")["shots_simulated"] > 0
+        True
+        """
+        text = _native.run(
+            str(self.path),
+            _paths(als),
+            _paths(l1b),
+            _paths(l2a),
+            epsg=epsg,
+            landcover=None if landcover is None else os.fspath(landcover),
+            geoid_offset=geoid_offset,
+            all_shots=all_shots,
+            progress=_progress(progress),
+        )
+        return json.loads(text)
+
+    def report(self, diagnosis: PathLike | None = None, *, progress: bool | None = None) -> Path:
+        """``gedisim report``: the study's tables, figures and ``report.html`` under ``<dataset>/report/``
+        (with a diagnosis folder's verdict when ``diagnosis`` is given). Returns the page's path."""
+        html = _native.report(
+            str(self.path),
+            diagnosis=None if diagnosis is None else os.fspath(diagnosis),
+            progress=_progress(progress),
+        )
+        return Path(html)
+
+    def diagnose(
+        self,
+        out: PathLike,
+        *,
+        twins: int | None = None,
+        effects: Sequence[str] | None = None,
+        ranked_shots: int | None = None,
+        force: bool = False,
+        progress: bool | None = None,
+    ) -> dict[str, Any]:
+        """``gedisim diagnose --dataset … --out out``: where the sim-to-real gap lies, which effect causes it
+        and how far it shrinks (docs/diagnosis.md). Returns ``diagnosis.json`` as Python objects; its
+        tables and figures are in ``out``. ``twins`` (self-test), ``effects`` and ``ranked_shots``
+        default to the command line's."""
+        text = _native.diagnose(
+            str(self.path),
+            os.fspath(out),
+            twins=twins,
+            effects=None if effects is None else list(effects),
+            ranked_shots=ranked_shots,
+            force=force,
+            progress=_progress(progress),
+        )
+        return json.loads(text)
+
+
+def _footprints_csv(footprints: Any, directory: str) -> str:
+    """``footprints`` as a CSV file the simulator reads: a path is used as it is; a pyarrow Table, a
+    pandas or polars DataFrame or a mapping of columns is written to ``directory``."""
+    if isinstance(footprints, (str, os.PathLike)):
+        return os.fspath(footprints)
+    if isinstance(footprints, pa.Table):
+        table = footprints
+    elif isinstance(footprints, Mapping):
+        table = pa.table(dict(footprints))
+    elif hasattr(footprints, "__arrow_c_stream__"):
+        table = pa.table(footprints)
+    elif hasattr(footprints, "to_arrow"):
+        table = footprints.to_arrow()
+    elif hasattr(footprints, "columns") and hasattr(footprints, "to_dict"):
+        table = pa.Table.from_pandas(footprints, preserve_index=False)
+    else:
+        raise TypeError(
+            "footprints: a CSV path, a pyarrow Table, a pandas or polars DataFrame or a dict of columns "
+            "(an id, and x, y or lon, lat)"
+        )
+    path = os.path.join(directory, "footprints.csv")
+    pacsv.write_csv(table, path)
+    return path
+
+
+def simulate(
+    als: PathLike | Iterable[PathLike],
+    footprints: Any,
+    *,
+    weighting: str | None = None,
+    profile: str = "default",
+    fsigma: float = 5.5,
+    crs: int | None = None,
+    pulse: str = "gaussian",
+    out: PathLike | None = None,
+    progress: bool | None = None,
+) -> pa.Table:
+    """Simulated GEDI waveforms and RH metrics at ``footprints`` from ALS tiles (LAS/LAZ/COPC files or
+    folders): ``gedisim simulate --als … --footprints … --out …``, one row per footprint × weighting
+    (``count``, ``frac``, ``int``; docs/schemas.md, ``sim/``).
+
+    ``footprints``: a CSV path, or a table (pyarrow, pandas, polars, dict of columns) with an id and
+    ``x, y`` (in ``crs``, default the ALS CRS) or ``lon, lat``. ``weighting`` keeps one weighting's
+    rows. ``profile``: ``default`` or ``gedirat`` (Hancock's gediRat exactly). ``out``: also keep the
+    Parquet file there (written atomically); otherwise it is written to a temporary folder.
+
+    >>> t = gedisim.simulate(tiles, {"id": ["p1"], "x": [x0], "y": [y0]}, weighting="int")
+    >>> t.column("weighting").to_pylist()
+    ['int']
+    """
+    with tempfile.TemporaryDirectory(prefix="gedisim-") as tmp:
+        target = os.fspath(out) if out is not None else os.path.join(tmp, "simulated.parquet")
+        _native.simulate(
+            _paths(als),
+            _footprints_csv(footprints, tmp),
+            target,
+            profile=profile,
+            fsigma=float(fsigma),
+            crs=crs,
+            pulse=pulse,
+            progress=_progress(progress),
+        )
+        table = pq.read_table(target)
+    if weighting is not None:
+        table = table.filter(pc.equal(table.column("weighting"), weighting))
+    return table
+
+
+def l2a(l1b: PathLike, *, algorithm: int | Sequence[int] = (1, 2, 3, 4, 5, 6), out: PathLike | None = None) -> pa.Table:
+    """GEDI's L2A processing of every waveform of an L1B granule (``gedisim l2a``): ground, RH0…RH100
+    and the flags of each algorithm asked for (1–6), one row per shot × algorithm."""
+    algorithms = [algorithm] if isinstance(algorithm, int) else list(algorithm)
+    with tempfile.TemporaryDirectory(prefix="gedisim-") as tmp:
+        target = os.fspath(out) if out is not None else os.path.join(tmp, "l2a.parquet")
+        _native.l2a(os.fspath(l1b), algorithms, target)
+        return pq.read_table(target)
+
+
+def rh(table: pa.Table, *percentiles: int, column: str = "rh") -> pa.Table:
+    """The RH percentiles of a table with a 101-value ``rh`` list column (RH0…RH100, m), as columns
+    ``rh<N>``: ``gedisim.rh(sim, 50, 98)`` adds ``rh50`` and ``rh98`` (all 101 without percentiles).
+
+    >>> gedisim.rh(pa.table({"rh": [[float(i) for i in range(101)]]}), 98).column("rh98").to_pylist()
+    [98.0]
+    """
+    wanted = percentiles or tuple(range(101))
+    for p in wanted:
+        if not 0 <= p <= 100:
+            raise ValueError(f"rh: percentile {p} is not within 0–100")
+    values = table.column(column)
+    for p in wanted:
+        table = table.append_column(f"rh{p}", pc.list_element(values, p))
+    return table
