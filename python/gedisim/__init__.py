@@ -4,7 +4,10 @@ Every call is a thin wrapper over the operation the ``gedisim`` command runs (th
 in the extension module ``gedisim._native``), with the command line's defaults; tables come back
 as ``pyarrow.Table`` through the Arrow C data interface (no copy), so pandas, polars and DuckDB take
 them directly. Errors raise :class:`GedisimError` with the command line's one-line message.
-docs/python.md in the repository describes the API; ``examples/study.ipynb`` runs the study.
+docs/python.md in the repository describes the API; ``examples/study.ipynb`` runs the study. The examples of the
+docstrings run in the package's tests (python/tests), on a world of ``gedisim scenario``: ``world`` (its folder),
+``dataset`` (a dataset ``run`` made from it), ``ds`` (``Dataset(dataset)``), ``tmp`` (an empty folder), ``x0, y0``
+(a footprint's position over its tiles).
 
 >>> import gedisim
 >>> gedisim.__version__
@@ -76,7 +79,7 @@ def _progress(progress: bool | None):
 class Dataset:
     """A gedisim dataset: a directory of Parquet tables (docs/schemas.md), created by :meth:`run`.
 
-    >>> ds = gedisim.Dataset(demo / "dataset")
+    >>> ds = gedisim.Dataset(dataset)
     >>> ds.sql("SELECT count(*) AS n FROM shots").column("n")[0].as_py() > 0
     True
     """
@@ -123,8 +126,8 @@ class Dataset:
         """``gedisim run``: ingest ALS tiles and GEDI granules (files or folders), collocate, simulate
         and write the study's tables into the dataset (created if needed). Returns what it did.
 
-        >>> gedisim.Dataset(tmp / "ds").run(als=demo / "world/als", l1b=demo / "world/gedi",
-        ...                                 l2a=demo / "world/gedi")["shots_simulated"] > 0
+        >>> ran = gedisim.Dataset(tmp / "ds").run(als=world / "als", l1b=world / "gedi", l2a=world / "gedi")
+        >>> ran["shots_simulated"] > 0
         True
         """
         text = _native.run(
@@ -142,7 +145,11 @@ class Dataset:
 
     def report(self, diagnosis: PathLike | None = None, *, progress: bool | None = None) -> Path:
         """``gedisim report``: the study's tables, figures and ``report.html`` under ``<dataset>/report/``
-        (with a diagnosis folder's verdict when ``diagnosis`` is given). Returns the page's path."""
+        (with a diagnosis folder's verdict when ``diagnosis`` is given). Returns the page's path.
+
+        >>> ds.report().name
+        'report.html'
+        """
         html = _native.report(
             str(self.path),
             diagnosis=None if diagnosis is None else os.fspath(diagnosis),
@@ -163,7 +170,12 @@ class Dataset:
         """``gedisim diagnose --dataset … --out out``: where the sim-to-real gap lies, which effect causes it
         and how far it shrinks (docs/diagnosis.md). Returns ``diagnosis.json`` as Python objects; its
         tables and figures are in ``out``. ``twins`` (self-test), ``effects`` and ``ranked_shots``
-        default to the command line's."""
+        default to the command line's.
+
+        >>> d = ds.diagnose(tmp / "diagnosis", twins=0, effects=["datum"], ranked_shots=60)
+        >>> d["effects"][0]["name"], d["configuration"]["chosen"] != ""
+        ('datum', True)
+        """
         text = _native.diagnose(
             str(self.path),
             os.fspath(out),
@@ -222,9 +234,9 @@ def simulate(
     rows. ``profile``: ``default`` or ``gedirat`` (Hancock's gediRat exactly). ``out``: also keep the
     Parquet file there (written atomically); otherwise it is written to a temporary folder.
 
-    >>> t = gedisim.simulate(tiles, {"id": ["p1"], "x": [x0], "y": [y0]}, weighting="int")
-    >>> t.column("weighting").to_pylist()
-    ['int']
+    >>> t = gedisim.simulate(world / "als", {"id": ["p1"], "x": [x0], "y": [y0]}, weighting="int")
+    >>> t.column("weighting").to_pylist(), t.column("status").to_pylist()
+    (['int'], ['ok'])
     """
     with tempfile.TemporaryDirectory(prefix="gedisim-") as tmp:
         target = os.fspath(out) if out is not None else os.path.join(tmp, "simulated.parquet")
@@ -246,7 +258,12 @@ def simulate(
 
 def l2a(l1b: PathLike, *, algorithm: int | Sequence[int] = (1, 2, 3, 4, 5, 6), out: PathLike | None = None) -> pa.Table:
     """GEDI's L2A processing of every waveform of an L1B granule (``gedisim l2a``): ground, RH0…RH100
-    and the flags of each algorithm asked for (1–6), one row per shot × algorithm."""
+    and the flags of each algorithm asked for (1–6), one row per shot × algorithm.
+
+    >>> t = gedisim.l2a(next((world / "gedi").glob("*GEDI01_B*.h5")), algorithm=[1, 5])
+    >>> sorted(set(t.column("algorithm").to_pylist()))
+    [1, 5]
+    """
     algorithms = [algorithm] if isinstance(algorithm, int) else list(algorithm)
     with tempfile.TemporaryDirectory(prefix="gedisim-") as tmp:
         target = os.fspath(out) if out is not None else os.path.join(tmp, "l2a.parquet")

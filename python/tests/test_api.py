@@ -6,6 +6,7 @@ installed command; every API call is then compared with the command it wraps, ta
 
 from __future__ import annotations
 
+import doctest
 import json
 import os
 import subprocess
@@ -163,3 +164,12 @@ def test_tables_reach_pyarrow_without_a_copy(datasets):
     assert pc.sum(t.column("value")).as_py() == 10_000_000 * 9_999_999 // 2
     duckdb = pytest.importorskip("duckdb")
     assert duckdb.sql("SELECT count(*) FROM t").fetchall()[0][0] == 10_000_000
+
+
+def test_the_docstring_examples_run(world, datasets, tmp_path):
+    api, _ = datasets
+    at = gedisim.Dataset(api).sql("SELECT x, y FROM sim WHERE status = 'ok' ORDER BY footprint_id LIMIT 1")
+    names = dict(gedisim=gedisim, pa=pa, world=world, dataset=api, ds=gedisim.Dataset(api), tmp=tmp_path,
+                 x0=at.column("x")[0].as_py(), y0=at.column("y")[0].as_py())
+    failed, attempted = doctest.testmod(gedisim, extraglobs=names, report=True)
+    assert attempted >= 15 and failed == 0, (failed, attempted)
