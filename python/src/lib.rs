@@ -111,7 +111,7 @@ fn sql(py: Python<'_>, dataset: String, query: String) -> PyResult<PyArrowType<T
 }
 
 /// run(dataset, als, l1b, l2a, epsg, landcover, geoid_offset, all_shots, progress) -> JSON text:
-/// `gedisim run` with the command line's defaults.
+/// `gedisim run` with the command line's defaults; what `gedisim run --json` prints.
 #[pyfunction]
 #[pyo3(signature = (dataset, als, l1b, l2a, epsg=None, landcover=None, geoid_offset=None, all_shots=false,
                     progress=None))]
@@ -141,15 +141,7 @@ fn run(
     };
     let progress = PyProgress(progress);
     let report = py.detach(|| gedisim::ops::run::run_study(&opts, &progress)).map_err(py_err)?;
-    let value = serde_json::json!({
-        "dataset": report.dataset,
-        "granules": report.granules.len(),
-        "shots_simulated": report.shots_simulated(),
-        "shots_kept": report.shots_kept,
-        "shots_outside_area": report.shots_outside_area,
-        "warnings": report.warnings,
-    });
-    Ok(value.to_string())
+    Ok(report.json().to_string())
 }
 
 /// report(dataset, diagnosis, progress) -> path of report.html: `gedisim report --dataset …

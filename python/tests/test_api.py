@@ -55,9 +55,16 @@ def datasets(world, tmp_path_factory) -> tuple[Path, Path]:
     """The same run through the API (first) and the command (second)."""
     root = tmp_path_factory.mktemp("datasets")
     api, cmd = root / "api", root / "cli"
-    gedisim.Dataset(api).run(als=world / "als", l1b=world / "gedi", l2a=world / "gedi", progress=False)
-    cli("run", "--als", str(world / "als"), "--l1b", str(world / "gedi"), "--l2a", str(world / "gedi"),
-        "--dataset", str(cmd))
+    ran = gedisim.Dataset(api).run(als=world / "als", l1b=world / "gedi", l2a=world / "gedi", progress=False)
+    said = cli("run", "--als", str(world / "als"), "--l1b", str(world / "gedi"), "--l2a", str(world / "gedi"),
+               "--dataset", str(cmd), "--json")
+    # What each run did: the same object, but for the dataset's own paths.
+    printed = json.loads(said.stdout.strip().splitlines()[-1])
+    for d, root in ((ran, api), (printed, cmd)):
+        text = json.dumps(d).replace(str(root), "<dataset>")
+        d.clear()
+        d.update(json.loads(text))
+    assert ran == printed and ran["simulation"]["shots_simulated"] > 0
     return api, cmd
 
 

@@ -109,97 +109,17 @@ pub fn run_command(a: RunArgs) -> Result<()> {
     let report = gedisim::ops::run::run_study(&opts, &Bars::new())?;
     if a.json {
         print_ingest_and_collocation(&report);
-        println!("{}", run_json(&report));
+        println!("{}", report.json());
     } else {
         print_run(&report);
     }
     Ok(())
 }
 
-/// What a run ingested and simulated, counted once for the text and JSON summaries.
-struct Counts {
-    granules_new: usize,
-    granules_already: usize,
-    shots_ingested: usize,
-    tiles_new: usize,
-    tiles_already: usize,
-    points_ingested: u64,
-    /// (simulated, skipped by the simulator) and the granules simulated.
-    simulated: (usize, usize),
-    granules_simulated: usize,
-}
-
-impl Counts {
-    fn of(r: &gedisim::ops::run::RunReport) -> Counts {
-        use gedisim::ops::ingest_als::TileOutcome;
-        use gedisim::ops::ingest_gedi::GranuleOutcome;
-        let shots: Vec<usize> = r
-            .ingested
-            .iter()
-            .filter_map(|g| if let GranuleOutcome::Ingested { shots, .. } = g { Some(*shots) } else { None })
-            .collect();
-        let points: Vec<u64> = r
-            .tiles
-            .iter()
-            .filter_map(|t| if let TileOutcome::Ingested { points, .. } = t { Some(*points) } else { None })
-            .collect();
-        let simulated: Vec<(usize, usize)> = r.granules.iter().filter_map(|g| g.simulated).collect();
-        Counts {
-            granules_new: shots.len(),
-            granules_already: r.ingested.len() - shots.len(),
-            shots_ingested: shots.iter().sum(),
-            tiles_new: points.len(),
-            tiles_already: r.tiles.len() - points.len(),
-            points_ingested: points.iter().sum(),
-            simulated: simulated.iter().fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1)),
-            granules_simulated: simulated.len(),
-        }
-    }
-}
-
-/// What a run did, for scripts (`run --json`).
-pub fn run_json(r: &gedisim::ops::run::RunReport) -> serde_json::Value {
-    let (t, c) = (&r.totals, Counts::of(r));
-    let filters: Vec<serde_json::Value> = gedisim::kernels::study::select::Filter::ALL
-        .iter()
-        .map(
-            |&f| serde_json::json!({"filter": f.name(), "rule": f.describe(&r.rules), "rows_removed": t.removed_by(f)}),
-        )
-        .collect();
-    serde_json::json!({
-        "dataset": r.dataset,
-        "results": r.dataset.join("results"),
-        "nothing_new": r.nothing_new(),
-        "als": {
-            "tiles_ingested": c.tiles_new,
-            "points_ingested": c.points_ingested,
-            "tiles_already_ingested": c.tiles_already
-        },
-        "gedi": {
-            "granules_ingested": c.granules_new,
-            "shots_ingested": c.shots_ingested,
-            "shots_outside_area": r.shots_outside_area,
-            "granules_already_ingested": c.granules_already
-        },
-        "collocation": r.collocation.as_ref().map(|c| serde_json::json!({
-            "granules": r.collocated.len(), "shots_read": c.shots, "segments": c.segments,
-            "short_runs": c.short_runs.len(), "table": c.table
-        })),
-        "simulation": {"shots_simulated": c.simulated.0, "shots_skipped_by_simulator": c.simulated.1},
-        "granules": {"in_dataset": r.granules.len(), "results_written": r.granules_processed()},
-        "rows": {
-            "candidates": t.candidates, "kept": t.kept, "shots": t.shots, "shots_kept": t.shots_kept,
-            "acquisition_window_not_applied": t.window_unknown
-        },
-        "filters": filters,
-        "warnings": r.warnings,
-    })
-}
-
 /// What the ingest and collocation of a run did (stderr).
 pub fn print_ingest_and_collocation(r: &gedisim::ops::run::RunReport) {
     use gedisim::ops::ingest_als::TileOutcome;
-    let c = Counts::of(r);
+    let c = r.counts();
     if !r.ingested.is_empty() {
         info!(
             "GEDI: {} granules ingested ({} shots), {} already ingested",
@@ -263,7 +183,7 @@ pub fn print_ingest_and_collocation(r: &gedisim::ops::run::RunReport) {
 pub fn print_run(r: &gedisim::ops::run::RunReport) {
     use gedisim::kernels::study::select::Filter;
     print_ingest_and_collocation(r);
-    let c = Counts::of(r);
+    let c = r.counts();
     if c.granules_simulated == 0 {
         let covered: usize = r.granules.iter().map(|g| g.covered).sum();
         if covered == 0 {

@@ -175,6 +175,84 @@ impl RunReport {
             && self.tiles.iter().all(|t| matches!(t, TileOutcome::AlreadyIngested { .. }))
             && self.ingested.iter().all(|g| matches!(g, GranuleOutcome::AlreadyIngested { .. }))
     }
+
+    /// What this run ingested and simulated.
+    pub fn counts(&self) -> RunCounts {
+        let shots: Vec<usize> = self
+            .ingested
+            .iter()
+            .filter_map(|g| if let GranuleOutcome::Ingested { shots, .. } = g { Some(*shots) } else { None })
+            .collect();
+        let points: Vec<u64> = self
+            .tiles
+            .iter()
+            .filter_map(|t| if let TileOutcome::Ingested { points, .. } = t { Some(*points) } else { None })
+            .collect();
+        let simulated: Vec<(usize, usize)> = self.granules.iter().filter_map(|g| g.simulated).collect();
+        RunCounts {
+            granules_new: shots.len(),
+            granules_already: self.ingested.len() - shots.len(),
+            shots_ingested: shots.iter().sum(),
+            tiles_new: points.len(),
+            tiles_already: self.tiles.len() - points.len(),
+            points_ingested: points.iter().sum(),
+            simulated: simulated.iter().fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1)),
+            granules_simulated: simulated.len(),
+        }
+    }
+
+    /// What the run did, for scripts (`run --json`, the Python API's `Dataset.run`).
+    pub fn json(&self) -> serde_json::Value {
+        let (t, c) = (&self.totals, self.counts());
+        let filters: Vec<serde_json::Value> = crate::kernels::study::select::Filter::ALL
+        .iter()
+        .map(
+            |&f| serde_json::json!({"filter": f.name(), "rule": f.describe(&self.rules), "rows_removed": t.removed_by(f)}),
+        )
+        .collect();
+        serde_json::json!({
+            "dataset": self.dataset,
+            "results": self.dataset.join("results"),
+            "nothing_new": self.nothing_new(),
+            "als": {
+                "tiles_ingested": c.tiles_new,
+                "points_ingested": c.points_ingested,
+                "tiles_already_ingested": c.tiles_already
+            },
+            "gedi": {
+                "granules_ingested": c.granules_new,
+                "shots_ingested": c.shots_ingested,
+                "shots_outside_area": self.shots_outside_area,
+                "granules_already_ingested": c.granules_already
+            },
+            "collocation": self.collocation.as_ref().map(|c| serde_json::json!({
+                "granules": self.collocated.len(), "shots_read": c.shots, "segments": c.segments,
+                "short_runs": c.short_runs.len(), "table": c.table
+            })),
+            "simulation": {"shots_simulated": c.simulated.0, "shots_skipped_by_simulator": c.simulated.1},
+            "granules": {"in_dataset": self.granules.len(), "results_written": self.granules_processed()},
+            "rows": {
+                "candidates": t.candidates, "kept": t.kept, "shots": t.shots, "shots_kept": t.shots_kept,
+                "acquisition_window_not_applied": t.window_unknown
+            },
+            "filters": filters,
+            "warnings": self.warnings,
+        })
+    }
+}
+
+/// What a run ingested and simulated, counted once for the text and JSON summaries.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunCounts {
+    pub granules_new: usize,
+    pub granules_already: usize,
+    pub shots_ingested: usize,
+    pub tiles_new: usize,
+    pub tiles_already: usize,
+    pub points_ingested: u64,
+    /// (simulated, skipped by the simulator) and the granules simulated.
+    pub simulated: (usize, usize),
+    pub granules_simulated: usize,
 }
 
 /// The whole chain on `opts.out`; `progress` follows every long step.
