@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import sys
 import sysconfig
 import tempfile
@@ -41,7 +40,8 @@ PathLike = Union[str, "os.PathLike[str]"]
 
 
 def command() -> str | None:
-    """Path of the ``gedisim`` command installed with this package (``None`` if it is missing).
+    """Path of the ``gedisim`` command installed with this package, in the environment's scripts folder (``None``
+    if it is missing: another ``gedisim`` on the PATH may be another version).
 
     >>> import os
     >>> os.access(gedisim.command(), os.X_OK)
@@ -52,9 +52,7 @@ def command() -> str | None:
     if scripts.is_file():
         return str(scripts)
     beside = Path(sys.executable).parent / exe
-    if beside.is_file():
-        return str(beside)
-    return shutil.which("gedisim")
+    return str(beside) if beside.is_file() else None
 
 
 # Granules are read in child processes of the installed command, as the command line reads them: a corrupt granule

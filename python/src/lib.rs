@@ -5,7 +5,6 @@
 //! `gedisim.simulate`, …) is `python/gedisim/__init__.py`; docs/python.md describes both.
 
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 
 use arrow::datatypes::SchemaRef;
 use arrow::record_batch::RecordBatch;
@@ -105,7 +104,9 @@ fn sql(py: Python<'_>, dataset: String, query: String) -> PyResult<PyArrowType<T
     });
     let sink = collected.map_err(py_err)?;
     let Some(schema) = sink.schema else {
-        return Err(GedisimError::new_err(format!("SQL: no statement of the query has a result: {query}")));
+        return Err(GedisimError::new_err(
+            "SQL: no statement of the query has a result (Dataset.sql returns one table)",
+        ));
     };
     Table::try_new(sink.batches, schema).map(PyArrowType).map_err(|e| GedisimError::new_err(e.to_string()))
 }
@@ -244,19 +245,13 @@ fn l2a(py: Python<'_>, l1b: String, algorithms: Vec<u8>, out: String) -> PyResul
     Ok((r.shots, r.rows, r.warnings))
 }
 
-static CHILD_READER: Mutex<bool> = Mutex::new(false);
-
 /// Read granules in child processes of the `gedisim` binary at `exe` (the one the wheel installs),
 /// as the command line does: a corrupt granule that crashes the HDF5 library then ends as an
-/// exception, not as the end of the Python process. Set once; later calls change nothing.
+/// exception, not as the end of the Python process. The first call sets it; later ones change nothing.
 #[pyfunction]
 fn read_granules_with(exe: String) {
-    let mut set = CHILD_READER.lock().unwrap_or_else(|e| e.into_inner());
-    if !*set {
-        use gedisim::ops::ingest_gedi::child;
-        child::read_in_children(child::Reader { exe: PathBuf::from(exe), stall_limit: child::STALL_LIMIT });
-        *set = true;
-    }
+    use gedisim::ops::ingest_gedi::child;
+    child::read_in_children(child::Reader { exe: PathBuf::from(exe), stall_limit: child::STALL_LIMIT });
 }
 
 #[pymodule]

@@ -161,6 +161,14 @@ def test_errors_are_the_commands_one_line(tmp_path):
     assert not out.exists() and list(tmp_path.iterdir()) == [bad]
 
 
+def test_sql_returns_one_table(datasets):
+    ds = gedisim.Dataset(datasets[0])
+    with pytest.raises(gedisim.GedisimError, match="second statement with a result"):
+        ds.sql("SELECT 1 AS a; SELECT 2 AS b")
+    with pytest.raises(gedisim.GedisimError, match="read-only"):
+        ds.sql("CREATE TABLE t AS SELECT 1")
+
+
 def test_tables_reach_pyarrow_without_a_copy(datasets):
     api, _ = datasets
     before = pa.total_allocated_bytes()
