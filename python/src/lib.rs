@@ -35,7 +35,7 @@ impl PyProgress {
     fn send(&self, event: &str, label: &str, unit: &str, n: u64) {
         if let Some(f) = &self.0 {
             Python::attach(|py| {
-                // A failing progress callback must not fail the operation: say it once and go on.
+                // A failing progress callback must not fail the operation: its error is printed, the work goes on.
                 if let Err(e) = f.call1(py, (event, label, unit, n)) {
                     e.print(py);
                 }

@@ -205,11 +205,12 @@ impl RunReport {
     pub fn json(&self) -> serde_json::Value {
         let (t, c) = (&self.totals, self.counts());
         let filters: Vec<serde_json::Value> = crate::kernels::study::select::Filter::ALL
-        .iter()
-        .map(
-            |&f| serde_json::json!({"filter": f.name(), "rule": f.describe(&self.rules), "rows_removed": t.removed_by(f)}),
-        )
-        .collect();
+            .iter()
+            .map(|&f| {
+                let rule = f.describe(&self.rules);
+                serde_json::json!({"filter": f.name(), "rule": rule, "rows_removed": t.removed_by(f)})
+            })
+            .collect();
         serde_json::json!({
             "dataset": self.dataset,
             "results": self.dataset.join("results"),
