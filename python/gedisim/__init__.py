@@ -187,64 +187,87 @@ class Dataset:
         return json.loads(text)
 
 
+def _table(x: Any) -> pa.Table | None:
+    """``x`` as a pyarrow Table when it is a table (pyarrow, anything with ``__arrow_c_stream__`` such as polars,
+    pandas, a mapping of columns); ``None`` when it is not (a path, or a list of paths)."""
+    if isinstance(x, pa.Table):
+        return x
+    if isinstance(x, (str, os.PathLike)):
+        return None
+    if isinstance(x, Mapping):
+        return pa.table(dict(x))
+    if hasattr(x, "__arrow_c_stream__"):
+        return pa.table(x)
+    if hasattr(x, "to_arrow"):
+        return x.to_arrow()
+    if hasattr(x, "columns") and hasattr(x, "to_dict"):
+        return pa.Table.from_pandas(x, preserve_index=False)
+    return None
+
+
 def _footprints_csv(footprints: Any, directory: str) -> str:
-    """``footprints`` as a CSV file the simulator reads: a path is used as it is; a pyarrow Table, a
-    pandas or polars DataFrame or a mapping of columns is written to ``directory``."""
+    """``footprints`` as a CSV file the simulator reads: a path is used as it is; a table is written to
+    ``directory``."""
     if isinstance(footprints, (str, os.PathLike)):
         return os.fspath(footprints)
-    if isinstance(footprints, pa.Table):
-        table = footprints
-    elif isinstance(footprints, Mapping):
-        table = pa.table(dict(footprints))
-    elif hasattr(footprints, "__arrow_c_stream__"):
-        table = pa.table(footprints)
-    elif hasattr(footprints, "to_arrow"):
-        table = footprints.to_arrow()
-    elif hasattr(footprints, "columns") and hasattr(footprints, "to_dict"):
-        table = pa.Table.from_pandas(footprints, preserve_index=False)
-    else:
+    table = _table(footprints)
+    if table is None:
         raise TypeError(
             "footprints: a CSV path, a pyarrow Table, a pandas or polars DataFrame or a dict of columns "
             "(an id, and x, y or lon, lat)"
         )
+    # The CSV writer takes no view columns (the strings of Dataset.sql are views).
+    plain = {pa.string_view(): pa.string(), pa.binary_view(): pa.binary()}
+    table = table.cast(pa.schema([f.with_type(plain.get(f.type, f.type)) for f in table.schema]))
     path = os.path.join(directory, "footprints.csv")
     pacsv.write_csv(table, path)
     return path
 
 
 def simulate(
-    als: PathLike | Iterable[PathLike],
+    als: PathLike | Iterable[PathLike] | Any,
     footprints: Any,
     *,
+    als_crs: int | None = None,
     weighting: str | None = None,
     profile: str = "default",
-    fsigma: float = 5.5,
+    fsigma: float | None = None,
     crs: int | None = None,
     pulse: str = "gaussian",
     out: PathLike | None = None,
     progress: bool | None = None,
 ) -> pa.Table:
-    """Simulated GEDI waveforms and RH metrics at ``footprints`` from ALS tiles (LAS/LAZ/COPC files or
-    folders): ``gedisim simulate --als … --footprints … --out …``, one row per footprint × weighting
-    (``count``, ``frac``, ``int``; docs/schemas.md, ``sim/``).
+    """Simulated GEDI waveforms and RH metrics at ``footprints``: ``gedisim simulate --als … --footprints … --out …``,
+    one row per footprint × weighting (``count``, ``frac``, ``int``; docs/schemas.md, ``sim/``).
 
-    ``footprints``: a CSV path, or a table (pyarrow, pandas, polars, dict of columns) with an id and
-    ``x, y`` (in ``crs``, default the ALS CRS) or ``lon, lat``. ``weighting`` keeps one weighting's
-    rows. ``profile``: ``default`` or ``gedirat`` (Hancock's gediRat exactly). ``out``: also keep the
-    Parquet file there (written atomically); otherwise it is written to a temporary folder.
+    ``als``: LAS/LAZ/COPC files or folders; or a points table with the columns of ``als/`` (docs/schemas.md: x, y,
+    z, intensity, return_number, number_of_returns, classification; scan_angle_deg, gps_time and point_source_id may be
+    missing), e.g. ``ds.sql("SELECT * FROM als WHERE …")`` or a laspy/PDAL array as a DataFrame, in EPSG ``als_crs``
+    (default: a frame of its own). ``footprints``: a CSV path, or a table (pyarrow, pandas, polars, dict of columns)
+    with an id and ``x, y`` (in ``crs``, default the ALS CRS) or ``lon, lat``. ``weighting`` keeps one weighting's
+    rows. ``profile``: ``default`` or ``gedirat`` (Hancock's gediRat exactly); ``fsigma``: the footprint σ (m,
+    default GEDI's 5.5). ``out``: also keep the Parquet file there (written atomically); otherwise it is written to
+    a temporary folder.
 
     >>> t = gedisim.simulate(world / "als", {"id": ["p1"], "x": [x0], "y": [y0]}, weighting="int")
     >>> t.column("weighting").to_pylist(), t.column("status").to_pylist()
     (['int'], ['ok'])
+    >>> points = ds.sql(f"SELECT * FROM als WHERE abs(x - {x0}) < 30 AND abs(y - {y0}) < 30")
+    >>> u = gedisim.simulate(points, {"id": ["p1"], "x": [x0], "y": [y0]}, als_crs=2154, weighting="int")
+    >>> u.column("rh").to_pylist() == t.column("rh").to_pylist()
+    True
     """
+    points = _table(als)
     with tempfile.TemporaryDirectory(prefix="gedisim-") as tmp:
         target = os.fspath(out) if out is not None else os.path.join(tmp, "simulated.parquet")
         _native.simulate(
-            _paths(als),
+            [] if points is not None else _paths(als),
             _footprints_csv(footprints, tmp),
             target,
+            points=points,
+            als_crs=als_crs,
             profile=profile,
-            fsigma=float(fsigma),
+            fsigma=None if fsigma is None else float(fsigma),
             crs=crs,
             pulse=pulse,
             progress=_progress(progress),
@@ -255,19 +278,48 @@ def simulate(
     return table
 
 
-def l2a(l1b: PathLike, *, algorithm: int | Sequence[int] = (1, 2, 3, 4, 5, 6), out: PathLike | None = None) -> pa.Table:
-    """GEDI's L2A processing of every waveform of an L1B granule (``gedisim l2a``): ground, RH0…RH100
-    and the flags of each algorithm asked for (1–6), one row per shot × algorithm.
+def l2a(
+    waveforms: PathLike | Any,
+    *,
+    algorithm: int | Sequence[int] = (1, 2, 3, 4, 5, 6),
+    out: PathLike | None = None,
+) -> pa.Table:
+    """GEDI's L2A processing (``gedisim l2a``, docs/l2a.md): ground, RH0…RH100 and the flags of each algorithm asked
+    for (1–6), one row per shot × algorithm (docs/schemas.md, ``l2a``). ``waveforms``: an L1B granule, or a table
+    with the L1B columns of ``shots/`` (shot_number, beam, rx_waveform, noise_mean_corrected, noise_stddev_corrected,
+    elevation_bin0/lastbin, latitude_bin0/lastbin, longitude_bin0/lastbin), e.g. ``ds.table("shots")``; rows
+    without ``elevation_bin0`` (no L1B) are skipped. ``out``: also write the Parquet file there (atomically).
 
     >>> t = gedisim.l2a(next((world / "gedi").glob("*GEDI01_B*.h5")), algorithm=[1, 5])
     >>> sorted(set(t.column("algorithm").to_pylist()))
     [1, 5]
+    >>> u = gedisim.l2a(ds.sql("SELECT * FROM shots WHERE rx_waveform IS NOT NULL"), algorithm=[1, 5])
+    >>> u.num_rows > 0, sorted(set(u.column("algorithm").to_pylist()))
+    (True, [1, 5])
     """
     algorithms = [algorithm] if isinstance(algorithm, int) else list(algorithm)
+    shots = _table(waveforms)
+    if shots is not None:
+        table = _native.l2a_table(shots, algorithms)
+        if out is not None:
+            _write_atomic(table, os.fspath(out))
+        return table
     with tempfile.TemporaryDirectory(prefix="gedisim-") as tmp:
         target = os.fspath(out) if out is not None else os.path.join(tmp, "l2a.parquet")
-        _native.l2a(os.fspath(l1b), algorithms, target)
+        _native.l2a(os.fspath(waveforms), algorithms, target)
         return pq.read_table(target)
+
+
+def _write_atomic(table: pa.Table, path: str) -> None:
+    """``table`` as the Parquet file ``path``, written under a unique temporary name beside it and renamed."""
+    fd, tmp = tempfile.mkstemp(prefix=".gedisim-", suffix=".parquet.tmp", dir=os.path.dirname(path) or ".")
+    os.close(fd)
+    try:
+        pq.write_table(table, tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
 
 
 def rh(table: pa.Table, *percentiles: int, column: str = "rh") -> pa.Table:

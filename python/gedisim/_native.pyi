@@ -37,11 +37,14 @@ def simulate(
     als: list[str],
     footprints: str,
     out: str,
+    points: Optional[pyarrow.Table] = None,
+    als_crs: Optional[int] = None,
     profile: str = "default",
-    fsigma: float = 5.5,
+    fsigma: Optional[float] = None,
     crs: Optional[int] = None,
     pulse: str = "gaussian",
     progress: Optional[ProgressCallback] = None,
 ) -> tuple[int, int]: ...
 def l2a(l1b: str, algorithms: list[int], out: str) -> tuple[int, int, list[str]]: ...
+def l2a_table(shots: pyarrow.Table, algorithms: list[int]) -> pyarrow.Table: ...
 def read_granules_with(exe: str) -> None: ...

@@ -5,8 +5,10 @@
 //! `gedisim.simulate`, …) is `python/gedisim/__init__.py`; docs/python.md describes both.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use arrow::datatypes::SchemaRef;
+use arrow::ffi_stream::ArrowArrayStreamReader;
 use arrow::record_batch::RecordBatch;
 use arrow_pyarrow::{PyArrowType, Table};
 use pyo3::create_exception;
@@ -191,48 +193,54 @@ fn diagnose(
     serde_json::to_string(&report.output.json).map_err(|e| GedisimError::new_err(e.to_string()))
 }
 
-/// simulate(als, footprints, out, profile, fsigma, crs, pulse, progress) -> (simulated, skipped):
-/// `gedisim simulate --als … --footprints <CSV> --out <Parquet>` (direct mode).
+/// The batches of an Arrow stream (a pyarrow Table or anything with `__arrow_c_stream__`), read
+/// with the GIL held (a stream made by Python code calls back into it); `what` names it in errors.
+fn batches(stream: ArrowArrayStreamReader, what: &str) -> PyResult<Vec<RecordBatch>> {
+    stream.collect::<Result<Vec<_>, _>>().map_err(|e| GedisimError::new_err(format!("{what}: {e}")))
+}
+
+/// simulate(als, footprints, out, points, als_crs, profile, fsigma, crs, pulse, progress) ->
+/// (simulated, skipped): `gedisim simulate --als … --footprints <CSV> --out <Parquet>` (direct
+/// mode), or the same on `points`, a points table (the columns of `als/`) in EPSG `als_crs`, when
+/// `als` is empty. Unset options take the command line's defaults (`SimulateOptions::new`).
 #[pyfunction]
-#[pyo3(signature = (als, footprints, out, profile="default", fsigma=5.5, crs=None, pulse="gaussian", progress=None))]
+#[pyo3(signature = (als, footprints, out, points=None, als_crs=None, profile="default", fsigma=None, crs=None,
+                    pulse="gaussian", progress=None))]
 #[allow(clippy::too_many_arguments)] // one per keyword of the Python call
 fn simulate(
     py: Python<'_>,
     als: Vec<String>,
     footprints: String,
     out: String,
+    points: Option<PyArrowType<ArrowArrayStreamReader>>,
+    als_crs: Option<u32>,
     profile: &str,
-    fsigma: f32,
+    fsigma: Option<f32>,
     crs: Option<u32>,
     pulse: &str,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<(usize, usize)> {
-    use gedisim::kernels::sim::{DensityCount, Profile, PulseModel};
+    use gedisim::kernels::sim::{Profile, PulseModel};
     use gedisim::ops::simulate::{SimulateOptions, Source};
-    let profile = match profile {
+    let (footprints, out) = (PathBuf::from(footprints), PathBuf::from(out));
+    let source = match points {
+        Some(stream) => {
+            let batches = batches(stream.0, "als (points table)")?;
+            let points = gedisim::dataset::als::points_from_batches(&batches, Path::new("als (points table)"))
+                .map_err(py_err)?;
+            Source::Points { points: Arc::new(points), epsg: als_crs, footprints, out, keep_all_classes: false }
+        }
+        None => Source::Direct { als: paths(als), footprints, out, keep_all_classes: false },
+    };
+    let mut opts = SimulateOptions::new(source);
+    opts.profile = match profile {
         "default" => Profile::Default,
         "gedirat" => Profile::Gedirat,
         other => return Err(GedisimError::new_err(format!("profile: `{other}` is not default or gedirat"))),
     };
-    if !(fsigma.is_finite() && fsigma > 0.0) {
-        return Err(GedisimError::new_err(format!("fsigma: {fsigma} is not a footprint σ (m, > 0)")));
-    }
-    let opts = SimulateOptions {
-        source: Source::Direct {
-            als: paths(als),
-            footprints: PathBuf::from(footprints),
-            out: PathBuf::from(out),
-            keep_all_classes: false,
-        },
-        profile,
-        fsigma,
-        normalise_density: true,
-        density_count: DensityCount::LastReturns,
-        pulse_before: false,
-        pulse: PulseModel::parse(pulse, None, Default::default()),
-        engine: Default::default(),
-        footprints_crs: crs,
-    };
+    opts.fsigma = fsigma.unwrap_or(opts.fsigma);
+    opts.pulse = PulseModel::parse(pulse, None, Default::default());
+    opts.footprints_crs = crs;
     let progress = PyProgress(progress);
     let r = py.detach(|| gedisim::ops::simulate::simulate(&opts, &progress)).map_err(py_err)?;
     Ok((r.simulated, r.skipped))
@@ -243,6 +251,22 @@ fn simulate(
 fn l2a(py: Python<'_>, l1b: String, algorithms: Vec<u8>, out: String) -> PyResult<(usize, usize, Vec<String>)> {
     let r = py.detach(|| gedisim::ops::l2a::l2a(Path::new(&l1b), &algorithms, Path::new(&out))).map_err(py_err)?;
     Ok((r.shots, r.rows, r.warnings))
+}
+
+/// l2a_table(shots, algorithms) -> pyarrow.Table: the rows `gedisim l2a` writes, from a table
+/// with the L1B columns of `shots/` instead of a granule.
+#[pyfunction]
+fn l2a_table(
+    py: Python<'_>,
+    shots: PyArrowType<ArrowArrayStreamReader>,
+    algorithms: Vec<u8>,
+) -> PyResult<PyArrowType<Table>> {
+    let what = "waveforms (shots table)";
+    let input = batches(shots.0, what)?;
+    let rows = py.detach(|| gedisim::ops::l2a::l2a_of_shots(&input, &algorithms, Path::new(what))).map_err(py_err)?;
+    Table::try_new(rows, gedisim::dataset::l2a::l2a_schema())
+        .map(PyArrowType)
+        .map_err(|e| GedisimError::new_err(e.to_string()))
 }
 
 /// Read granules in child processes of the `gedisim` binary at `exe` (the one the wheel installs),
@@ -264,6 +288,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(diagnose, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(l2a, m)?)?;
+    m.add_function(wrap_pyfunction!(l2a_table, m)?)?;
     m.add_function(wrap_pyfunction!(read_granules_with, m)?)?;
     Ok(())
 }

@@ -119,6 +119,56 @@ def test_simulate_equals_the_command(world, datasets, tmp_path):
     assert with_rh.column("rh98").to_pylist() == [r[98] for r in only.column("rh").to_pylist()]
 
 
+def test_simulate_on_a_points_table_equals_the_command(world, datasets, tmp_path):
+    """The dataset's `als/` points as a table (in any order, columns of other types) give the rows of
+    `gedisim simulate --als <the tiles>`."""
+    ds = gedisim.Dataset(datasets[0])
+    shots = ds.sql("SELECT footprint_id AS id, x, y FROM sim WHERE weighting = 'int' ORDER BY id LIMIT 6")
+    csv = tmp_path / "footprints.csv"
+    csv.write_text("id,x,y\n" + "".join(f"{r['id']},{r['x']!r},{r['y']!r}\n" for r in shots.to_pylist()))
+    out = tmp_path / "cli.parquet"
+    cli("simulate", "--als", str(world / "als"), "--footprints", str(csv), "--out", str(out))
+    expected = pq.read_table(out)
+    columns = ["x", "y", "z", "intensity", "return_number", "number_of_returns", "classification",
+               "scan_angle_deg", "gps_time", "point_source_id"]
+    points = ds.sql(f"SELECT {', '.join(columns)} FROM als")
+    assert gedisim.simulate(points, csv, als_crs=2154, progress=False).equals(expected)
+    # Reversed, with int64 intensities: the same rows.
+    reversed_ = points.take(pa.array(range(points.num_rows - 1, -1, -1)))
+    reversed_ = reversed_.set_column(3, "intensity", reversed_.column("intensity").cast(pa.int64()))
+    assert gedisim.simulate(reversed_, shots, als_crs=2154, progress=False).equals(expected)
+    # Without the optional columns: no scan angle is 0°, the waveforms are the same.
+    bare = gedisim.simulate(points.select(columns[:7]), shots, als_crs=2154, progress=False)
+    assert set(bare.column("mean_scan_angle_deg").to_pylist()) == {0.0}
+    assert bare.drop_columns(["mean_scan_angle_deg"]).equals(expected.drop_columns(["mean_scan_angle_deg"]))
+    # Bad points: one line naming the column, nothing written.
+    negative = points.set_column(3, "intensity", pa.array([-1] * points.num_rows, pa.int32()))
+    for bad, said in ((points.drop_columns(["z"]), "z: column missing from the table"),
+                      (negative, "intensity: Int32 cannot be read as UInt16 (Can't cast value -1"),
+                      (points.slice(0, 0), "the points table has no point")):
+        with pytest.raises(gedisim.GedisimError) as e:
+            gedisim.simulate(bad, shots, als_crs=2154, out=tmp_path / "bad.parquet", progress=False)
+        assert said in str(e.value) and "\n" not in str(e.value), str(e.value)
+        assert not (tmp_path / "bad.parquet").exists()
+
+
+def test_l2a_of_a_shots_table_equals_the_command(world, datasets, tmp_path):
+    """The waveforms of the dataset's `shots/` give the rows `gedisim l2a` writes for those shots."""
+    shots = gedisim.Dataset(datasets[0]).table("shots")
+    table = gedisim.l2a(shots, algorithm=[1, 3], out=tmp_path / "api.parquet")
+    assert table.equals(pq.read_table(tmp_path / "api.parquet"))
+    files = []
+    for i, l1b in enumerate(sorted((world / "gedi").glob("*GEDI01_B*.h5"))):
+        files.append(tmp_path / f"cli{i}.parquet")
+        cli("l2a", "--l1b", str(l1b), "--algorithms", "1,3", "--out", str(files[-1]))
+    by_command = pa.concat_tables(pq.read_table(f) for f in files)
+    mine = by_command.filter(pc.is_in(by_command.column("shot_number"), value_set=table.column("shot_number")))
+    order = [("shot_number", "ascending"), ("algorithm", "ascending")]
+    assert table.num_rows > 0 and table.sort_by(order).equals(mine.sort_by(order))
+    with pytest.raises(gedisim.GedisimError, match="rx_waveform: column missing"):
+        gedisim.l2a(shots.drop_columns(["rx_waveform"]))
+
+
 def test_l2a_equals_the_command(world, tmp_path):
     l1b = sorted((world / "gedi").glob("*GEDI01_B*.h5"))[0]
     table = gedisim.l2a(l1b, algorithm=[1, 5])

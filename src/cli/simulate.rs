@@ -6,6 +6,7 @@ use tracing::{info, warn};
 
 use clap::Args;
 
+use gedisim::kernels::sim::footprint::GEDI_SIGMA_M;
 use gedisim::kernels::sim::PulseModel;
 use gedisim::{Error, Result};
 
@@ -49,7 +50,8 @@ pub struct SimulateArgs {
     #[arg(long, value_enum, default_value = "last-returns", conflicts_with = "no_norm")]
     density: DensityArg,
     /// Footprint Gaussian σ (m).
-    #[arg(long, default_value_t = 5.5, allow_negative_numbers = true, value_parser = super::values::footprint_sigma)]
+    #[arg(long, default_value_t = GEDI_SIGMA_M, allow_negative_numbers = true)]
+    #[arg(value_parser = super::values::footprint_sigma)]
     fsigma: f32,
     /// Gaussian pulse σ (m) instead of the 15 ns FWHM.
     #[arg(long, allow_negative_numbers = true, value_parser = super::values::pulse_sigma)]
@@ -119,11 +121,6 @@ pub fn simulate(a: SimulateArgs) -> Result<()> {
         }
         (None, _) => return Err(Error::Usage("give --als, --footprints and --out (direct mode) or --dataset".into())),
     };
-    if matches!(a.profile, ProfileArg::Gedirat) && a.density == DensityArg::Pulses {
-        return Err(Error::Usage(
-            "--density pulses is not gediRat's normalisation: use it with --profile default".into(),
-        ));
-    }
     let opts = SimulateOptions {
         source,
         profile: match a.profile {

@@ -12,8 +12,6 @@ fn metres_in(s: &str, max: f64) -> Result<f64, String> {
     }
 }
 
-/// Largest footprint σ accepted (m): 20 times GEDI's 5.5 m.
-pub const MAX_FOOTPRINT_SIGMA_M: f64 = 100.0;
 /// Largest pulse σ accepted (m): 20 times the 15 ns pulse's.
 pub const MAX_PULSE_SIGMA_M: f64 = 20.0;
 /// Largest |geoid offset| accepted (m): the Earth's geoid lies within about −107 and +86 m of the
@@ -22,7 +20,7 @@ pub const MAX_GEOID_OFFSET_M: f64 = 150.0;
 
 /// `--fsigma`.
 pub fn footprint_sigma(s: &str) -> Result<f32, String> {
-    metres_in(s, MAX_FOOTPRINT_SIGMA_M).map(|v| v as f32)
+    metres_in(s, f64::from(gedisim::kernels::sim::footprint::MAX_SIGMA_M)).map(|v| v as f32)
 }
 
 /// `--psigma`.

@@ -117,6 +117,55 @@ pub fn read_file_points(path: &Path) -> Result<AlsPoints> {
     Ok(out)
 }
 
+/// Columns of `als/` a points table may leave out: no scan angle is read as 0°, no GPS time as
+/// none (a pulse is then one return), no flight line as line 0.
+const OPTIONAL_POINT_COLUMNS: [&str; 3] = [col::SCAN_ANGLE_DEG, col::GPS_TIME, col::POINT_SOURCE_ID];
+
+/// The points of a points table from elsewhere (the Python API's), `source` naming it in errors:
+/// the columns of `als/` by name, cast to their types (docs/schemas.md); x, y, z, intensity,
+/// return_number, number_of_returns and classification are required, finite and not null, the
+/// [`OPTIONAL_POINT_COLUMNS`] may be missing. A table without a point is an error.
+pub fn points_from_batches(batches: &[RecordBatch], source: &Path) -> Result<AlsPoints> {
+    let schema = als_schema();
+    let mut out = AlsPoints::default();
+    for b in batches {
+        let cast = super::read::cast_columns(source, b, &schema, &POINT_COLUMNS, &OPTIONAL_POINT_COLUMNS)?;
+        let n = cast.num_rows();
+        let mut fields = Vec::with_capacity(POINT_COLUMNS.len());
+        let mut columns = Vec::with_capacity(POINT_COLUMNS.len());
+        for name in POINT_COLUMNS {
+            let field = schema.field_with_name(name).expect("a column of als/");
+            let column: ArrayRef = match cast.column_by_name(name) {
+                Some(c) if c.null_count() > 0 && !field.is_nullable() => {
+                    let row = out.len() + (0..n).find(|&i| c.is_null(i)).unwrap_or_default();
+                    return Err(Error::field(source, name, format!("null at row {row}: every point needs one")));
+                }
+                Some(c) => c.clone(),
+                None => match name {
+                    col::SCAN_ANGLE_DEG => Arc::new(Float32Array::from(vec![0f32; n])),
+                    col::POINT_SOURCE_ID => Arc::new(UInt16Array::from(vec![0u16; n])),
+                    _ => arrow::array::new_null_array(field.data_type(), n),
+                },
+            };
+            if let Some(v) = column.as_primitive_opt::<Float64Type>().filter(|_| !field.is_nullable()) {
+                if let Some(i) = v.values().iter().position(|x| !x.is_finite()) {
+                    let why = format!("{} at row {}: not a position", v.value(i), out.len() + i);
+                    return Err(Error::field(source, name, why));
+                }
+            }
+            fields.push(field.clone());
+            columns.push(column);
+        }
+        let batch =
+            RecordBatch::try_new(Arc::new(Schema::new(fields)), columns).map_err(|e| Error::table(source, e))?;
+        append(&mut out, &batch, None, source)?;
+    }
+    if out.is_empty() {
+        return Err(Error::file(source, "the points table has no point"));
+    }
+    Ok(out)
+}
+
 /// The global cell key of a position: row-major over (floor(y/CELL), floor(x/CELL)), so that
 /// sorting by key clusters points spatially.
 pub fn cell_key(x: f64, y: f64) -> u64 {
@@ -559,4 +608,51 @@ fn append(out: &mut AlsPoints, b: &arrow::record_batch::RecordBatch, keep: Optio
     out.gps_time.extend(rows.iter().map(|&i| if gps.is_null(i) { f64::NAN } else { gps.value(i) }));
     put(&mut out.point_source_id, column(col::POINT_SOURCE_ID)?.as_primitive::<UInt16Type>().values(), &rows);
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use arrow::array::{Float32Array, Int64Array};
+
+    fn table(columns: Vec<(&str, ArrayRef)>) -> RecordBatch {
+        RecordBatch::try_from_iter(columns).unwrap()
+    }
+
+    fn required(x: Vec<f64>) -> Vec<(&'static str, ArrayRef)> {
+        let n = x.len();
+        vec![
+            (col::X, Arc::new(Float64Array::from(x)) as ArrayRef),
+            (col::Y, Arc::new(Float32Array::from(vec![2.5f32; n]))),
+            (col::Z, Arc::new(Int64Array::from(vec![100i64; n]))),
+            (col::INTENSITY, Arc::new(Int64Array::from(vec![300i64; n]))),
+            (col::RETURN_NUMBER, Arc::new(Int64Array::from(vec![1i64; n]))),
+            (col::NUMBER_OF_RETURNS, Arc::new(Int64Array::from(vec![2i64; n]))),
+            (col::CLASSIFICATION, Arc::new(Int64Array::from(vec![5i64; n]))),
+        ]
+    }
+
+    #[test]
+    fn a_points_table_is_cast_and_checked() {
+        let source = Path::new("points");
+        let p = points_from_batches(&[table(required(vec![1.0, 2.0])), table(required(vec![3.0]))], source).unwrap();
+        assert_eq!(p.x, [1.0, 2.0, 3.0]);
+        assert_eq!((p.y[0], p.z[0], p.intensity[0], p.number_of_returns[0]), (2.5, 100.0, 300, 2));
+        // The optional columns: no scan angle is 0°, no GPS time NaN, no flight line 0.
+        assert_eq!((p.scan_angle_deg[2], p.point_source_id[2]), (0.0, 0));
+        assert!(p.gps_time.iter().all(|t| t.is_nan()));
+
+        let err =
+            |b: RecordBatch| points_from_batches(&[table(required(vec![0.0])), b], source).unwrap_err().to_string();
+        let mut big = required(vec![0.0]);
+        big[3].1 = Arc::new(Int64Array::from(vec![70_000i64]));
+        let said = err(table(big));
+        assert!(said.contains("intensity: Int64 cannot be read as UInt16"), "{said}");
+        let mut null = required(vec![0.0]);
+        null[6].1 = Arc::new(Int64Array::from(vec![None]));
+        assert!(err(table(null)).contains("classification: null at row 1"));
+        assert!(err(table(required(vec![f64::NAN]))).contains("x: NaN at row 1: not a position"));
+        assert!(err(table(required(vec![0.0])[1..].to_vec())).contains("x: column missing"));
+        assert!(points_from_batches(&[table(required(vec![]))], source).unwrap_err().to_string().contains("no point"));
+    }
 }

@@ -5,15 +5,18 @@
 use std::collections::HashMap;
 use std::fs::File;
 use std::path::Path;
+use std::sync::Arc;
 
 use arrow::array::{
     Array, ArrayRef, AsArray, Float32Array, Float64Array, ListArray, PrimitiveArray, StringArray,
     TimestampMicrosecondArray, UInt16Array, UInt32Array, UInt64Array, UInt8Array,
 };
+use arrow::compute::{cast_with_options, CastOptions};
 use arrow::datatypes::{
     ArrowPrimitiveType, Float32Type, Float64Type, TimestampMicrosecondType, UInt16Type, UInt32Type, UInt64Type,
     UInt8Type,
 };
+use arrow::datatypes::{Field, Schema};
 use arrow::record_batch::RecordBatch;
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use parquet::arrow::ProjectionMask;
@@ -58,6 +61,39 @@ pub fn for_each_batch(
         f(Columns { path, batch: &b })?;
     }
     Ok(())
+}
+
+/// The columns `names` of `batch`, a table from elsewhere (a Python one: int64 intensities, a
+/// float64 waveform, a large list), cast to the types `schema` gives them, in that order; those of
+/// `optional` may be missing (and are then left out). A missing column, or a value its type cannot
+/// hold (no wrap, no truncation to null), is an error naming `path` and the column. The fields are
+/// nullable: the caller says which nulls it takes.
+pub fn cast_columns(
+    path: &Path,
+    batch: &RecordBatch,
+    schema: &Schema,
+    names: &[&str],
+    optional: &[&str],
+) -> Result<RecordBatch> {
+    let options = CastOptions { safe: false, ..Default::default() };
+    let (mut fields, mut columns) = (Vec::with_capacity(names.len()), Vec::with_capacity(names.len()));
+    for &name in names {
+        let Some(column) = batch.column_by_name(name) else {
+            if optional.contains(&name) {
+                continue;
+            }
+            return Err(Error::field(path, name, "column missing from the table"));
+        };
+        let to = schema.field_with_name(name).map_err(|e| Error::field(path, name, e))?.data_type();
+        let cast = cast_with_options(column, to, &options).map_err(|e| {
+            let why = e.to_string();
+            let why = why.strip_prefix("Cast error: ").unwrap_or(&why).to_string();
+            Error::field(path, name, format!("{} cannot be read as {to} ({why})", column.data_type()))
+        })?;
+        fields.push(Field::new(name, to.clone(), true));
+        columns.push(cast);
+    }
+    RecordBatch::try_new(Arc::new(Schema::new(fields)), columns).map_err(|e| Error::table(path, e))
 }
 
 /// Typed access to the columns of a batch read from `path`: a missing column or one of another

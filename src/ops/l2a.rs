@@ -1,15 +1,17 @@
 //! `gedisim l2a`: GEDI L2A (algorithms a1–a6) re-run on every waveform of an L1B granule, one row
-//! per shot × algorithm written to a Parquet file (docs/l2a.md).
+//! per shot × algorithm written to a Parquet file (docs/l2a.md); or on a table of shots (the
+//! Python API's `gedisim.l2a(table)`), the same rows returned.
 
 use std::path::Path;
 use std::sync::Arc;
 
-use arrow::array::{Array, ArrayRef, AsArray, Float64Array, RecordBatch, StringArray, UInt64Array, UInt8Array};
-use arrow::datatypes::{Float32Type, Float64Type, UInt64Type};
+use arrow::array::{Array, ArrayRef, AsArray, RecordBatch, StringArray, UInt64Array, UInt8Array};
+use arrow::datatypes::{DataType, Float32Type};
 use rayon::prelude::*;
 
 use crate::dataset::l2a::{l2a_schema, status_text, L2aColumns};
-use crate::dataset::shots::col;
+use crate::dataset::read::{cast_columns, Columns};
+use crate::dataset::shots::{col, shots_schema};
 use crate::dataset::{writer_properties, AtomicParquet};
 use crate::error::{Error, Result};
 use crate::kernels::waveform::l2a::{
@@ -28,16 +30,7 @@ pub struct L2aReport {
 
 /// Run the GEDI `algorithms` (1..6) on every waveform of `l1b` into `out` (atomically).
 pub fn l2a(l1b: &Path, algorithms: &[u8], out: &Path) -> Result<L2aReport> {
-    if let Some(n) = algorithms.iter().enumerate().find_map(|(i, n)| algorithms[..i].contains(n).then_some(n)) {
-        return Err(Error::Usage(format!("--algorithms: {n} given twice (each algorithm's rows once)")));
-    }
-    let settings = algorithms
-        .iter()
-        .map(|&n| {
-            AlgorithmSettings::gedi(n)
-                .ok_or_else(|| Error::Usage(format!("--algorithms: {n} is not a GEDI algorithm (1..6)")))
-        })
-        .collect::<Result<Vec<_>>>()?;
+    let settings = algorithm_settings(algorithms)?;
     let mut writer = AtomicParquet::create(out, l2a_schema(), writer_properties(&Default::default(), 1 << 16))?;
     let mut rows = 0;
     let report = ingest_gedi(std::slice::from_ref(&l1b.to_path_buf()), &[], &GediOptions::default(), |shots| {
@@ -49,19 +42,58 @@ pub fn l2a(l1b: &Path, algorithms: &[u8], out: &Path) -> Result<L2aReport> {
     Ok(L2aReport { shots: report.rows(), rows, warnings: report.warnings() })
 }
 
+/// The `l2a` rows of the `algorithms` (1..6) on the waveforms of `shots`, a table with the L1B
+/// columns of `shots/` (docs/schemas.md: shot_number, beam, rx_waveform, the corrected noise
+/// statistics, the elevations and positions of the first and last samples), cast to their types;
+/// `source` names it in errors. Rows without `elevation_bin0` (no L1B) are skipped, as in [`l2a`].
+pub fn l2a_of_shots(shots: &[RecordBatch], algorithms: &[u8], source: &Path) -> Result<Vec<RecordBatch>> {
+    let settings = algorithm_settings(algorithms)?;
+    let schema = shots_schema(0);
+    shots.iter().map(|b| l2a_batch(&cast_columns(source, b, &schema, &L1B_COLUMNS, &[])?, &settings, source)).collect()
+}
+
+/// The `--algorithms`' settings, each algorithm once.
+fn algorithm_settings(algorithms: &[u8]) -> Result<Vec<AlgorithmSettings>> {
+    if let Some(n) = algorithms.iter().enumerate().find_map(|(i, n)| algorithms[..i].contains(n).then_some(n)) {
+        return Err(Error::Usage(format!("--algorithms: {n} given twice (each algorithm's rows once)")));
+    }
+    algorithms
+        .iter()
+        .map(|&n| {
+            AlgorithmSettings::gedi(n)
+                .ok_or_else(|| Error::Usage(format!("--algorithms: {n} is not a GEDI algorithm (1..6)")))
+        })
+        .collect()
+}
+
+/// The columns of `shots/` that the L2A of a waveform reads.
+const L1B_COLUMNS: [&str; 11] = [
+    col::SHOT_NUMBER,
+    col::BEAM,
+    col::RX_WAVEFORM,
+    col::NOISE_MEAN_CORRECTED,
+    col::NOISE_STDDEV_CORRECTED,
+    col::ELEVATION_BIN0,
+    col::ELEVATION_LASTBIN,
+    col::LAT_BIN0,
+    col::LAT_LASTBIN,
+    col::LON_BIN0,
+    col::LON_LASTBIN,
+];
+
 /// Run the L2A kernel with `settings` on every shot of a `shots` batch that has L1B columns (rows
 /// without are skipped), shots in parallel. A shot the kernel cannot process, or whose waveform
 /// ingest nulled, keeps its rows with `status` = `no_result: <reason>` and null values.
 fn l2a_batch(shots: &RecordBatch, settings: &[AlgorithmSettings], source: &Path) -> Result<RecordBatch> {
-    let col = |n: &str| shots.column_by_name(n).ok_or_else(|| Error::field(source, n, "column missing"));
-    let sn = col(col::SHOT_NUMBER)?.as_primitive::<UInt64Type>().clone();
-    let beam = col(col::BEAM)?.as_string::<i32>().clone();
-    let waves = col(col::RX_WAVEFORM)?.as_list::<i32>().clone();
-    let f64c = |n: &str| -> Result<Float64Array> { Ok(col(n)?.as_primitive::<Float64Type>().clone()) };
-    let (mean, sd) = (f64c(col::NOISE_MEAN_CORRECTED)?, f64c(col::NOISE_STDDEV_CORRECTED)?);
-    let (z0, zn) = (f64c(col::ELEVATION_BIN0)?, f64c(col::ELEVATION_LASTBIN)?);
-    let (la0, lan) = (f64c(col::LAT_BIN0)?, f64c(col::LAT_LASTBIN)?);
-    let (lo0, lon) = (f64c(col::LON_BIN0)?, f64c(col::LON_LASTBIN)?);
+    let c = Columns::new(source, shots);
+    let (sn, beam, waves) = (c.u64s(col::SHOT_NUMBER)?, c.strings(col::BEAM)?, c.lists(col::RX_WAVEFORM)?);
+    let (mean, sd) = (c.f64s(col::NOISE_MEAN_CORRECTED)?, c.f64s(col::NOISE_STDDEV_CORRECTED)?);
+    let (z0, zn) = (c.f64s(col::ELEVATION_BIN0)?, c.f64s(col::ELEVATION_LASTBIN)?);
+    let (la0, lan) = (c.f64s(col::LAT_BIN0)?, c.f64s(col::LAT_LASTBIN)?);
+    let (lo0, lon) = (c.f64s(col::LON_BIN0)?, c.f64s(col::LON_LASTBIN)?);
+    if waves.value_type() != DataType::Float32 {
+        return Err(Error::field(source, col::RX_WAVEFORM, format!("a list of {}, not float32", waves.value_type())));
+    }
     let l1b_rows: Vec<usize> = (0..shots.num_rows()).filter(|&i| !z0.is_null(i)).collect();
     let outcomes: Vec<(usize, Vec<L2aOutcome>, WaveformGeolocation)> = l1b_rows
         .par_iter()

@@ -38,6 +38,10 @@ pub enum Source {
     /// `<dataset>/simulated/shots.parquet`, or the `footprints` CSV into `out` (default
     /// `<dataset>/simulated/<CSV name>.parquet`). Never into `sim/`, which `run` writes.
     Dataset { dataset: PathBuf, footprints: Option<PathBuf>, out: Option<PathBuf> },
+    /// Points already in memory (the Python API's points table, `dataset::als::points_from_batches`)
+    /// in EPSG `epsg` (`None`: a frame of their own), and a footprint CSV, into `out`; the classes
+    /// the ingest drops are dropped as in direct mode.
+    Points { points: Arc<AlsPoints>, epsg: Option<u32>, footprints: PathBuf, out: PathBuf, keep_all_classes: bool },
 }
 
 /// Options of `gedisim simulate`.
@@ -57,6 +61,25 @@ pub struct SimulateOptions {
     pub engine: Engine,
     /// EPSG code of a footprint CSV's x, y (`--crs`; lon, lat columns are EPSG:4326 by name).
     pub footprints_crs: Option<u32>,
+}
+
+impl SimulateOptions {
+    /// The command line's defaults for `source`: the `default` profile, GEDI's σ_f 5.5 m, the
+    /// density normalised by last returns, the study's 15 ns Gaussian pulse after binning, here.
+    pub fn new(source: Source) -> Self {
+        let cfg = SimConfig::new(Profile::Default);
+        SimulateOptions {
+            source,
+            profile: Profile::Default,
+            fsigma: cfg.fsigma,
+            normalise_density: cfg.normalise_density,
+            density_count: cfg.density_count,
+            pulse_before: false,
+            pulse: PulseModel::Gaussian(None),
+            engine: Engine::Local,
+            footprints_crs: None,
+        }
+    }
 }
 
 /// What `gedisim simulate` did.
@@ -225,6 +248,16 @@ fn warn_beyond_bounds(file: &Path, p: &AlsPoints, bounds: &[f64; 6]) {
 
 /// The simulator settings of `opts` (profile, footprint, density normalisation, pulse).
 pub fn sim_config(opts: &SimulateOptions) -> Result<SimConfig> {
+    let max = sim::footprint::MAX_SIGMA_M;
+    if !(opts.fsigma.is_finite() && opts.fsigma > 0.0 && opts.fsigma <= max) {
+        let why = format!("{} m: give a finite σ above 0 and at most {max} m", opts.fsigma);
+        return Err(Error::Usage(format!("--fsigma: {why}")));
+    }
+    if opts.profile == Profile::Gedirat && opts.normalise_density && opts.density_count == DensityCount::Pulses {
+        return Err(Error::Usage(
+            "--density pulses is not gediRat's normalisation: use it with --profile default".into(),
+        ));
+    }
     let mut cfg = SimConfig::new(opts.profile);
     cfg.fsigma = opts.fsigma;
     cfg.normalise_density = opts.normalise_density;
@@ -365,12 +398,14 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
             progress.finish();
             (r?, dest)
         }
-        Source::Direct { .. } if matches!(opts.pulse, PulseModel::Recorded(_)) => return Err(Error::Usage(
+        Source::Direct { .. } | Source::Points { .. } if matches!(opts.pulse, PulseModel::Recorded(_)) => {
+            return Err(Error::Usage(
             "--pulse recorded needs the shots of a dataset (--dataset); in direct mode give a pulse file, e.g. the \
                  mean recorded pulse that `simulate --dataset … --footprints … --pulse recorded` writes"
                 .into(),
-        )),
-        Source::Direct { .. } if opts.engine != Engine::Local => {
+            ))
+        }
+        Source::Direct { .. } | Source::Points { .. } if opts.engine != Engine::Local => {
             return Err(Error::Usage("--cluster: a cluster simulates from a dataset (--dataset)".into()))
         }
         Source::Direct { als, footprints, out, keep_all_classes } => {
@@ -383,6 +418,24 @@ pub fn simulate(opts: &SimulateOptions, progress: &dyn Progress) -> Result<Simul
             outside_files = inputs.outside(&footprints);
             let (counts, read) = simulate_direct(&inputs, &footprints, &cfg, profile, drop_classes, out, progress)?;
             copc = read;
+            (counts, out.clone())
+        }
+        Source::Points { points, epsg, footprints, out, keep_all_classes } => {
+            crate::dataset::outside_tables(out)?;
+            let table = crate::io::footprints::read_footprints_csv(footprints)?;
+            let (footprints, how) = place_footprints(&table, opts.footprints_crs, *epsg, footprints)?;
+            placement = Some(how);
+            let points = if profile == Profile::Default && !keep_all_classes {
+                Cow::Owned(drop_ingest_classes(points))
+            } else {
+                Cow::Borrowed(points.as_ref())
+            };
+            let props = dataset::writer_properties(&sim_metadata(profile), SIM_ROW_GROUP_ROWS);
+            let mut writer = AtomicParquet::create(out, sim_schema(), props)?;
+            progress.start(Step::Simulate, footprints.len() as u64);
+            let counts = write_simulated(points, &footprints, &cfg, &mut writer, progress)?;
+            progress.finish();
+            writer.finish()?;
             (counts, out.clone())
         }
     };
@@ -447,14 +500,9 @@ pub fn simulate_direct(
     for group in groups {
         let fps: Vec<Footprint> = group.iter().map(|&i| footprints[i].clone()).collect();
         let points = inputs.read_around(&fps, cfg, drop_classes, &mut read)?;
-        sim::simulate_in_chunks::<crate::Error>(Cow::Owned(points), &fps, cfg, DIRECT_CHUNK, &mut |start, results| {
-            let n_ok = results.iter().filter(|r| r.is_ok()).count();
-            ok += n_ok;
-            skipped += results.len() - n_ok;
-            writer.write(&sim_batch(&fps[start..start + results.len()], &results, &Weighting::STUDY, &[])?)?;
-            progress.advance(results.len() as u64);
-            Ok(())
-        })?;
+        let (o, s) = write_simulated(Cow::Owned(points), &fps, cfg, &mut writer, progress)?;
+        ok += o;
+        skipped += s;
     }
     progress.finish();
     writer.finish()?;
@@ -463,6 +511,28 @@ pub fn simulate_direct(
         t
     });
     Ok(((ok, skipped), copc))
+}
+
+/// Simulate `footprints` on `points` a chunk of [`DIRECT_CHUNK`] at a time, each chunk's `sim`
+/// rows written to `writer` before the next is simulated; returns the numbers of footprints
+/// simulated and skipped. `progress` advances by each chunk's footprints.
+fn write_simulated(
+    points: Cow<AlsPoints>,
+    footprints: &[Footprint],
+    cfg: &SimConfig,
+    writer: &mut AtomicParquet,
+    progress: &dyn Progress,
+) -> Result<(usize, usize)> {
+    let (mut ok, mut skipped) = (0, 0);
+    sim::simulate_in_chunks::<crate::Error>(points, footprints, cfg, DIRECT_CHUNK, &mut |start, results| {
+        let n_ok = results.iter().filter(|r| r.is_ok()).count();
+        ok += n_ok;
+        skipped += results.len() - n_ok;
+        writer.write(&sim_batch(&footprints[start..start + results.len()], &results, &Weighting::STUDY, &[])?)?;
+        progress.advance(results.len() as u64);
+        Ok(())
+    })?;
+    Ok((ok, skipped))
 }
 
 /// Simulate `footprints` (each with the collocation offset already applied to it, if any) on the

@@ -5,6 +5,12 @@
 /// footprint weight exceeds this value; the Gaussian pulse is truncated at the same value.
 pub const I_THRESH: f32 = 0.0006;
 
+/// GEDI's footprint σ (m): the reference's and the study's default (`--fsigma`).
+pub const GEDI_SIGMA_M: f32 = 5.5;
+
+/// Largest footprint σ accepted (m): 20 times GEDI's; beyond it a "footprint" covers kilometres.
+pub const MAX_SIGMA_M: f32 = 100.0;
+
 /// Normalised Gaussian density G(x; σ) = exp(−x²/(2σ²)) / (σ√(2π)), in f64 with the reference's
 /// operation order (libclidar `gaussian`), so that its f32 casts round identically.
 pub fn gaussian(x: f64, sigma: f64) -> f64 {

@@ -189,7 +189,7 @@ impl SimConfig {
         let res = 0.15;
         SimConfig {
             quirks: profile.quirks(),
-            fsigma: 5.5,
+            fsigma: footprint::GEDI_SIGMA_M,
             res,
             pulse: Pulse::from_fwhm_ns(15.0, res as f32).expect("the default pulse is valid"),
             normalise_density: true,
@@ -626,7 +626,9 @@ fn gather(job: &Job, widths: &[Width]) -> Vec<std::result::Result<Gathered, Skip
     // Pass 2 (waveFromPointCloud): weights of the contributing returns.
     let cut_sq: Vec<f64> = widths.iter().map(|w| weight_cut_off_sq(w.fsigma)).collect();
     let farthest_first = largest_first(&|k| cut_sq[k]);
-    let mut sums = vec![(0f32, 0f32); widths.len()];
+    // The mean scan angle is summed in f64, so that it does not depend on the points' order (as the waveforms of
+    // the default profile do not).
+    let mut sums = vec![(0f64, 0f64); widths.len()];
     let widest = squares[widest_first[0]];
     for &i in candidates {
         let i = i as usize;
@@ -669,8 +671,8 @@ fn gather(job: &Job, widths: &[Width]) -> Vec<std::result::Result<Gathered, Skip
             // A return without a pulse shares it as frac does.
             w[Weighting::Share as usize] = r * pulses.and_then(|ps| ps.intensity_share(i)).unwrap_or(frac_hit);
             g.contributions.push(Contribution { z: p.z[i], w, ground: p.classification[i] == 2 });
-            sums[k].0 += r * p.scan_angle_deg[i].abs();
-            sums[k].1 += r;
+            sums[k].0 += f64::from(r) * f64::from(p.scan_angle_deg[i].abs());
+            sums[k].1 += f64::from(r);
             if !q.batch_grid {
                 g.z_range = (g.z_range.0.min(p.z[i]), g.z_range.1.max(p.z[i]));
             }
@@ -683,7 +685,7 @@ fn gather(job: &Job, widths: &[Width]) -> Vec<std::result::Result<Gathered, Skip
             if g.contributions.is_empty() && !q.batch_grid {
                 return Err(SkipReason::NoPoints);
             }
-            let mean_scan_angle_deg = if weight_sum > 0.0 { scan_sum / weight_sum } else { 0.0 };
+            let mean_scan_angle_deg = if weight_sum > 0.0 { (scan_sum / weight_sum) as f32 } else { 0.0 };
             Ok(Gathered { mean_scan_angle_deg, ..g })
         })
         .collect()
