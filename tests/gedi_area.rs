@@ -241,6 +241,17 @@ fn the_command_line_keeps_the_shots_over_twenty_thousand_tiles_and_says_what_it_
     let (ok, _, err) =
         common::gedisim(&[&args[..], &[common::s(ds.root()), "--bbox", "1,2,3,4", "--all-shots"]].concat());
     assert!(!ok && err.contains("cannot be used with"), "{err}");
+    // GeoPackages written by GDAL (tests/data/within): areas away from the track keep none of its shots; a
+    // table of lines is refused in one line naming the file and the table.
+    let within = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/within");
+    let (ok, _, err) = common::gedisim(
+        &[&args[..], &[common::s(ds.root()), "--within", common::s(&within.join("areas.gpkg"))]].concat(),
+    );
+    assert!(ok && err.contains("0 shot(s) kept within") && err.contains("800 outside"), "{err}");
+    let (ok, _, err) = common::gedisim(
+        &[&args[..], &[common::s(ds.root()), "--within", common::s(&within.join("line.gpkg"))]].concat(),
+    );
+    assert!(!ok && err.contains("line.gpkg: track.geom: a line") && err.trim().lines().count() == 1, "{err}");
 }
 
 /// A granule another holder has locked (a child process that inherited its descriptor, a reader on

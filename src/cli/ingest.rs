@@ -69,7 +69,8 @@ pub struct ShotArgs {
     /// the dataset's ALS tiles, grown by the collocation's search and the footprint's reach).
     #[arg(long, value_name = "W,S,E,N", allow_hyphen_values = true, conflicts_with_all = ["within", "all_shots"])]
     pub bbox: Option<String>,
-    /// Keep the shots within the polygons of this GeoJSON file (WGS84 longitude, latitude).
+    /// Keep the shots within the polygons of this GeoJSON file (WGS84 longitude, latitude) or GeoPackage
+    /// (`.gpkg`: every feature table, in the EPSG CRS it declares).
     #[arg(long, value_name = "FILE", conflicts_with = "all_shots")]
     pub within: Option<PathBuf>,
     /// Keep every shot of every granule.

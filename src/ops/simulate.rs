@@ -1,6 +1,6 @@
 //! `gedisim simulate`: the simulation kernels driven from files — direct mode (LAS/LAZ files and
 //! a footprint CSV) and dataset mode (every ingested shot, or a footprint CSV such as inventory
-//! plots, against the `als/` table).
+//! plots, against the `als/` table) — or from points already in memory (the Python API).
 
 use std::borrow::Cow;
 use std::collections::{HashMap, HashSet};
