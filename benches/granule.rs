@@ -167,10 +167,15 @@ fn cold_cache() -> bool {
 
 /// `gedisim ingest gedi` into a new dataset: (wall s, peak RSS MB, MB read from disk, stderr).
 fn ingest(l1b: &Path, l2a: &Path, area: &[&str]) -> (f64, f64, f64, String) {
+    ingest_with(Path::new(env!("CARGO_BIN_EXE_gedisim")), l1b, l2a, area)
+}
+
+/// [`ingest`] by the gedisim binary `exe`.
+fn ingest_with(exe: &Path, l1b: &Path, l2a: &Path, area: &[&str]) -> (f64, f64, f64, String) {
     let out = tempfile::tempdir().unwrap();
     let stats = tempfile::NamedTempFile::new().unwrap();
     let o = Command::new("/usr/bin/time")
-        .args(["-f", "%e %M %I", "-o", common::s(stats.path()), env!("CARGO_BIN_EXE_gedisim"), "ingest", "gedi"])
+        .args(["-f", "%e %M %I", "-o", common::s(stats.path()), common::s(exe), "ingest", "gedi"])
         .args(["--l1b", common::s(l1b), "--l2a", common::s(l2a), "--dataset", common::s(out.path())])
         .args(area)
         .output()
@@ -227,6 +232,44 @@ fn main() {
             let (ws, ms, rs, err) = ingest(&s1, &s2, &["--all-shots"]);
             println!("| | small, only those shots | {ws:.2} | {ms:.0} | {rs:.0} | {} |", stored(&err));
             println!("| | ratio full / small | {:.1} | {:.1} | | |", w / ws, m / ms);
+        }
+    }
+    many_runs(n, &f1, &f2);
+}
+
+/// Runs of kept shots a beam in [`many_runs`].
+const RUNS: usize = 50;
+
+/// 0.1 % of the shots kept in [`RUNS`] runs a beam (`--within` boxes across every beam, as plots
+/// along the tracks), against the same count in one run; with `GEDISIM_BENCH_BEFORE=<a gedisim
+/// binary>`, that binary too, in the same run (e.g. one without the chunk cache of src/io/gedi.rs).
+fn many_runs(n: usize, f1: &Path, f2: &Path) {
+    let per_run = ((n as f64 * 0.001 / RUNS as f64).round() as usize).max(1);
+    let step = n / (RUNS + 1);
+    let box_of = |lo: usize, hi: usize| {
+        let (s, n) = (lat_of(lo) - DLAT / 2.0, lat_of(hi - 1) + DLAT / 2.0);
+        format!("[[[2.99,{s}],[3.06,{s}],[3.06,{n}],[2.99,{n}],[2.99,{s}]]]")
+    };
+    let boxes: Vec<String> = (1..=RUNS).map(|j| box_of(j * step, j * step + per_run)).collect();
+    let dir = tempfile::tempdir().unwrap();
+    let within = dir.path().join("runs.geojson");
+    std::fs::write(&within, format!(r#"{{"type":"MultiPolygon","coordinates":[{}]}}"#, boxes.join(","))).unwrap();
+    let one = box_of(n / 2, n / 2 + per_run * RUNS);
+    let single = dir.path().join("one.geojson");
+    std::fs::write(&single, format!(r#"{{"type":"Polygon","coordinates":{one}}}"#)).unwrap();
+    let mut binaries = vec![("this build".to_string(), PathBuf::from(env!("CARGO_BIN_EXE_gedisim")))];
+    if let Ok(before) = std::env::var("GEDISIM_BENCH_BEFORE") {
+        binaries.push((format!("GEDISIM_BENCH_BEFORE ({before})"), PathBuf::from(before)));
+    }
+    println!("\n{} shots a beam kept in {RUNS} runs of {per_run} vs one run (`--within`, 8 beams):", RUNS * per_run);
+    println!("| binary | runs a beam | wall s | peak RSS MB | MB read | shots stored |");
+    println!("|---|---|---|---|---|---|");
+    for (name, exe) in &binaries {
+        for (runs, file) in [(1, &single), (RUNS, &within)] {
+            cold_cache();
+            let (w, m, r, err) = ingest_with(exe, f1, f2, &["--within", common::s(file)]);
+            let kept = err.lines().find(|l| l.contains("kept within")).unwrap_or_default().trim().to_string();
+            println!("| {name} | {runs} | {w:.2} | {m:.0} | {r:.0} | {kept} |");
         }
     }
 }

@@ -51,8 +51,19 @@ pub fn without_locks() -> hdf5::FileBuilder {
     builder
 }
 
+/// HDF5's raw-data chunk cache of each dataset while a granule is read (bytes, hash slots). NASA
+/// stores a beam's per-shot dataset as one gzip chunk of up to 554,085 rows: once a beam holds more
+/// than 131,072 shots, a float64 chunk is above HDF5's default cache of 1 MiB, and HDF5 inflates it
+/// again for every run of selected shots read from it (a track crossing plots far apart,
+/// `--within`). Measured with h5py on the same library: 10 datasets of 200,000 rows, 50 runs of 3
+/// rows each, 3.21 s with 1 MiB, 0.075 s with 32 MiB (docs/benchmarks.md). Held only while a
+/// dataset is open.
+const CHUNK_CACHE: (usize, usize) = (32 << 20, 10_007);
+
 pub fn open_product(path: &Path, product: Product) -> Result<Granule<'_>> {
-    let file = without_locks().open(path).map_err(|e| Error::file(path, format!("cannot open as HDF5: {e}")))?;
+    let mut builder = without_locks();
+    builder.with_fapl(|p| p.chunk_cache(CHUNK_CACHE.1, CHUNK_CACHE.0, 0.75));
+    let file = builder.open(path).map_err(|e| Error::file(path, format!("cannot open as HDF5: {e}")))?;
     // A swapped --l1b/--l2a would otherwise fail later with a confusing "missing dataset".
     if let Some(name) = read_str_attr(&file, "short_name") {
         let other = if product == Product::L1b { Product::L2a } else { Product::L1b };

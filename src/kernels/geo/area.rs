@@ -1,7 +1,9 @@
 //! Which shots of a granule an ingest keeps (docs/gedi-products.md, "Shots kept"): the dataset's ALS
 //! coverage by default, a box or polygons when the user names one, or every shot.
 
-use geo::{Intersects, MultiPolygon, Point};
+use geo::{BoundingRect, Intersects, MultiPolygon, Point};
+use rstar::primitives::{GeomWithData, Rectangle};
+use rstar::RTree;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
@@ -51,23 +53,34 @@ impl ShotArea {
         matches!(self, ShotArea::Tiles { .. })
     }
 
-    /// Whether a shot at `lon`, `lat` (degrees), projected to `xy`, is kept.
+    /// Whether a shot at `lon`, `lat` (degrees), projected to `xy`, is kept. One test: a loop over
+    /// the shots of a granule tests through [`ShotArea::index`], built once.
     pub fn contains(&self, lon: f64, lat: f64, xy: Option<(f64, f64)>) -> bool {
-        match self {
-            ShotArea::All => true,
-            ShotArea::Tiles { extents, margin_m } => xy.is_some_and(|(x, y)| {
-                extents.iter().any(|e| {
-                    x >= e[0] - margin_m && x <= e[2] + margin_m && y >= e[1] - margin_m && y <= e[3] + margin_m
-                })
-            }),
-            ShotArea::LonLatBox([w, s, e, n]) => {
-                let lon = wrap_lon(lon);
-                let in_lon = if w <= e { lon >= *w && lon <= *e } else { lon >= *w || lon <= *e };
-                in_lon && lat >= *s && lat <= *n
+        self.index().contains(lon, lat, xy)
+    }
+
+    /// The area ready for many tests: tile extents and polygons' bounding boxes in an R-tree, so
+    /// that a shot is tested against the few rectangles around it, not against every tile of a
+    /// national dataset (half a million LiDAR HD tiles) or every plot of an inventory.
+    pub fn index(&self) -> AreaIndex<'_> {
+        let rectangles: Vec<[f64; 4]> = match self {
+            ShotArea::Tiles { extents, margin_m: m } => {
+                extents.iter().map(|e| [e[0] - m, e[1] - m, e[2] + m, e[3] + m]).collect()
             }
-            // A point on the boundary is inside.
-            ShotArea::Polygons { polygons, .. } => polygons.intersects(&Point::new(wrap_lon(lon), lat)),
-        }
+            ShotArea::Polygons { polygons, .. } => polygons
+                .0
+                .iter()
+                .map(|p| p.bounding_rect().map_or([f64::NAN; 4], |r| [r.min().x, r.min().y, r.max().x, r.max().y]))
+                .collect(),
+            ShotArea::All | ShotArea::LonLatBox(_) => Vec::new(),
+        };
+        let boxes = rectangles
+            .into_iter()
+            .enumerate()
+            .filter(|(_, r)| r.iter().all(|v| v.is_finite()) && r[0] <= r[2] && r[1] <= r[3])
+            .map(|(i, r)| GeomWithData::new(Rectangle::from_corners([r[0], r[1]], [r[2], r[3]]), i))
+            .collect();
+        AreaIndex { area: self, boxes: RTree::bulk_load(boxes) }
     }
 
     /// What the area is, for messages: "the 3 ALS tiles (+ 26.5 m)", "the box …", "the polygons of …".
@@ -95,6 +108,34 @@ impl ShotArea {
     }
 }
 
+/// A [`ShotArea`] with its rectangles (tile extents grown by the margin, polygons' bounding boxes)
+/// in an R-tree: [`ShotArea::index`].
+pub struct AreaIndex<'a> {
+    area: &'a ShotArea,
+    /// Each rectangle with the index of its tile extent or polygon.
+    boxes: RTree<GeomWithData<Rectangle<[f64; 2]>, usize>>,
+}
+
+impl AreaIndex<'_> {
+    /// Whether a shot at `lon`, `lat` (degrees), projected to `xy`, is kept; a point on a tile's
+    /// edge or a polygon's boundary is inside.
+    pub fn contains(&self, lon: f64, lat: f64, xy: Option<(f64, f64)>) -> bool {
+        match self.area {
+            ShotArea::All => true,
+            ShotArea::Tiles { .. } => xy.is_some_and(|(x, y)| self.boxes.locate_at_point(&[x, y]).is_some()),
+            ShotArea::LonLatBox([w, s, e, n]) => {
+                let lon = wrap_lon(lon);
+                let in_lon = if w <= e { lon >= *w && lon <= *e } else { lon >= *w || lon <= *e };
+                in_lon && lat >= *s && lat <= *n
+            }
+            ShotArea::Polygons { polygons, .. } => {
+                let (lon, point) = (wrap_lon(lon), Point::new(wrap_lon(lon), lat));
+                self.boxes.locate_all_at_point(&[lon, lat]).any(|b| polygons.0[b.data].intersects(&point))
+            }
+        }
+    }
+}
+
 /// A longitude in −180…180° (GEDI's are; a granule in 0…360° is brought back).
 fn wrap_lon(lon: f64) -> f64 {
     if lon > 180.0 {
@@ -107,7 +148,7 @@ fn wrap_lon(lon: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use geo::{polygon, MultiPolygon};
+    use geo::{polygon, MultiPolygon, Polygon};
 
     #[test]
     fn tiles_keep_what_lies_within_the_margin() {
@@ -144,6 +185,45 @@ mod tests {
         assert!(a.contains(1.5, 0.5, None));
         assert!(a.contains(1.0, 1.0, None), "on the boundary");
         assert!(!a.contains(0.5, 1.5, None));
+    }
+
+    #[test]
+    fn the_index_keeps_what_a_test_of_every_rectangle_and_polygon_keeps() {
+        use rand_chacha::rand_core::{RngCore, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut u = |scale: f64| (rng.next_u32() as f64 / u32::MAX as f64) * scale;
+        // 2,000 tiles of 1 km on a 100 km square, some touching, and 300 triangles.
+        let extents: Vec<[f64; 4]> = (0..2000)
+            .map(|_| {
+                let (x, y) = ((u(100.0).floor()) * 1000.0, (u(100.0).floor()) * 1000.0);
+                [x, y, x + 1000.0, y + 1000.0]
+            })
+            .collect();
+        let tiles = ShotArea::Tiles { extents: extents.clone(), margin_m: 28.4 };
+        let triangles: Vec<Polygon<f64>> = (0..300)
+            .map(|_| {
+                let (x, y) = (u(10.0), u(10.0));
+                polygon![(x: x, y: y), (x: x + u(0.5), y: y), (x: x, y: y + u(0.5)), (x: x, y: y)]
+            })
+            .collect();
+        let plots = ShotArea::Polygons { source: "t".into(), polygons: MultiPolygon(triangles.clone()) };
+        let (tiles_index, plots_index) = (tiles.index(), plots.index());
+        let (mut in_tiles, mut in_plots) = (0, 0);
+        for _ in 0..20_000 {
+            let (x, y) = (u(101_000.0) - 500.0, u(101_000.0) - 500.0);
+            // Some points exactly on an edge grown by the margin.
+            let x = if u(1.0) < 0.05 { (x / 1000.0).floor() * 1000.0 - 28.4 } else { x };
+            let all =
+                extents.iter().any(|e| x >= e[0] - 28.4 && x <= e[2] + 28.4 && y >= e[1] - 28.4 && y <= e[3] + 28.4);
+            assert_eq!(tiles_index.contains(0.0, 0.0, Some((x, y))), all, "({x}, {y})");
+            in_tiles += all as usize;
+            let (lon, lat) = (u(10.5), u(10.5));
+            let all = triangles.iter().any(|t| t.intersects(&Point::new(lon, lat)));
+            assert_eq!(plots_index.contains(lon, lat, None), all, "({lon}, {lat})");
+            in_plots += all as usize;
+        }
+        // Both answers occur often enough for the comparison to mean something.
+        assert!((2000..18_000).contains(&in_tiles) && (100..19_000).contains(&in_plots), "{in_tiles} {in_plots}");
     }
 
     #[test]

@@ -47,6 +47,7 @@ pub(super) fn kept(
             by_shot.entry(s).or_default().1 = Some(i);
         }
     }
+    let index = area.index();
     let (mut rows1, mut rows2, mut inside_n, mut outside) = (Vec::new(), Vec::new(), 0, 0);
     for (i1, i2) in by_shot.into_values() {
         let lowest = p2.as_ref().zip(i2).and_then(|(p, i)| {
@@ -55,7 +56,7 @@ pub(super) fn kept(
         let bins = p1.as_ref().zip(i1).map(|(p, i)| [p.lat_bin0[i], p.lon_bin0[i], p.lat_lastbin[i], p.lon_lastbin[i]]);
         let inside = position(lowest, bins).is_some_and(|(lat, lon, _)| {
             let xy = if area.needs_xy() { projector.project(lon, lat).ok() } else { None };
-            area.contains(lon, lat, xy)
+            index.contains(lon, lat, xy)
         });
         if inside {
             rows1.extend(i1);
