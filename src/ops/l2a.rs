@@ -48,6 +48,7 @@ pub fn l2a(l1b: &Path, algorithms: &[u8], out: &Path) -> Result<L2aReport> {
 /// `source` names it in errors. Rows without `elevation_bin0` (no L1B) are skipped, as in [`l2a`].
 pub fn l2a_of_shots(shots: &[RecordBatch], algorithms: &[u8], source: &Path) -> Result<Vec<RecordBatch>> {
     let settings = algorithm_settings(algorithms)?;
+    // The columns' types (the EPSG code only names the CRS of x, y in the schema's metadata).
     let schema = shots_schema(0);
     shots.iter().map(|b| l2a_batch(&cast_columns(source, b, &schema, &L1B_COLUMNS, &[])?, &settings, source)).collect()
 }

@@ -117,6 +117,11 @@ pub struct AreaIndex<'a> {
 }
 
 impl AreaIndex<'_> {
+    /// Whether the test needs the shot's projected position ([`ShotArea::needs_xy`]).
+    pub fn needs_xy(&self) -> bool {
+        self.area.needs_xy()
+    }
+
     /// Whether a shot at `lon`, `lat` (degrees), projected to `xy`, is kept; a point on a tile's
     /// edge or a polygon's boundary is inside.
     pub fn contains(&self, lon: f64, lat: f64, xy: Option<(f64, f64)>) -> bool {
@@ -129,7 +134,8 @@ impl AreaIndex<'_> {
                 in_lon && lat >= *s && lat <= *n
             }
             ShotArea::Polygons { polygons, .. } => {
-                let (lon, point) = (wrap_lon(lon), Point::new(wrap_lon(lon), lat));
+                let lon = wrap_lon(lon);
+                let point = Point::new(lon, lat);
                 self.boxes.locate_all_at_point(&[lon, lat]).any(|b| polygons.0[b.data].intersects(&point))
             }
         }

@@ -272,6 +272,8 @@ pub fn read_granule_in_process(
     beams.sort();
     beams.dedup();
 
+    // The area's rectangles indexed once for the granule's beams.
+    let area = opts.area.index();
     let mut reports = Vec::new();
     for beam in beams {
         let beam_type = BeamType::from_name(&beam).ok_or_else(|| {
@@ -289,7 +291,7 @@ pub fn read_granule_in_process(
         let mut g2 = l2a.as_ref().map(|f| f.beam(&beam)).transpose()?.flatten();
         if !opts.area.is_all() {
             // Every shot placed from its cheap datasets; the rest read for the shots kept only.
-            let kept = select::kept(pair, &beam, g1.as_ref(), g2.as_ref(), &opts.area, &projector)?;
+            let kept = select::kept(pair, &beam, g1.as_ref(), g2.as_ref(), &area, &projector)?;
             report.outside_area = kept.outside;
             if kept.inside == 0 {
                 reports.push(report);

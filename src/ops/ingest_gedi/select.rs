@@ -1,12 +1,13 @@
 //! Which shots of a beam an ingest reads (docs/gedi-products.md, "Shots kept"): the cheap per-shot
-//! datasets that place every shot are read first, the shots inside the [`ShotArea`] kept, and only
-//! their runs are read of every other dataset, waveforms included (`BeamGroup::select`).
+//! datasets that place every shot are read first, the shots inside the area
+//! ([`ShotArea`](crate::kernels::geo::area::ShotArea), indexed) kept, and only their runs are read of
+//! every other dataset, waveforms included (`BeamGroup::select`).
 
 use std::collections::HashMap;
 
 use crate::error::Result;
 use crate::io::gedi::{read_l1b_places, read_l2a_places, runs_of, valid_lowestmode, BeamGroup, Runs};
-use crate::kernels::geo::area::ShotArea;
+use crate::kernels::geo::area::AreaIndex;
 use crate::kernels::geo::projection::Projector;
 
 use super::join::{duplicate_check, position};
@@ -29,7 +30,7 @@ pub(super) fn kept(
     beam: &str,
     l1b: Option<&BeamGroup>,
     l2a: Option<&BeamGroup>,
-    area: &ShotArea,
+    area: &AreaIndex,
     projector: &Projector,
 ) -> Result<Kept> {
     let p1 = l1b.map(read_l1b_places).transpose()?;
@@ -47,7 +48,6 @@ pub(super) fn kept(
             by_shot.entry(s).or_default().1 = Some(i);
         }
     }
-    let index = area.index();
     let (mut rows1, mut rows2, mut inside_n, mut outside) = (Vec::new(), Vec::new(), 0, 0);
     for (i1, i2) in by_shot.into_values() {
         let lowest = p2.as_ref().zip(i2).and_then(|(p, i)| {
@@ -56,7 +56,7 @@ pub(super) fn kept(
         let bins = p1.as_ref().zip(i1).map(|(p, i)| [p.lat_bin0[i], p.lon_bin0[i], p.lat_lastbin[i], p.lon_lastbin[i]]);
         let inside = position(lowest, bins).is_some_and(|(lat, lon, _)| {
             let xy = if area.needs_xy() { projector.project(lon, lat).ok() } else { None };
-            index.contains(lon, lat, xy)
+            area.contains(lon, lat, xy)
         });
         if inside {
             rows1.extend(i1);
