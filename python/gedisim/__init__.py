@@ -300,26 +300,11 @@ def l2a(
     algorithms = [algorithm] if isinstance(algorithm, int) else list(algorithm)
     shots = _table(waveforms)
     if shots is not None:
-        table = _native.l2a_table(shots, algorithms)
-        if out is not None:
-            _write_atomic(table, os.fspath(out))
-        return table
+        return _native.l2a_table(shots, algorithms, None if out is None else os.fspath(out))
     with tempfile.TemporaryDirectory(prefix="gedisim-") as tmp:
         target = os.fspath(out) if out is not None else os.path.join(tmp, "l2a.parquet")
         _native.l2a(os.fspath(waveforms), algorithms, target)
         return pq.read_table(target)
-
-
-def _write_atomic(table: pa.Table, path: str) -> None:
-    """``table`` as the Parquet file ``path``, written under a unique temporary name beside it and renamed."""
-    fd, tmp = tempfile.mkstemp(prefix=".gedisim-", suffix=".parquet.tmp", dir=os.path.dirname(path) or ".")
-    os.close(fd)
-    try:
-        pq.write_table(table, tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
 
 
 def rh(table: pa.Table, *percentiles: int, column: str = "rh") -> pa.Table:

@@ -253,17 +253,22 @@ fn l2a(py: Python<'_>, l1b: String, algorithms: Vec<u8>, out: String) -> PyResul
     Ok((r.shots, r.rows, r.warnings))
 }
 
-/// l2a_table(shots, algorithms) -> pyarrow.Table: the rows `gedisim l2a` writes, from a table
-/// with the L1B columns of `shots/` instead of a granule.
+/// l2a_table(shots, algorithms, out) -> pyarrow.Table: the rows `gedisim l2a` writes, from a table
+/// with the L1B columns of `shots/` instead of a granule; also written to `out` when given.
 #[pyfunction]
+#[pyo3(signature = (shots, algorithms, out=None))]
 fn l2a_table(
     py: Python<'_>,
     shots: PyArrowType<ArrowArrayStreamReader>,
     algorithms: Vec<u8>,
+    out: Option<String>,
 ) -> PyResult<PyArrowType<Table>> {
     let what = "waveforms (shots table)";
     let input = batches(shots.0, what)?;
-    let rows = py.detach(|| gedisim::ops::l2a::l2a_of_shots(&input, &algorithms, Path::new(what))).map_err(py_err)?;
+    let out = out.map(PathBuf::from);
+    let rows = py
+        .detach(|| gedisim::ops::l2a::l2a_of_shots(&input, &algorithms, Path::new(what), out.as_deref()))
+        .map_err(py_err)?;
     Table::try_new(rows, gedisim::dataset::l2a::l2a_schema())
         .map(PyArrowType)
         .map_err(|e| GedisimError::new_err(e.to_string()))

@@ -31,7 +31,7 @@ pub struct L2aReport {
 /// Run the GEDI `algorithms` (1..6) on every waveform of `l1b` into `out` (atomically).
 pub fn l2a(l1b: &Path, algorithms: &[u8], out: &Path) -> Result<L2aReport> {
     let settings = algorithm_settings(algorithms)?;
-    let mut writer = AtomicParquet::create(out, l2a_schema(), writer_properties(&Default::default(), 1 << 16))?;
+    let mut writer = l2a_writer(out)?;
     let mut rows = 0;
     let report = ingest_gedi(std::slice::from_ref(&l1b.to_path_buf()), &[], &GediOptions::default(), |shots| {
         let batch = l2a_batch(&shots, &settings, l1b)?;
@@ -46,11 +46,31 @@ pub fn l2a(l1b: &Path, algorithms: &[u8], out: &Path) -> Result<L2aReport> {
 /// columns of `shots/` (docs/schemas.md: shot_number, beam, rx_waveform, the corrected noise
 /// statistics, the elevations and positions of the first and last samples), cast to their types;
 /// `source` names it in errors. Rows without `elevation_bin0` (no L1B) are skipped, as in [`l2a`].
-pub fn l2a_of_shots(shots: &[RecordBatch], algorithms: &[u8], source: &Path) -> Result<Vec<RecordBatch>> {
+/// With `out`, the rows are also written there as [`l2a`] writes them (atomically).
+pub fn l2a_of_shots(
+    shots: &[RecordBatch],
+    algorithms: &[u8],
+    source: &Path,
+    out: Option<&Path>,
+) -> Result<Vec<RecordBatch>> {
     let settings = algorithm_settings(algorithms)?;
     // The columns' types (the EPSG code only names the CRS of x, y in the schema's metadata).
     let schema = shots_schema(0);
-    shots.iter().map(|b| l2a_batch(&cast_columns(source, b, &schema, &L1B_COLUMNS, &[])?, &settings, source)).collect()
+    let rows = shots
+        .iter()
+        .map(|b| l2a_batch(&cast_columns(source, b, &schema, &L1B_COLUMNS, &[])?, &settings, source))
+        .collect::<Result<Vec<_>>>()?;
+    if let Some(out) = out {
+        let mut writer = l2a_writer(out)?;
+        rows.iter().try_for_each(|b| writer.write(b))?;
+        writer.finish()?;
+    }
+    Ok(rows)
+}
+
+/// The `l2a` file `out`, written under a temporary name until it is finished.
+fn l2a_writer(out: &Path) -> Result<AtomicParquet> {
+    AtomicParquet::create(out, l2a_schema(), writer_properties(&Default::default(), 1 << 16))
 }
 
 /// The `--algorithms`' settings, each algorithm once.
