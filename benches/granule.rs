@@ -268,7 +268,8 @@ fn many_runs(n: usize, f1: &Path, f2: &Path) {
         for (runs, file) in [(1, &single), (RUNS, &within)] {
             cold_cache();
             let (w, m, r, err) = ingest_with(exe, f1, f2, &["--within", common::s(file)]);
-            let kept = err.lines().find(|l| l.contains("kept within")).unwrap_or_default().trim().to_string();
+            let kept = err.lines().find(|l| l.contains("kept within")).and_then(|l| l.split_whitespace().next());
+            let kept = kept.unwrap_or("?");
             println!("| {name} | {runs} | {w:.2} | {m:.0} | {r:.0} | {kept} |");
         }
     }

@@ -299,10 +299,16 @@ impl BeamGroup<'_> {
     /// A required coordinate (degrees): NaN or a value beyond `limit` is an error naming the shot.
     pub fn coordinates(&self, rel: &str, limit: f64, shot_number: &[u64]) -> Result<Vec<f64>> {
         let v = self.require::<f64>(rel, Shape::PerShot)?;
-        if let Some((i, x)) = v.iter().enumerate().find(|(_, x)| !(x.is_finite() && x.abs() <= limit)) {
-            return Err(self.err(rel, format!("shot {}: invalid coordinate {x}", shot_number[i])));
-        }
+        self.check_coordinates(rel, &v, limit, |i| shot_number[i])?;
         Ok(v)
+    }
+
+    /// Refuse a NaN or a value beyond `limit` in coordinates `v`, naming the shot (`shot(i)`).
+    fn check_coordinates(&self, rel: &str, v: &[f64], limit: f64, shot: impl Fn(usize) -> u64) -> Result<()> {
+        match v.iter().enumerate().find(|(_, x)| !(x.is_finite() && x.abs() <= limit)) {
+            Some((i, x)) => Err(self.err(rel, format!("shot {}: invalid coordinate {x}", shot(i)))),
+            None => Ok(()),
+        }
     }
 }
 
@@ -446,26 +452,27 @@ pub fn read_l1b(g: &BeamGroup) -> Result<L1bBeam> {
     })
 }
 
-/// The cheap per-shot datasets that place the shots of an L1B beam (read for every shot, before
-/// the rest is read for the shots kept): shot numbers and the bin0/lastbin coordinates.
-pub struct L1bPlaces {
-    pub shot_number: Vec<u64>,
-    pub lat_bin0: Vec<f64>,
-    pub lon_bin0: Vec<f64>,
-    pub lat_lastbin: Vec<f64>,
-    pub lon_lastbin: Vec<f64>,
-}
-
-pub fn read_l1b_places(g: &BeamGroup) -> Result<L1bPlaces> {
-    let shot_number = g.shot_numbers()?;
-    let coord = |rel: &str, limit: f64| g.coordinates(rel, limit, &shot_number);
-    Ok(L1bPlaces {
-        lat_bin0: coord("geolocation/latitude_bin0", 90.0)?,
-        lon_bin0: coord("geolocation/longitude_bin0", 360.0)?,
-        lat_lastbin: coord("geolocation/latitude_lastbin", 90.0)?,
-        lon_lastbin: coord("geolocation/longitude_lastbin", 360.0)?,
-        shot_number,
-    })
+/// The bin0 and lastbin coordinates (`[lat_bin0, lon_bin0, lat_lastbin, lon_lastbin]`) of the L1B
+/// rows `rows` (sorted, distinct), in their order: the place of a shot without a valid L2A lowest
+/// mode. Only the chunks that hold those rows are inflated, so a beam whose shots L2A places
+/// costs none of these four datasets (`shot_number`: the beam's, to name a bad shot).
+pub fn read_l1b_bins(g: &BeamGroup, rows: &[usize], shot_number: &[u64]) -> Result<Vec<[f64; 4]>> {
+    let runs = runs_of(rows);
+    let read = |rel: &str, limit: f64| -> Result<Vec<f64>> {
+        let ds = g.require_dataset(rel)?;
+        g.check_shape(rel, &ds, Shape::PerShot)?;
+        let mut v = Vec::with_capacity(rows.len());
+        for r in &runs {
+            v.extend(g.read_range::<f64>(rel, &ds, r.clone())?);
+        }
+        g.check_coordinates(rel, &v, limit, |k| shot_number[rows[k]])?;
+        Ok(v)
+    };
+    let lat0 = read("geolocation/latitude_bin0", 90.0)?;
+    let lon0 = read("geolocation/longitude_bin0", 360.0)?;
+    let lat1 = read("geolocation/latitude_lastbin", 90.0)?;
+    let lon1 = read("geolocation/longitude_lastbin", 360.0)?;
+    Ok((0..rows.len()).map(|k| [lat0[k], lon0[k], lat1[k], lon1[k]]).collect())
 }
 
 /// The cheap per-shot datasets that place the shots of an L2A beam: shot numbers and the lowest

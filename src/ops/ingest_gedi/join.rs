@@ -1,7 +1,7 @@
 //! Compute: one beam's L1B and L2A joined on `shot_number` into rows (a shot on one side only kept,
 //! with nulls), each placed (L2A lowest mode, else L1B bin0/lastbin), duplicates refused.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -130,17 +130,52 @@ impl ShotOwners {
     }
 }
 
-pub(super) fn duplicate_check(path: Option<&Path>, beam: &str, shots: &[u64]) -> Result<()> {
-    let mut sorted = shots.to_vec();
-    sorted.sort_unstable();
-    if let Some(w) = sorted.windows(2).find(|w| w[0] == w[1]) {
+/// One shot of a beam: its number and its row on each side.
+pub(super) type Paired = (u64, Option<usize>, Option<usize>);
+
+/// The two sides' rows paired by shot number, in shot-number order; a shot number twice on one
+/// side is refused. GEDI writes a beam's shots in along-track order, so the shot numbers are
+/// increasing and this is a merge (no hashing: it ran through every shot of a full granule); a
+/// side out of order is sorted first.
+pub(super) fn pair_by_shot(
+    pair: &GranulePair,
+    beam: &str,
+    l1b: Option<&[u64]>,
+    l2a: Option<&[u64]>,
+) -> Result<Vec<Paired>> {
+    let order1 = l1b.map(|s| shot_order(pair.l1b.as_deref(), beam, s)).transpose()?.unwrap_or_default();
+    let order2 = l2a.map(|s| shot_order(pair.l2a.as_deref(), beam, s)).transpose()?.unwrap_or_default();
+    let (s1, s2) = (l1b.unwrap_or_default(), l2a.unwrap_or_default());
+    let mut out = Vec::with_capacity(order1.len().max(order2.len()));
+    let (mut a, mut b) = (order1.iter().copied().peekable(), order2.iter().copied().peekable());
+    loop {
+        let next = match (a.peek(), b.peek()) {
+            (Some(&i), Some(&j)) if s1[i] == s2[j] => (s1[i], a.next(), b.next()),
+            (Some(&i), Some(&j)) if s1[i] < s2[j] => (s1[i], a.next(), None),
+            (Some(&i), None) => (s1[i], a.next(), None),
+            (_, Some(&j)) => (s2[j], None, b.next()),
+            (None, None) => return Ok(out),
+        };
+        out.push(next);
+    }
+}
+
+/// The rows of one side in shot-number order (themselves when already increasing); a shot number
+/// seen twice is refused, naming the file and the beam's dataset.
+fn shot_order(path: Option<&Path>, beam: &str, shots: &[u64]) -> Result<Vec<usize>> {
+    let mut order: Vec<usize> = (0..shots.len()).collect();
+    if shots.windows(2).all(|w| w[0] < w[1]) {
+        return Ok(order);
+    }
+    order.sort_unstable_by_key(|&i| shots[i]);
+    if let Some(w) = order.windows(2).find(|w| shots[w[0]] == shots[w[1]]) {
         return Err(Error::field(
             path.unwrap_or(Path::new("")),
             format!("{beam}/shot_number"),
-            format!("duplicate shot {}", w[0]),
+            format!("duplicate shot {}", shots[w[0]]),
         ));
     }
-    Ok(())
+    Ok(order)
 }
 
 /// Join the two sides on shot_number (rows sorted by shot number) and project every row.
@@ -153,24 +188,12 @@ pub(super) fn join(
     projector: &Projector,
     report: &mut BeamReport,
 ) -> Result<Vec<Row>> {
-    let mut by_shot: BTreeMap<u64, (Option<usize>, Option<usize>)> = BTreeMap::new();
-    if let Some(b) = l1b {
-        duplicate_check(pair.l1b.as_deref(), beam, &b.shot_number)?;
-        for (i, &s) in b.shot_number.iter().enumerate() {
-            by_shot.entry(s).or_default().0 = Some(i);
-        }
-        report.l1b_shots = b.shot_number.len();
-    }
-    if let Some(b) = l2a {
-        duplicate_check(pair.l2a.as_deref(), beam, &b.shot_number)?;
-        for (i, &s) in b.shot_number.iter().enumerate() {
-            by_shot.entry(s).or_default().1 = Some(i);
-        }
-        report.l2a_shots = b.shot_number.len();
-    }
+    let by_shot = pair_by_shot(pair, beam, l1b.map(|b| &b.shot_number[..]), l2a.map(|b| &b.shot_number[..]))?;
+    report.l1b_shots = l1b.map_or(0, |b| b.shot_number.len());
+    report.l2a_shots = l2a.map_or(0, |b| b.shot_number.len());
 
     let mut rows = Vec::with_capacity(by_shot.len());
-    for (shot_number, (i1, i2)) in by_shot {
+    for (shot_number, i1, i2) in by_shot {
         match (i1, i2) {
             (Some(_), Some(_)) => report.joined += 1,
             // A one-sided shot is an anomaly only when the other product's file was given.
@@ -229,4 +252,43 @@ pub(super) fn join(
         }
     }
     Ok(rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pair() -> GranulePair {
+        GranulePair { granule: "g".into(), l1b: Some("a_L1B.h5".into()), l2a: Some("a_L2A.h5".into()) }
+    }
+
+    #[test]
+    fn pairs_by_shot_number_in_order_whatever_order_the_sides_are_in() {
+        let l1b = [10, 20, 30, 40];
+        let l2a = [40, 5, 20, 35];
+        let got = pair_by_shot(&pair(), "BEAM0000", Some(&l1b), Some(&l2a)).unwrap();
+        let want = vec![
+            (5, None, Some(1)),
+            (10, Some(0), None),
+            (20, Some(1), Some(2)),
+            (30, Some(2), None),
+            (35, None, Some(3)),
+            (40, Some(3), Some(0)),
+        ];
+        assert_eq!(got, want);
+        // One side only, and no side.
+        let got = pair_by_shot(&pair(), "BEAM0000", None, Some(&l2a)).unwrap();
+        assert_eq!(got.iter().map(|p| p.0).collect::<Vec<_>>(), [5, 20, 35, 40]);
+        assert!(got.iter().all(|p| p.1.is_none()));
+        assert!(pair_by_shot(&pair(), "BEAM0000", None, None).unwrap().is_empty());
+    }
+
+    #[test]
+    fn a_shot_twice_on_one_side_is_refused_naming_the_file() {
+        for (l1b, l2a, file) in [([1, 2, 2, 3], [1, 2, 3, 4], "a_L1B.h5"), ([1, 2, 3, 4], [3, 1, 4, 3], "a_L2A.h5")] {
+            let e = pair_by_shot(&pair(), "BEAM0101", Some(&l1b), Some(&l2a)).unwrap_err().to_string();
+            assert!(e.contains(file) && e.contains("BEAM0101/shot_number"), "{e}");
+            assert!(e.contains(&format!("duplicate shot {}", if file == "a_L1B.h5" { 2 } else { 3 })), "{e}");
+        }
+    }
 }

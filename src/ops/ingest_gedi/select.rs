@@ -3,14 +3,12 @@
 //! ([`ShotArea`](crate::kernels::geo::area::ShotArea), indexed) kept, and only their runs are read of
 //! every other dataset, waveforms included (`BeamGroup::select`).
 
-use std::collections::HashMap;
-
 use crate::error::Result;
-use crate::io::gedi::{read_l1b_places, read_l2a_places, runs_of, valid_lowestmode, BeamGroup, Runs};
+use crate::io::gedi::{read_l1b_bins, read_l2a_places, runs_of, valid_lowestmode, BeamGroup, Runs};
 use crate::kernels::geo::area::AreaIndex;
 use crate::kernels::geo::projection::Projector;
 
-use super::join::{duplicate_check, position};
+use super::join::{pair_by_shot, position};
 use super::GranulePair;
 
 /// The shots of one beam inside the area: the runs of each side's rows to read.
@@ -24,7 +22,8 @@ pub(super) struct Kept {
 
 /// Place every shot of the beam as its row will be placed (L2A lowest mode, else the L1B bin mean)
 /// and keep those inside `area`. A shot without a valid position, or that cannot be projected
-/// when the area needs its projected position, is outside.
+/// when the area needs its projected position, is outside. The L1B bins are read only for the
+/// shots that need them (no valid lowest mode).
 pub(super) fn kept(
     pair: &GranulePair,
     beam: &str,
@@ -33,27 +32,27 @@ pub(super) fn kept(
     area: &AreaIndex,
     projector: &Projector,
 ) -> Result<Kept> {
-    let p1 = l1b.map(read_l1b_places).transpose()?;
+    let sn1 = l1b.map(|g| g.shot_numbers()).transpose()?;
     let p2 = l2a.map(read_l2a_places).transpose()?;
-    let mut by_shot: HashMap<u64, (Option<usize>, Option<usize>)> = HashMap::new();
-    if let Some(p) = &p1 {
-        duplicate_check(pair.l1b.as_deref(), beam, &p.shot_number)?;
-        for (i, &s) in p.shot_number.iter().enumerate() {
-            by_shot.entry(s).or_default().0 = Some(i);
-        }
-    }
-    if let Some(p) = &p2 {
-        duplicate_check(pair.l2a.as_deref(), beam, &p.shot_number)?;
-        for (i, &s) in p.shot_number.iter().enumerate() {
-            by_shot.entry(s).or_default().1 = Some(i);
-        }
-    }
+    let by_shot = pair_by_shot(pair, beam, sn1.as_deref(), p2.as_ref().map(|p| &p.shot_number[..]))?;
+    let lowest = |i2: Option<usize>| {
+        let (p, i) = p2.as_ref().zip(i2)?;
+        valid_lowestmode(p.lat_lowestmode.as_ref().map(|v| v[i]), p.lon_lowestmode.as_ref().map(|v| v[i]))
+    };
+    let mut need_bins: Vec<usize> =
+        by_shot.iter().filter(|&&(_, i1, i2)| i1.is_some() && lowest(i2).is_none()).filter_map(|p| p.1).collect();
+    need_bins.sort_unstable();
+    let bins = match (l1b, &sn1) {
+        (Some(g), Some(sn)) if !need_bins.is_empty() => read_l1b_bins(g, &need_bins, sn)?,
+        _ => Vec::new(),
+    };
     let (mut rows1, mut rows2, mut inside_n, mut outside) = (Vec::new(), Vec::new(), 0, 0);
-    for (i1, i2) in by_shot.into_values() {
-        let lowest = p2.as_ref().zip(i2).and_then(|(p, i)| {
-            valid_lowestmode(p.lat_lowestmode.as_ref().map(|v| v[i]), p.lon_lowestmode.as_ref().map(|v| v[i]))
-        });
-        let bins = p1.as_ref().zip(i1).map(|(p, i)| [p.lat_bin0[i], p.lon_bin0[i], p.lat_lastbin[i], p.lon_lastbin[i]]);
+    for (_, i1, i2) in by_shot {
+        let lowest = lowest(i2);
+        let bins = match (lowest, i1) {
+            (None, Some(i)) => need_bins.binary_search(&i).ok().map(|k| bins[k]),
+            _ => None,
+        };
         let inside = position(lowest, bins).is_some_and(|(lat, lon, _)| {
             let xy = if area.needs_xy() { projector.project(lon, lat).ok() } else { None };
             area.contains(lon, lat, xy)
