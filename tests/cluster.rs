@@ -313,8 +313,9 @@ fn run_on_the_cluster_writes_the_local_results() {
     let args = run_args(&w.root, &out, Some(&cluster.url));
     let (ok, _, err) = gedisim(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(ok, "{err}");
-    // The collocation (one offsets file, a partition per granule) and the simulation (a file per granule).
-    for (table, files) in [("offsets", 1), ("sim", 6), ("results", 6)] {
+    // The ingest of the granules (a shots file and a record per granule, read on the executors), the
+    // collocation (one offsets file, a partition per granule) and the simulation (a file per granule).
+    for (table, files) in [("shots", 6), ("granules", 6), ("offsets", 1), ("sim", 6), ("results", 6)] {
         let (l, r) = (table_files(&w.local, table), table_files(&out, table));
         assert!(l.len() >= files, "{table}: {} files", l.len());
         assert!(l.iter().map(|f| f.1[0].num_rows()).sum::<usize>() > 0, "{table}: no rows");
@@ -325,8 +326,11 @@ fn run_on_the_cluster_writes_the_local_results() {
             assert_eq!(l.2, r.2, "{table}/{}: metadata", l.0);
         }
     }
-    // The collocation and the simulation ran as jobs of tasks on the executors.
-    assert!(jobs_run(&cluster.logs).len() >= 2, "{:?}", jobs_run(&cluster.logs));
+    // The ingest, the collocation and the simulation ran as jobs of tasks on the executors.
+    assert!(jobs_run(&cluster.logs).len() >= 3, "{:?}", jobs_run(&cluster.logs));
+    // Nothing staged was left behind.
+    let left: Vec<_> = std::fs::read_dir(out.join("shots")).unwrap().flatten().map(|e| e.file_name()).collect();
+    assert!(left.iter().all(|n| n.to_string_lossy().ends_with(".parquet")), "{left:?}");
 }
 
 /// The Ballista jobs whose tasks the executors of `logs` ran (`Execute task … [TID <job>/…]`).

@@ -60,6 +60,12 @@ pub struct IngestGediArgs {
     strict_join: bool,
     #[command(flatten)]
     shots: ShotArgs,
+    /// Read the granules on the Ballista cluster whose scheduler is at this address (`gedisim
+    /// cluster`): one plan, a partition per granule, each executor writing its granule's shots; this
+    /// process checks and commits them. Every node must see the granules and the dataset at the same
+    /// paths.
+    #[arg(long, value_name = "df://HOST:PORT")]
+    cluster: Option<String>,
 }
 
 /// Which shots of the granules an ingest keeps (docs/gedi-products.md, "Shots kept").
@@ -172,6 +178,7 @@ pub fn ingest_gedi(a: IngestGediArgs) -> Result<()> {
         shots: a.shots.choice()?,
         als_inputs: Vec::new(),
         margin_m: als::run_window_half(CollocateOptions::default().max_shift),
+        engine: a.cluster.map(gedisim::ops::ingest_gedi::Engine::Cluster).unwrap_or_default(),
     };
     let (outcomes, report) = gedisim::ops::ingest_gedi::ingest(&ds, &a.l1b, &a.l2a, &request, &Bars::new())?;
     for w in report.warnings() {

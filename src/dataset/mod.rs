@@ -344,15 +344,34 @@ impl AtomicParquet {
     }
 
     /// Write the footer, sync, and rename into place.
-    pub fn finish(mut self) -> Result<PathBuf> {
+    pub fn finish(self) -> Result<PathBuf> {
+        let dest = self.dest.clone();
+        let tmp = self.finish_staged()?;
+        place(&tmp, &dest, Ok(()))?;
+        Ok(dest)
+    }
+
+    /// Write the footer and sync, but leave the file under its temporary name (not a table file:
+    /// no reader sees it), for another process to put in place with [`place_staged`]: a cluster's
+    /// executor writes, the client commits. Returns the temporary name.
+    pub fn finish_staged(mut self) -> Result<PathBuf> {
         let file = match self.writer.take().expect("writer is present until finish") {
             Writer::Buffered(w) => w.into_inner(),
             Writer::RowGroups(w, _) => w.into_inner(),
         }
-        .map_err(|e| Error::table(&self.dest, e))?;
-        place(&self.tmp, &self.dest, file.sync_all().map_err(|e| Error::file(&self.tmp, e)))?;
-        Ok(self.dest.clone())
+        .map_err(|e| Error::table(&self.dest, e));
+        let synced = file.and_then(|f| f.sync_all().map_err(|e| Error::file(&self.tmp, e)));
+        if synced.is_err() {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+        synced.map(|_| self.tmp.clone())
     }
+}
+
+/// Put a file [`AtomicParquet::finish_staged`] left at `staged` in place at `dest` (a rename; the
+/// staged file is removed if that fails).
+pub fn place_staged(staged: &Path, dest: &Path) -> Result<()> {
+    place(staged, dest, Ok(()))
 }
 
 impl Drop for AtomicParquet {

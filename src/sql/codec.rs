@@ -28,6 +28,7 @@ use crate::kernels::collocate::segments::Level;
 use crate::kernels::sim::{Footprint, Profile, PulseModel, PulseReference};
 use crate::sql::collocate::{CollocateExec, CollocatedGranules};
 use crate::sql::collocation::CollocateOptions;
+use crate::sql::ingest::{IngestExec, IngestedGranules};
 use crate::sql::simulate::{FootprintPartition, Footprints, SimulateExec, SimulateWork, SimulatedShots};
 
 /// What starts an encoded simulation (Ballista's own nodes are protobuf messages, which never start
@@ -35,6 +36,8 @@ use crate::sql::simulate::{FootprintPartition, Footprints, SimulateExec, Simulat
 const SIMULATE: &[u8] = b"gedisim/simulate/1\n";
 /// What starts an encoded collocation.
 const COLLOCATE: &[u8] = b"gedisim/collocate/1\n";
+/// What starts an encoded GEDI ingest.
+const INGEST: &[u8] = b"gedisim/ingest/1\n";
 
 /// A plan's partition count and projection, when the node is a plan rather than a table.
 #[derive(Serialize, Deserialize)]
@@ -82,6 +85,16 @@ struct WireCollocation {
     step: u64,
     min_segment: usize,
     pulse: WirePulse,
+    exec: Option<WireExec>,
+}
+
+/// An [`IngestedGranules`] as sent (its request and jobs are the operations layer's JSON, which names
+/// the granule files by absolute path: every node sees them there).
+#[derive(Serialize, Deserialize)]
+struct WireIngest {
+    dataset: PathBuf,
+    request: String,
+    jobs: Vec<(String, String)>,
     exec: Option<WireExec>,
 }
 
@@ -235,6 +248,25 @@ fn decode_collocation(buf: &[u8]) -> Option<DfResult<(CollocatedGranules, Option
     }))
 }
 
+fn encode_ingest(granules: &IngestedGranules, exec: Option<WireExec>, buf: &mut Vec<u8>) -> DfResult<()> {
+    let wire = WireIngest {
+        dataset: shared_path(granules.dataset.root())?,
+        request: granules.request.clone(),
+        jobs: granules.jobs.clone(),
+        exec,
+    };
+    frame(INGEST, &wire, buf)
+}
+
+/// The [`IngestedGranules`] and plan details of `buf`, if it is an encoded ingest.
+fn decode_ingest(buf: &[u8]) -> Option<DfResult<(IngestedGranules, Option<WireExec>)>> {
+    let wire = unframe::<WireIngest>(INGEST, buf)?;
+    Some(wire.and_then(|w| {
+        let dataset = open_dataset(&w.dataset, "GEDI ingest")?;
+        Ok((IngestedGranules::new(dataset, w.request, w.jobs), w.exec))
+    }))
+}
+
 /// Ballista's logical codec, and gedisim's tables.
 #[derive(Debug, Default)]
 pub struct LogicalCodec(BallistaLogicalExtensionCodec);
@@ -261,6 +293,9 @@ impl LogicalExtensionCodec for LogicalCodec {
         if let Some(decoded) = decode_collocation(buf) {
             return Ok(Arc::new(decoded?.0));
         }
+        if let Some(decoded) = decode_ingest(buf) {
+            return Ok(Arc::new(decoded?.0));
+        }
         self.0.try_decode_table_provider(buf, table_ref, schema, ctx)
     }
 
@@ -275,6 +310,9 @@ impl LogicalExtensionCodec for LogicalCodec {
         }
         if let Some(granules) = node.downcast_ref::<CollocatedGranules>() {
             return encode_collocation(granules, None, buf);
+        }
+        if let Some(granules) = node.downcast_ref::<IngestedGranules>() {
+            return encode_ingest(granules, None, buf);
         }
         self.0.try_encode_table_provider(table_ref, node, buf)
     }
@@ -310,6 +348,14 @@ impl PhysicalExtensionCodec for PhysicalCodec {
             }
             return Ok(Arc::new(CollocateExec::with_input(granules, exec.projection, input)?));
         }
+        if let Some(decoded) = decode_ingest(buf) {
+            let (granules, exec) = decoded?;
+            let (exec, input) = plan(exec)?;
+            if exec.partitions != granules.jobs.len() {
+                return exec_err!("GEDI ingest: {} partitions for {} granules", exec.partitions, granules.jobs.len());
+            }
+            return Ok(Arc::new(IngestExec::with_input(granules, exec.projection, input)?));
+        }
         self.0.try_decode(buf, inputs, ctx, proto_converter)
     }
 
@@ -326,6 +372,10 @@ impl PhysicalExtensionCodec for PhysicalCodec {
         if let Some(exec) = node.downcast_ref::<CollocateExec>() {
             let wire = WireExec { partitions: exec.work.files.len(), projection: exec.projection.clone() };
             return encode_collocation(&exec.work, Some(wire), buf);
+        }
+        if let Some(exec) = node.downcast_ref::<IngestExec>() {
+            let wire = WireExec { partitions: exec.work.jobs.len(), projection: exec.projection.clone() };
+            return encode_ingest(&exec.work, Some(wire), buf);
         }
         self.0.try_encode(node, buf, proto_converter)
     }
@@ -403,9 +453,24 @@ mod tests {
     }
 
     #[test]
+    fn an_ingest_travels_with_its_request_and_jobs_as_given() {
+        let dir = tempfile::tempdir().unwrap();
+        let ds = Dataset::create(&dir.path().join("ds")).unwrap();
+        let jobs = vec![("k1".to_string(), "{\"a\": 0.30000000000000004}".to_string()), ("k2".into(), "{}".into())];
+        let granules = IngestedGranules::new(ds, "{\"epsg\": 2154}".into(), jobs.clone());
+        let mut buf = Vec::new();
+        encode_ingest(&granules, Some(WireExec { partitions: 2, projection: None }), &mut buf).unwrap();
+        assert!(decode_collocation(&buf).is_none() && decode_simulation(&buf).is_none());
+        let (back, exec) = decode_ingest(&buf).unwrap().unwrap();
+        assert_eq!(exec.map(|e| e.partitions), Some(2));
+        assert_eq!((back.request.as_str(), back.jobs), ("{\"epsg\": 2154}", jobs));
+    }
+
+    #[test]
     fn other_nodes_are_not_taken_for_gedisim_ones() {
         assert!(decode_simulation(b"\x0a\x04gedi").is_none());
         assert!(decode_collocation(b"\x0a\x04gedi").is_none());
+        assert!(decode_ingest(b"\x0a\x04gedi").is_none());
         let mut buf = SIMULATE.to_vec();
         buf.extend_from_slice(b"{\"dataset\": 1}");
         assert!(decode_simulation(&buf).unwrap().is_err());

@@ -7,6 +7,7 @@ pub mod blocks;
 pub mod codec;
 pub mod collocate;
 pub mod collocation;
+pub mod ingest;
 pub mod l2a;
 pub mod link_margin_twin;
 pub mod noise_twin;

@@ -42,6 +42,8 @@ pub struct IngestRequest {
     /// Margin (m) around each tile extent: the collocation's search and the footprint's reach
     /// ([`crate::ops::ingest_als::run_window_half`]).
     pub margin_m: f64,
+    /// Where granules are read: here, or a partition each on a cluster (`run --cluster`).
+    pub engine: crate::sql::Engine,
 }
 
 /// `gedisim ingest gedi`: the granules of `l1b` and `l2a` (files, or folders expanded) into
@@ -75,7 +77,7 @@ pub fn ingest(
     let (area, called) = request.shots.area(dataset, &request.als_inputs, request.margin_m)?;
     let opts = GediOptions { epsg, geoid_offset: request.geoid_offset, strict_join: request.strict_join, area };
     progress.start(Step::IngestGedi, pair_granules(&l1b, &l2a)?.0.len() as u64);
-    let r = ingest_into_dataset(dataset, &l1b, &l2a, &opts, progress);
+    let r = ingest_into_dataset(dataset, &l1b, &l2a, &opts, &request.engine, progress);
     progress.finish();
     let (outcomes, mut report) = r?;
     if let Some(called) = called {
@@ -97,16 +99,18 @@ pub const DEFAULT_EPSG: u32 = 2154;
 /// Ingest L1B/L2A files into `<dataset>/shots/` (one file per granule, `<granule_key>.parquet`)
 /// and `<dataset>/granules/`. A granule whose files have the same content hashes as at its last
 /// ingest is skipped; one whose files changed (e.g. its L2A arrived later) is rewritten.
-/// Granules are processed in parallel; `progress` advances by one after each.
+/// Granules are read in parallel here, or a partition each on a cluster (`engine`: each executor
+/// writes a granule's shots under a temporary name, this process checks and commits them);
+/// `progress` advances by one after each.
 pub fn ingest_into_dataset(
     dataset: &crate::dataset::Dataset,
     l1b: &[PathBuf],
     l2a: &[PathBuf],
     opts: &GediOptions,
+    engine: &crate::sql::Engine,
     progress: &dyn Progress,
 ) -> Result<(Vec<GranuleOutcome>, IngestReport)> {
-    use crate::dataset::{self, tables, AtomicParquet};
-    use arrow::array::{StringArray, UInt64Array};
+    use crate::dataset::{self, tables};
 
     let dataset = &dataset.as_writer()?;
     let (pairs, notes) = pair_granules(l1b, l2a)?;
@@ -131,23 +135,18 @@ pub fn ingest_into_dataset(
         }
     }
     let duplicate = copies_of_other_granules(&pairs, &keyed, &recorded)?;
-    let owners = ShotOwners::read(&shots_dir)?;
-    let results = pairs
-        .par_iter()
-        .zip(keyed)
-        .zip(duplicate)
-        .map(|((pair, (key, h1, h2)), duplicate)| -> Result<(GranuleOutcome, Vec<BeamReport>)> {
-            let record = granules_dir.join(format!("{key}.parquet"));
-            let previous = recorded.get(&key).cloned();
-            // A side the granule had and this call lacks would be lost by a rewrite: unchanged
-            // given sides are nothing new; changed ones need both files.
-            let same = |new: &Option<String>, old: &Option<String>| new.is_none() || new == old;
-            if let Some((p1, p2)) = &previous {
-                if (p1.is_some() && h1.is_none()) || (p2.is_some() && h2.is_none()) {
-                    if same(&h1, p1) && same(&h2, p2) {
-                        progress.advance(1);
-                        return Ok((GranuleOutcome::AlreadyIngested { granule: pair.granule.clone() }, Vec::new()));
-                    }
+    // Each pair skipped (already ingested) or a job to read.
+    let mut outcomes: Vec<Option<GranuleOutcome>> = Vec::with_capacity(pairs.len());
+    let mut jobs = Vec::new();
+    for ((pair, (key, h1, h2)), duplicate) in pairs.into_iter().zip(keyed).zip(duplicate) {
+        let previous = recorded.get(&key).cloned();
+        // A side the granule had and this call lacks would be lost by a rewrite: unchanged
+        // given sides are nothing new; changed ones need both files.
+        let same = |new: &Option<String>, old: &Option<String>| new.is_none() || new == old;
+        let mut skip = duplicate;
+        if let Some((p1, p2)) = &previous {
+            if (p1.is_some() && h1.is_none()) || (p2.is_some() && h2.is_none()) {
+                if !(same(&h1, p1) && same(&h2, p2)) {
                     let (given, missing) = if h1.is_none() { ("L2A", "L1B") } else { ("L1B", "L2A") };
                     let file = pair.l1b.as_ref().or(pair.l2a.as_ref()).expect("a pair has a file");
                     return Err(Error::file(
@@ -158,54 +157,123 @@ pub fn ingest_into_dataset(
                         ),
                     ));
                 }
+                skip = true;
             }
-            // Read again with another area; but a granule read whole holds every shot the default
-            // (the tiles' coverage) asks for.
-            let area_read = recorded_area.get(&key).map(String::as_str);
-            let whole_for_tiles = matches!(opts.area, ShotArea::Tiles { .. }) && area_read == Some("all");
-            let same_area = area_read == Some(opts.area.key().as_str()) || whole_for_tiles;
-            if duplicate || (previous == Some((h1.clone(), h2.clone())) && same_area) {
-                progress.advance(1);
-                return Ok((GranuleOutcome::AlreadyIngested { granule: pair.granule.clone() }, Vec::new()));
-            }
-            let schema = shots_schema(opts.epsg);
-            let mut metadata = std::collections::HashMap::new();
-            metadata.insert(shots::meta::EPSG.to_string(), opts.epsg.to_string());
-            metadata.insert(shots::meta::VERTICAL.to_string(), VERTICAL_DATUM.to_string());
-            let props = dataset::writer_properties(&metadata, 1 << 16);
-            let mut writer = AtomicParquet::create(&shots_dir.join(format!("{key}.parquet")), schema, props)?;
-            let owner: Arc<str> = Arc::from(key.as_str());
-            let beams = read_granule(pair, opts, &mut |b| {
-                owners.claim(pair, &owner, &b)?;
-                writer.write(&b)
-            })?;
-            writer.finish()?;
-            let shots: usize = beams.iter().map(BeamReport::rows).sum();
-            let path = |p: &Option<PathBuf>| p.as_ref().map(|p| p.display().to_string());
-            let cols: Vec<arrow::array::ArrayRef> = vec![
-                Arc::new(StringArray::from(vec![pair.granule.clone()])),
-                Arc::new(StringArray::from(vec![key.clone()])),
-                Arc::new(StringArray::from(vec![path(&pair.l1b)])),
-                Arc::new(StringArray::from(vec![h1])),
-                Arc::new(StringArray::from(vec![path(&pair.l2a)])),
-                Arc::new(StringArray::from(vec![h2])),
-                Arc::new(UInt64Array::from(vec![shots as u64])),
-                Arc::new(StringArray::from(vec![opts.area.key()])),
-                Arc::new(UInt64Array::from(vec![beams.iter().map(|b| b.outside_area as u64).sum::<u64>()])),
-            ];
-            let batch = RecordBatch::try_new(granules_schema(), cols).map_err(|e| Error::table(&record, e))?;
-            dataset::write_parquet(&record, granules_schema(), &[batch], &metadata)?;
+        }
+        // Read again with another area; but a granule read whole holds every shot the default
+        // (the tiles' coverage) asks for.
+        let area_read = recorded_area.get(&key).map(String::as_str);
+        let whole_for_tiles = matches!(opts.area, ShotArea::Tiles { .. }) && area_read == Some("all");
+        let same_area = area_read == Some(opts.area.key().as_str()) || whole_for_tiles;
+        if skip || (previous == Some((h1.clone(), h2.clone())) && same_area) {
             progress.advance(1);
-            Ok((GranuleOutcome::Ingested { granule: pair.granule.clone(), shots }, beams))
-        })
-        .collect::<Result<Vec<_>>>()?;
-    let mut report = IngestReport { beams: Vec::new(), notes, area: opts.area.describe() };
-    let mut outcomes = Vec::new();
-    for (o, beams) in results {
-        outcomes.push(o);
-        report.beams.extend(beams);
+            outcomes.push(Some(GranuleOutcome::AlreadyIngested { granule: pair.granule.clone() }));
+        } else {
+            outcomes.push(None);
+            jobs.push(GranuleJob { pair, key, l1b_hash: h1, l2a_hash: h2 });
+        }
     }
+    let owners = ShotOwners::read(&shots_dir)?;
+    let commit = |job: &GranuleJob, staged: &Path, beams: &[BeamReport]| -> Result<GranuleOutcome> {
+        commit_granule(&shots_dir, &granules_dir, job, staged, beams, opts)
+    };
+    let read: Vec<(GranuleOutcome, Vec<BeamReport>)> = match engine {
+        crate::sql::Engine::Local => jobs
+            .par_iter()
+            .map(|job| {
+                let owner: Arc<str> = Arc::from(job.key.as_str());
+                let (staged, beams) =
+                    write_granule_shots(&shots_dir, job, opts, &|b| owners.claim(&job.pair, &owner, b))?;
+                let outcome = commit(job, &staged, &beams)?;
+                progress.advance(1);
+                Ok((outcome, beams))
+            })
+            .collect::<Result<_>>()?,
+        crate::sql::Engine::Cluster(_) => {
+            super::on_cluster::ingest_granules(engine, dataset, &jobs, opts, &owners, &commit, progress)?
+        }
+    };
+    let mut report = IngestReport { beams: Vec::new(), notes, area: opts.area.describe() };
+    let mut read = read.into_iter();
+    let outcomes = outcomes
+        .into_iter()
+        .map(|o| {
+            o.unwrap_or_else(|| {
+                let (outcome, beams) = read.next().expect("one result per job");
+                report.beams.extend(beams);
+                outcome
+            })
+        })
+        .collect();
     Ok((outcomes, report))
+}
+
+/// A granule an ingest reads: its files, key and content hashes.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GranuleJob {
+    pub pair: GranulePair,
+    pub key: String,
+    pub l1b_hash: Option<String>,
+    pub l2a_hash: Option<String>,
+}
+
+/// The shots of `job` read and written beside `shots/<key>.parquet` under a temporary name
+/// (complete, synced, not yet in place: [`commit_granule`] puts it there), each batch given to
+/// `check` before it is written. What a local ingest does per granule, and a cluster's executor.
+pub fn write_granule_shots(
+    shots_dir: &Path,
+    job: &GranuleJob,
+    opts: &GediOptions,
+    check: &(dyn Fn(&RecordBatch) -> Result<()> + Sync),
+) -> Result<(PathBuf, Vec<BeamReport>)> {
+    let props = crate::dataset::writer_properties(&shots_metadata(opts), 1 << 16);
+    let dest = shots_dir.join(format!("{}.parquet", job.key));
+    let mut writer = crate::dataset::AtomicParquet::create(&dest, shots_schema(opts.epsg), props)?;
+    let beams = read_granule(&job.pair, opts, &mut |b| {
+        check(&b)?;
+        writer.write(&b)
+    })?;
+    Ok((writer.finish_staged()?, beams))
+}
+
+/// The key-value metadata of a `shots/` file.
+fn shots_metadata(opts: &GediOptions) -> HashMap<String, String> {
+    HashMap::from([
+        (shots::meta::EPSG.to_string(), opts.epsg.to_string()),
+        (shots::meta::VERTICAL.to_string(), VERTICAL_DATUM.to_string()),
+    ])
+}
+
+/// Put a granule's shots, written at `staged` by [`write_granule_shots`], in place as
+/// `shots/<key>.parquet`, then write its record `granules/<key>.parquet`.
+fn commit_granule(
+    shots_dir: &Path,
+    granules_dir: &Path,
+    job: &GranuleJob,
+    staged: &Path,
+    beams: &[BeamReport],
+    opts: &GediOptions,
+) -> Result<GranuleOutcome> {
+    use arrow::array::{StringArray, UInt64Array};
+    let (pair, key) = (&job.pair, &job.key);
+    crate::dataset::place_staged(staged, &shots_dir.join(format!("{key}.parquet")))?;
+    let record = granules_dir.join(format!("{key}.parquet"));
+    let shots: usize = beams.iter().map(BeamReport::rows).sum();
+    let path = |p: &Option<PathBuf>| p.as_ref().map(|p| p.display().to_string());
+    let cols: Vec<arrow::array::ArrayRef> = vec![
+        Arc::new(StringArray::from(vec![pair.granule.clone()])),
+        Arc::new(StringArray::from(vec![key.clone()])),
+        Arc::new(StringArray::from(vec![path(&pair.l1b)])),
+        Arc::new(StringArray::from(vec![job.l1b_hash.clone()])),
+        Arc::new(StringArray::from(vec![path(&pair.l2a)])),
+        Arc::new(StringArray::from(vec![job.l2a_hash.clone()])),
+        Arc::new(UInt64Array::from(vec![shots as u64])),
+        Arc::new(StringArray::from(vec![opts.area.key()])),
+        Arc::new(UInt64Array::from(vec![beams.iter().map(|b| b.outside_area as u64).sum::<u64>()])),
+    ];
+    let batch = RecordBatch::try_new(granules_schema(), cols).map_err(|e| Error::table(&record, e))?;
+    crate::dataset::write_parquet(&record, granules_schema(), &[batch], &shots_metadata(opts))?;
+    Ok(GranuleOutcome::Ingested { granule: pair.granule.clone(), shots })
 }
 
 /// The content hashes of a granule's L1B and L2A files (either may be absent).

@@ -31,13 +31,20 @@ pub mod child;
 pub(crate) mod coverage;
 mod into_dataset;
 mod join;
+mod on_cluster;
 mod pairs;
 mod select;
 
+/// Where granules are read (`IngestRequest::engine`).
+pub use crate::sql::Engine;
 use batch::BatchContext;
 pub use coverage::ShotChoice;
-pub use into_dataset::{ingest, ingest_into_dataset, previous_record, GranuleOutcome, IngestRequest, DEFAULT_EPSG};
+pub use into_dataset::{
+    ingest, ingest_into_dataset, previous_record, write_granule_shots, GranuleJob, GranuleOutcome, IngestRequest,
+    DEFAULT_EPSG,
+};
 use join::join;
+pub use on_cluster::write_from_json;
 pub use pairs::{expand_granule_inputs, granule_key, pair_granules};
 
 /// Maximum rows per emitted batch (a beam larger than this is split).

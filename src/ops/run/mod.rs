@@ -369,6 +369,7 @@ fn ingest_gedi(
         shots: opts.shots.clone(),
         als_inputs: opts.als.clone(),
         margin_m: opts.als_window.unwrap_or_else(|| als::run_window_half(opts.collocate.max_shift)),
+        engine: opts.engine.clone(),
     };
     let (outcomes, ingest) = gedi::ingest(ds, &opts.l1b, &opts.l2a, &request, progress)?;
     report.shots_kept = ingest.kept_line();
