@@ -20,7 +20,7 @@ use crate::dataset::shots::col;
 use crate::dataset::{tables, Dataset};
 use crate::error::{Error, Result};
 use crate::ops::progress::Progress;
-use crate::sql::ingest::{granule_results, install_writer, GranuleIngested, IngestedGranules};
+use crate::sql::ingest::{granule_results, GranuleIngested, IngestedGranules};
 use crate::sql::Engine;
 
 /// What commits a granule: its job, staged shots and beams.
@@ -43,7 +43,6 @@ pub(super) fn ingest_granules(
     let failed = |e: datafusion::error::DataFusionError| {
         Error::Usage(format!("GEDI ingest on the cluster: {}", crate::error::one_line(&e.to_string())))
     };
-    install_writer(write_from_json);
     let json = |e: serde_json::Error| Error::file(dataset.root(), format!("a request gedisim cannot send: {e}"));
     let request = serde_json::to_string(opts).map_err(json)?;
     let wire_jobs = jobs
