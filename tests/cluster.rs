@@ -313,9 +313,11 @@ fn run_on_the_cluster_writes_the_local_results() {
     let args = run_args(&w.root, &out, Some(&cluster.url));
     let (ok, _, err) = gedisim(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(ok, "{err}");
-    // The ingest of the granules (a shots file and a record per granule, read on the executors), the
-    // collocation (one offsets file, a partition per granule) and the simulation (a file per granule).
-    for (table, files) in [("shots", 6), ("granules", 6), ("offsets", 1), ("sim", 6), ("results", 6)] {
+    // The ingest of the tiles (an als/ file and a tiles/ row each) and of the granules (a shots file
+    // and a record per granule), both read on the executors, the collocation (one offsets file, a
+    // partition per granule) and the simulation (a file per granule).
+    let tables = [("als", 3), ("tiles", 3), ("shots", 6), ("granules", 6), ("offsets", 1), ("sim", 6), ("results", 6)];
+    for (table, files) in tables {
         let (l, r) = (table_files(&w.local, table), table_files(&out, table));
         assert!(l.len() >= files, "{table}: {} files", l.len());
         assert!(l.iter().map(|f| f.1[0].num_rows()).sum::<usize>() > 0, "{table}: no rows");
@@ -326,11 +328,67 @@ fn run_on_the_cluster_writes_the_local_results() {
             assert_eq!(l.2, r.2, "{table}/{}: metadata", l.0);
         }
     }
-    // The ingest, the collocation and the simulation ran as jobs of tasks on the executors.
-    assert!(jobs_run(&cluster.logs).len() >= 3, "{:?}", jobs_run(&cluster.logs));
-    // Nothing staged was left behind.
-    let left: Vec<_> = std::fs::read_dir(out.join("shots")).unwrap().flatten().map(|e| e.file_name()).collect();
-    assert!(left.iter().all(|n| n.to_string_lossy().ends_with(".parquet")), "{left:?}");
+    // The two ingests, the collocation and the simulation ran as jobs of tasks on the executors.
+    assert!(jobs_run(&cluster.logs).len() >= 4, "{:?}", jobs_run(&cluster.logs));
+    nothing_staged_in(&out, &["als", "tiles", "shots"]);
+}
+
+/// Every file of these tables of `ds` is a table file: nothing staged was left behind.
+fn nothing_staged_in(ds: &Path, tables: &[&str]) {
+    for table in tables {
+        let left: Vec<_> = std::fs::read_dir(ds.join(table)).unwrap().flatten().map(|e| e.file_name()).collect();
+        assert!(left.iter().all(|n| n.to_string_lossy().ends_with(".parquet")), "{table}: {left:?}");
+    }
+}
+
+/// COPC tiles read in the windows around a dataset's shots, on the executors: the local `als/` and
+/// `tiles/` files, a renamed copy of a tile taken as ingested, the same printed report; a second
+/// ingest of the same tiles reads nothing.
+#[test]
+fn copc_tiles_ingested_on_the_cluster_in_windows_give_the_local_files() {
+    let w = world();
+    let tmp = tempfile::tempdir().unwrap();
+    let cluster = Cluster::start(&tmp.path().join("cluster"), 2, 20, &[]);
+    let copc = data("als-copc");
+    let mut tiles: Vec<String> = ["lidarforfuel_1_42", "lidarforfuel_2_bas_lig", "pdal-ign-plugin_mnx_input_crop_2"]
+        .map(|t| copc.join(format!("{t}.copc.laz")).display().to_string())
+        .to_vec();
+    let copy = tmp.path().join("copy-of-1_42.copc.laz");
+    std::fs::copy(&tiles[0], &copy).unwrap();
+    tiles.push(copy.display().to_string());
+    let mut outcomes = Vec::new();
+    for (name, engine) in [("here", None), ("cluster", Some(cluster.url.as_str()))] {
+        let ds = tmp.path().join(name);
+        for table in ["shots", "granules"] {
+            copy_tree(&w.local.join(table), &ds.join(table));
+        }
+        let ds = ds.to_str().unwrap().to_string();
+        let mut args = vec!["ingest", "als", "--dataset", &ds, "--als"];
+        args.extend(tiles.iter().map(String::as_str));
+        if let Some(url) = engine {
+            args.extend(["--cluster", url]);
+        }
+        let mut printed = Vec::new();
+        for _ in 0..2 {
+            let (ok, _, err) = gedisim(&args);
+            assert!(ok, "{err}");
+            printed.push(err.lines().map(|l| l.replace(&ds, "<dataset>")).collect::<Vec<_>>());
+        }
+        nothing_staged_in(Path::new(&ds), &["als", "tiles"]);
+        outcomes.push((table_files(Path::new(&ds), "als"), table_files(Path::new(&ds), "tiles"), printed));
+    }
+    let (here, there) = (&outcomes[0], &outcomes[1]);
+    assert_eq!(here.0.len(), 3, "one als/ file per content");
+    assert!(here.0.iter().all(|f| f.1[0].num_rows() > 0), "a tile without points");
+    // Read in windows: each tiles/ row records the cells it read.
+    for (name, rows, _) in &here.1 {
+        let cells = rows[0].column_by_name("read_cells").unwrap();
+        assert_eq!(cells.null_count(), 0, "tiles/{name} read whole");
+    }
+    assert_eq!(here.0, there.0, "als/");
+    assert_eq!(here.1, there.1, "tiles/");
+    assert_eq!(here.2, there.2, "the printed reports");
+    assert!(jobs_run(&cluster.logs).len() >= 2, "{:?}", jobs_run(&cluster.logs));
 }
 
 /// The Ballista jobs whose tasks the executors of `logs` ran (`Execute task … [TID <job>/…]`).

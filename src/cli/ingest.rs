@@ -36,6 +36,11 @@ pub struct IngestAlsArgs {
     /// Print wall time, points/s and peak memory at the end.
     #[arg(long)]
     stats: bool,
+    /// Read the tiles on the Ballista cluster whose scheduler is at this address (`gedisim
+    /// cluster`): one plan, a partition per tile, each executor writing its tile's files; this
+    /// process commits them. Every node must see the tiles and the dataset at the same paths.
+    #[arg(long, value_name = "df://HOST:PORT")]
+    cluster: Option<String>,
 }
 
 #[derive(Args)]
@@ -124,7 +129,8 @@ pub fn ingest_als(a: IngestAlsArgs) -> Result<()> {
             w.len()
         );
     }
-    let opts = AlsOptions { keep_all_classes: a.keep_all_classes, epsg: a.epsg, windows };
+    let engine = a.cluster.map(als::Engine::Cluster).unwrap_or_default();
+    let opts = AlsOptions { keep_all_classes: a.keep_all_classes, epsg: a.epsg, windows, engine };
     let outcomes = als::ingest(&ds, &inputs, &opts, &Bars::new())?;
     super::reporters::print_fetched(&inputs);
     let (mut read, mut written) = (0, 0);

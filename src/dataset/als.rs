@@ -71,7 +71,7 @@ impl ReadWindow {
 }
 
 /// Most cells a window record may hold (a 20 km × 20 km tile read whole in 10 m cells).
-const MAX_WINDOW_CELLS: usize = 4_000_000;
+pub const MAX_WINDOW_CELLS: usize = 4_000_000;
 
 /// The cells of a COPC tile that its `als/` file holds, from the file's metadata; `None` when the
 /// file holds the whole tile.

@@ -389,11 +389,22 @@ pub fn write_parquet(
     batches: &[RecordBatch],
     metadata: &HashMap<String, String>,
 ) -> Result<PathBuf> {
+    stage_parquet(dest, schema, batches, metadata)?.finish()
+}
+
+/// Write `batches` for `dest` under a temporary name: complete, not yet in place
+/// ([`AtomicParquet::finish_staged`]).
+pub fn stage_parquet(
+    dest: &Path,
+    schema: SchemaRef,
+    batches: &[RecordBatch],
+    metadata: &HashMap<String, String>,
+) -> Result<AtomicParquet> {
     let mut w = AtomicParquet::create(dest, schema, writer_properties(metadata, 1 << 17))?;
     for b in batches {
         w.write(b)?;
     }
-    w.finish()
+    Ok(w)
 }
 
 /// Write `bytes` to `path` through a temporary name in the same folder, renamed when complete (the

@@ -79,7 +79,7 @@ pub struct CopcTile {
 }
 
 /// What reading a COPC tile touched.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct CopcRead {
     /// Data nodes decoded, of `nodes_in_tile`.
     pub nodes: usize,

@@ -104,8 +104,10 @@ pub fn run_executor(scheduler: &str, bind: SocketAddr, concurrency: usize) -> Re
         .ok_or_else(|| Error::Usage(format!("--scheduler {scheduler}: expected host:port")))?;
     // Ballista's executor waits for ever on a scheduler that does not answer.
     crate::sql::reachable(scheduler).map_err(|e| Error::Usage(format!("--scheduler {scheduler}: {e}")))?;
-    // The partitions of a GEDI ingest read granules here.
-    crate::sql::ingest::install_writer(crate::ops::ingest_gedi::write_from_json);
+    // The partitions of an ingest read granules and tiles here.
+    use crate::sql::ingest::{install_stager, IngestKind};
+    install_stager(IngestKind::Granules, crate::ops::ingest_gedi::write_from_json);
+    install_stager(IngestKind::Tiles, crate::ops::ingest_als::stage_from_json);
     // Shuffle and spill files: one folder per executor of this machine.
     let work_dir = std::env::temp_dir().join(format!("gedisim-executor-{}", bind.port()));
     std::fs::create_dir_all(&work_dir).map_err(|e| Error::file(&work_dir, format!("cannot create: {e}")))?;

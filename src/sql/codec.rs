@@ -28,7 +28,7 @@ use crate::kernels::collocate::segments::Level;
 use crate::kernels::sim::{Footprint, Profile, PulseModel, PulseReference};
 use crate::sql::collocate::{CollocateExec, CollocatedGranules};
 use crate::sql::collocation::CollocateOptions;
-use crate::sql::ingest::{IngestExec, IngestedGranules};
+use crate::sql::ingest::{Ingest, IngestExec, IngestKind};
 use crate::sql::simulate::{FootprintPartition, Footprints, SimulateExec, SimulateWork, SimulatedShots};
 
 /// What starts an encoded simulation (Ballista's own nodes are protobuf messages, which never start
@@ -36,8 +36,8 @@ use crate::sql::simulate::{FootprintPartition, Footprints, SimulateExec, Simulat
 const SIMULATE: &[u8] = b"gedisim/simulate/1\n";
 /// What starts an encoded collocation.
 const COLLOCATE: &[u8] = b"gedisim/collocate/1\n";
-/// What starts an encoded GEDI ingest.
-const INGEST: &[u8] = b"gedisim/ingest/1\n";
+/// What starts an encoded ingest.
+const INGEST: &[u8] = b"gedisim/ingest/2\n";
 
 /// A plan's partition count and projection, when the node is a plan rather than a table.
 #[derive(Serialize, Deserialize)]
@@ -88,10 +88,11 @@ struct WireCollocation {
     exec: Option<WireExec>,
 }
 
-/// An [`IngestedGranules`] as sent (its request and jobs are the operations layer's JSON, which names
-/// the granule files by absolute path: every node sees them there).
+/// An [`Ingest`] as sent (its request and jobs are the operations layer's JSON, which names the
+/// granule and tile files by absolute path or URL: every node sees them there).
 #[derive(Serialize, Deserialize)]
 struct WireIngest {
+    kind: IngestKind,
     dataset: PathBuf,
     request: String,
     jobs: Vec<(String, String)>,
@@ -248,22 +249,23 @@ fn decode_collocation(buf: &[u8]) -> Option<DfResult<(CollocatedGranules, Option
     }))
 }
 
-fn encode_ingest(granules: &IngestedGranules, exec: Option<WireExec>, buf: &mut Vec<u8>) -> DfResult<()> {
+fn encode_ingest(ingest: &Ingest, exec: Option<WireExec>, buf: &mut Vec<u8>) -> DfResult<()> {
     let wire = WireIngest {
-        dataset: shared_path(granules.dataset.root())?,
-        request: granules.request.clone(),
-        jobs: granules.jobs.clone(),
+        kind: ingest.kind,
+        dataset: shared_path(ingest.dataset.root())?,
+        request: ingest.request.clone(),
+        jobs: ingest.jobs.clone(),
         exec,
     };
     frame(INGEST, &wire, buf)
 }
 
-/// The [`IngestedGranules`] and plan details of `buf`, if it is an encoded ingest.
-fn decode_ingest(buf: &[u8]) -> Option<DfResult<(IngestedGranules, Option<WireExec>)>> {
+/// The [`Ingest`] and plan details of `buf`, if it is an encoded ingest.
+fn decode_ingest(buf: &[u8]) -> Option<DfResult<(Ingest, Option<WireExec>)>> {
     let wire = unframe::<WireIngest>(INGEST, buf)?;
     Some(wire.and_then(|w| {
-        let dataset = open_dataset(&w.dataset, "GEDI ingest")?;
-        Ok((IngestedGranules::new(dataset, w.request, w.jobs), w.exec))
+        let dataset = open_dataset(&w.dataset, "ingest")?;
+        Ok((Ingest::new(w.kind, dataset, w.request, w.jobs), w.exec))
     }))
 }
 
@@ -311,8 +313,8 @@ impl LogicalExtensionCodec for LogicalCodec {
         if let Some(granules) = node.downcast_ref::<CollocatedGranules>() {
             return encode_collocation(granules, None, buf);
         }
-        if let Some(granules) = node.downcast_ref::<IngestedGranules>() {
-            return encode_ingest(granules, None, buf);
+        if let Some(ingest) = node.downcast_ref::<Ingest>() {
+            return encode_ingest(ingest, None, buf);
         }
         self.0.try_encode_table_provider(table_ref, node, buf)
     }
@@ -349,12 +351,12 @@ impl PhysicalExtensionCodec for PhysicalCodec {
             return Ok(Arc::new(CollocateExec::with_input(granules, exec.projection, input)?));
         }
         if let Some(decoded) = decode_ingest(buf) {
-            let (granules, exec) = decoded?;
+            let (ingest, exec) = decoded?;
             let (exec, input) = plan(exec)?;
-            if exec.partitions != granules.jobs.len() {
-                return exec_err!("GEDI ingest: {} partitions for {} granules", exec.partitions, granules.jobs.len());
+            if exec.partitions != ingest.jobs.len() {
+                return exec_err!("ingest: {} partitions for {} jobs", exec.partitions, ingest.jobs.len());
             }
-            return Ok(Arc::new(IngestExec::with_input(granules, exec.projection, input)?));
+            return Ok(Arc::new(IngestExec::with_input(ingest, exec.projection, input)?));
         }
         self.0.try_decode(buf, inputs, ctx, proto_converter)
     }
@@ -457,13 +459,13 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let ds = Dataset::create(&dir.path().join("ds")).unwrap();
         let jobs = vec![("k1".to_string(), "{\"a\": 0.30000000000000004}".to_string()), ("k2".into(), "{}".into())];
-        let granules = IngestedGranules::new(ds, "{\"epsg\": 2154}".into(), jobs.clone());
+        let ingest = Ingest::new(IngestKind::Tiles, ds, "{\"epsg\": 2154}".into(), jobs.clone());
         let mut buf = Vec::new();
-        encode_ingest(&granules, Some(WireExec { partitions: 2, projection: None }), &mut buf).unwrap();
+        encode_ingest(&ingest, Some(WireExec { partitions: 2, projection: None }), &mut buf).unwrap();
         assert!(decode_collocation(&buf).is_none() && decode_simulation(&buf).is_none());
         let (back, exec) = decode_ingest(&buf).unwrap().unwrap();
         assert_eq!(exec.map(|e| e.partitions), Some(2));
-        assert_eq!((back.request.as_str(), back.jobs), ("{\"epsg\": 2154}", jobs));
+        assert_eq!((back.kind, back.request.as_str(), back.jobs), (IngestKind::Tiles, "{\"epsg\": 2154}", jobs));
     }
 
     #[test]

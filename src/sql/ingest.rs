@@ -1,18 +1,20 @@
-//! The GEDI ingest of some granules as one plan ([`IngestExec`]): a partition per granule, each read
-//! where it runs and its shots written into the dataset's `shots/` under a temporary name, so that a
-//! cluster reads granules on its executors (`gedisim run --cluster`; docs/scale.md). Each partition
-//! returns one row: the granule's key, the temporary file and what its beams held; the client checks
-//! the shots and commits the files (`ops::ingest_gedi::on_cluster`).
+//! An ingest as one plan ([`IngestExec`]): a partition per unit of work — a GEDI granule, or an ALS
+//! tile — each read where it runs and its files written into the dataset under temporary names, so
+//! that a cluster reads granules and tiles on its executors (`gedisim run --cluster`; docs/scale.md).
+//! Each partition returns one row: the unit's key, its staged files and its report; the client
+//! checks them and commits the files ([`run_ingest`] gathers the rows; `ops::ingest_gedi::on_cluster`
+//! and `ops::ingest_als::on_cluster` commit).
 //!
-//! Reading a granule is the operations layer's (`ops::ingest_gedi`): it installs the function a
-//! partition runs ([`install_writer`]) in every process that runs such a plan, and the plan carries
-//! the request and each granule's job as that layer's JSON.
+//! Reading a granule or a tile is the operations layer's: it installs the function a partition runs
+//! ([`install_stager`]) in every process that runs such a plan, and the plan carries the request and
+//! each unit's job as that layer's JSON.
 
+use std::collections::HashMap;
 use std::fmt;
 use std::path::PathBuf;
 use std::sync::{Arc, OnceLock};
 
-use arrow::array::{Array, AsArray, RecordBatch, StringArray};
+use arrow::array::{Array, AsArray, ListBuilder, RecordBatch, StringArray, StringBuilder};
 use arrow::datatypes::{DataType, Field, Schema, SchemaRef};
 use async_trait::async_trait;
 use datafusion::catalog::{Session, TableProvider};
@@ -20,63 +22,94 @@ use datafusion::common::Result as DfResult;
 use datafusion::datasource::TableType;
 use datafusion::logical_expr::Expr;
 use datafusion::physical_plan::ExecutionPlan;
+use futures::StreamExt;
+use serde::{Deserialize, Serialize};
 
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::sql::partitions::{to_df, PartitionBatches, PartitionExec, PartitionWork};
+use crate::sql::Engine;
 
-/// What a partition runs: the dataset, the request (JSON) and one granule's job (JSON) → its shots
-/// written under a temporary name, and its report (JSON).
-pub type GranuleWriter = fn(&Dataset, &str, &str) -> Result<(PathBuf, String)>;
-
-static WRITER: OnceLock<GranuleWriter> = OnceLock::new();
-
-/// Install what the partitions of an ingest run in this process (once; later calls change nothing).
-pub fn install_writer(writer: GranuleWriter) {
-    let _ = WRITER.set(writer);
+/// What an ingest plan reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum IngestKind {
+    /// GEDI granules (L1B/L2A pairs) into `shots/`.
+    Granules,
+    /// ALS tiles into `als/` and `tiles/`.
+    Tiles,
 }
 
-/// The plan reading [`IngestedGranules`].
-pub type IngestExec = PartitionExec<IngestedGranules>;
+impl IngestKind {
+    /// How errors name it.
+    fn name(self) -> &'static str {
+        match self {
+            IngestKind::Granules => "GEDI ingest",
+            IngestKind::Tiles => "ALS ingest",
+        }
+    }
 
-/// Granules to read into a dataset: a table of one row per granule.
+    fn stager(self) -> &'static OnceLock<Stager> {
+        static GRANULES: OnceLock<Stager> = OnceLock::new();
+        static TILES: OnceLock<Stager> = OnceLock::new();
+        match self {
+            IngestKind::Granules => &GRANULES,
+            IngestKind::Tiles => &TILES,
+        }
+    }
+}
+
+/// What a partition runs: the dataset, the request (JSON) and one unit's job (JSON) → the files it
+/// wrote under temporary names, and its report (JSON).
+pub type Stager = fn(&Dataset, &str, &str) -> Result<(Vec<PathBuf>, String)>;
+
+/// Install what the partitions of an ingest of `kind` run in this process (once; later calls change
+/// nothing).
+pub fn install_stager(kind: IngestKind, stager: Stager) {
+    let _ = kind.stager().set(stager);
+}
+
+/// The plan reading an [`Ingest`].
+pub type IngestExec = PartitionExec<Ingest>;
+
+/// Units to read into a dataset: a table of one row per unit.
 #[derive(Clone)]
-pub struct IngestedGranules {
+pub struct Ingest {
+    pub(crate) kind: IngestKind,
     pub(crate) dataset: Dataset,
-    /// The request every granule is read with (JSON of the operations layer).
+    /// The request every unit is read with (JSON of the operations layer).
     pub(crate) request: String,
-    /// Each granule's key and job (JSON of the operations layer).
+    /// Each unit's key and job (JSON of the operations layer).
     pub(crate) jobs: Vec<(String, String)>,
 }
 
-impl IngestedGranules {
-    pub fn new(dataset: Dataset, request: String, jobs: Vec<(String, String)>) -> Self {
-        IngestedGranules { dataset, request, jobs }
+impl Ingest {
+    pub fn new(kind: IngestKind, dataset: Dataset, request: String, jobs: Vec<(String, String)>) -> Self {
+        Ingest { kind, dataset, request, jobs }
     }
 }
 
-impl fmt::Debug for IngestedGranules {
+impl fmt::Debug for Ingest {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "ingest({}, {} granules)", self.dataset.root().display(), self.jobs.len())
+        write!(f, "ingest({:?} of {}, {} jobs)", self.kind, self.dataset.root().display(), self.jobs.len())
     }
 }
 
-/// One row per granule: `granule_key`, `staged` (its shots, complete under a temporary name in
-/// `shots/`) and `report` (what its reading found, JSON of the operations layer).
+/// One row per unit: `key`, `staged` (the files it wrote, complete under temporary names in the
+/// dataset) and `report` (what its reading found, JSON of the operations layer).
 pub fn ingested_schema() -> SchemaRef {
     static SCHEMA: OnceLock<SchemaRef> = OnceLock::new();
     SCHEMA
         .get_or_init(|| {
             Arc::new(Schema::new(vec![
-                Field::new("granule_key", DataType::Utf8, false),
-                Field::new("staged", DataType::Utf8, false),
+                Field::new("key", DataType::Utf8, false),
+                Field::new("staged", DataType::List(Arc::new(Field::new_list_field(DataType::Utf8, false))), false),
                 Field::new("report", DataType::Utf8, false),
             ]))
         })
         .clone()
 }
 
-impl PartitionWork for IngestedGranules {
+impl PartitionWork for Ingest {
     const NAME: &'static str = "IngestExec";
 
     fn schema(&self) -> SchemaRef {
@@ -89,35 +122,41 @@ impl PartitionWork for IngestedGranules {
 
     fn batches(&self, partition: usize) -> PartitionBatches {
         let this = self.clone();
-        Box::new(std::iter::once_with(move || this.granule(partition).map_err(to_df)))
+        Box::new(std::iter::once_with(move || this.unit(partition).map_err(to_df)))
     }
 }
 
-impl IngestedGranules {
-    /// The row of granule `k`.
-    fn granule(&self, k: usize) -> Result<RecordBatch> {
+impl Ingest {
+    /// The row of unit `k`.
+    fn unit(&self, k: usize) -> Result<RecordBatch> {
         let (key, job) = &self.jobs[k];
-        let Some(write) = WRITER.get() else {
-            return Err(Error::Usage("GEDI ingest: this process cannot read granules (no writer installed)".into()));
+        let Some(stage) = self.kind.stager().get() else {
+            return Err(Error::Usage(format!(
+                "{}: this process cannot read its inputs (nothing installed)",
+                self.kind.name()
+            )));
         };
-        let (staged, report) = write(&self.dataset, &self.request, job)?;
+        let (staged, report) = stage(&self.dataset, &self.request, job)?;
+        let mut files =
+            ListBuilder::new(StringBuilder::new()).with_field(Arc::new(Field::new_list_field(DataType::Utf8, false)));
+        files.append_value(staged.iter().map(|p| Some(p.display().to_string())));
         RecordBatch::try_new(
             ingested_schema(),
             vec![
                 Arc::new(StringArray::from(vec![key.as_str()])),
-                Arc::new(StringArray::from(vec![staged.display().to_string()])),
+                Arc::new(files.finish()),
                 Arc::new(StringArray::from(vec![report])),
             ],
         )
         .map_err(|e| {
-            let _ = std::fs::remove_file(&staged);
-            Error::table(&staged, e)
+            remove_all(&staged);
+            Error::table(self.dataset.root(), e)
         })
     }
 }
 
 #[async_trait]
-impl TableProvider for IngestedGranules {
+impl TableProvider for Ingest {
     fn schema(&self) -> SchemaRef {
         ingested_schema()
     }
@@ -135,29 +174,75 @@ impl TableProvider for IngestedGranules {
     }
 }
 
-/// A granule read by [`IngestExec`].
-pub struct GranuleIngested {
+/// A unit read by [`IngestExec`].
+pub struct Ingested {
     pub key: String,
-    /// Its shots, complete under a temporary name.
-    pub staged: PathBuf,
+    /// The files it wrote, complete under temporary names.
+    pub staged: Vec<PathBuf>,
     /// What its reading found (JSON of the operations layer).
     pub report: String,
 }
 
-/// The granules of rows of [`ingested_schema`] (`origin` names where they came from in errors).
-pub fn granule_results(origin: &std::path::Path, batch: &RecordBatch) -> Result<Vec<GranuleIngested>> {
+impl Ingested {
+    /// Remove its staged files (what is not committed).
+    pub fn discard(&self) {
+        remove_all(&self.staged);
+    }
+}
+
+fn remove_all(files: &[PathBuf]) {
+    for f in files {
+        let _ = std::fs::remove_file(f);
+    }
+}
+
+/// The units of rows of [`ingested_schema`] (`origin` names where they came from in errors).
+pub fn ingested_rows(origin: &std::path::Path, batch: &RecordBatch) -> Result<Vec<Ingested>> {
     let column = |name: &str| -> Result<&Arc<dyn Array>> {
         batch.column_by_name(name).ok_or_else(|| Error::field(origin, name, "missing from an ingest's rows"))
     };
     let strings = |name: &str| {
         column(name)?.as_string_opt::<i32>().ok_or_else(|| Error::field(origin, name, "not of the ingest's type"))
     };
-    let (keys, staged, reports) = (strings("granule_key")?, strings("staged")?, strings("report")?);
-    Ok((0..batch.num_rows())
-        .map(|i| GranuleIngested {
-            key: keys.value(i).to_string(),
-            staged: PathBuf::from(staged.value(i)),
-            report: reports.value(i).to_string(),
+    let (keys, reports) = (strings("key")?, strings("report")?);
+    let staged = column("staged")?.as_list_opt::<i32>().ok_or_else(|| Error::field(origin, "staged", "not a list"))?;
+    (0..batch.num_rows())
+        .map(|i| {
+            let files = staged.value(i);
+            let files = files.as_string_opt::<i32>().ok_or_else(|| Error::field(origin, "staged", "not of paths"))?;
+            Ok(Ingested {
+                key: keys.value(i).to_string(),
+                staged: files.iter().flatten().map(PathBuf::from).collect(),
+                report: reports.value(i).to_string(),
+            })
         })
-        .collect())
+        .collect()
+}
+
+/// Run `ingest` on `engine` and gather its rows by key (`done` told of each as it comes back). A
+/// failure leaves no staged file behind; so must the caller, for the rows it does not commit.
+pub fn run_ingest(engine: &Engine, ingest: Ingest, done: &dyn Fn(&Ingested)) -> Result<HashMap<String, Ingested>> {
+    let (kind, dataset) = (ingest.kind, ingest.dataset.clone());
+    let failed = |e: datafusion::error::DataFusionError| {
+        Error::Usage(format!("{} on the cluster: {}", kind.name(), crate::error::one_line(&e.to_string())))
+    };
+    let mut rows: HashMap<String, Ingested> = HashMap::new();
+    let read = crate::sql::runtime()?.block_on(async {
+        let ctx = crate::sql::session_on(&dataset, &Default::default(), engine).await?;
+        let mut stream = ctx.read_table(Arc::new(ingest)).map_err(failed)?.execute_stream().await.map_err(failed)?;
+        while let Some(batch) = stream.next().await {
+            for row in ingested_rows(dataset.root(), &batch.map_err(failed)?)? {
+                done(&row);
+                rows.insert(row.key.clone(), row);
+            }
+        }
+        Ok::<_, Error>(())
+    });
+    match read {
+        Ok(()) => Ok(rows),
+        Err(e) => {
+            rows.values().for_each(Ingested::discard);
+            Err(e)
+        }
+    }
 }

@@ -7,11 +7,8 @@
 //! the plan carries the files canonicalised, the request and each job as JSON ([`write_from_json`],
 //! which executors run: `ops::cluster` installs it).
 
-use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Arc;
-
-use futures::StreamExt;
 
 use super::into_dataset::{write_granule_shots, GranuleJob, GranuleOutcome};
 use super::join::ShotOwners;
@@ -20,7 +17,7 @@ use crate::dataset::shots::col;
 use crate::dataset::{tables, Dataset};
 use crate::error::{Error, Result};
 use crate::ops::progress::Progress;
-use crate::sql::ingest::{granule_results, GranuleIngested, IngestedGranules};
+use crate::sql::ingest::{run_ingest, Ingest, IngestKind, Ingested};
 use crate::sql::Engine;
 
 /// What commits a granule: its job, staged shots and beams.
@@ -40,42 +37,25 @@ pub(super) fn ingest_granules(
     if jobs.is_empty() {
         return Ok(Vec::new());
     }
-    let failed = |e: datafusion::error::DataFusionError| {
-        Error::Usage(format!("GEDI ingest on the cluster: {}", crate::error::one_line(&e.to_string())))
-    };
     let json = |e: serde_json::Error| Error::file(dataset.root(), format!("a request gedisim cannot send: {e}"));
     let request = serde_json::to_string(opts).map_err(json)?;
     let wire_jobs = jobs
         .iter()
         .map(|j| Ok((j.key.clone(), serde_json::to_string(&shared(j)?).map_err(json)?)))
         .collect::<Result<Vec<_>>>()?;
-    let mut staged: HashMap<String, GranuleIngested> = HashMap::new();
-    let read = crate::sql::runtime()?.block_on(async {
-        let ctx = crate::sql::session_on(dataset, &Default::default(), engine).await?;
-        let granules = IngestedGranules::new(dataset.clone(), request, wire_jobs);
-        let mut stream = ctx.read_table(Arc::new(granules)).map_err(failed)?.execute_stream().await.map_err(failed)?;
-        while let Some(batch) = stream.next().await {
-            for g in granule_results(dataset.root(), &batch.map_err(failed)?)? {
-                progress.advance(1);
-                staged.insert(g.key.clone(), g);
-            }
-        }
-        Ok::<_, Error>(())
-    });
-    let committed = read.and_then(|()| {
-        jobs.iter()
-            .map(|job| {
-                let g = staged.remove(&job.key).ok_or_else(|| {
-                    Error::Usage(format!("GEDI ingest on the cluster: granule {} did not come back", job.key))
-                })?;
-                check_and_commit(job, g, owners, commit)
-            })
-            .collect::<Result<Vec<_>>>()
-    });
+    let ingest = Ingest::new(IngestKind::Granules, dataset.clone(), request, wire_jobs);
+    let mut staged = run_ingest(engine, ingest, &|_| progress.advance(1))?;
+    let committed = jobs
+        .iter()
+        .map(|job| {
+            let g = staged.remove(&job.key).ok_or_else(|| {
+                Error::Usage(format!("GEDI ingest on the cluster: granule {} did not come back", job.key))
+            })?;
+            check_and_commit(job, g, owners, commit)
+        })
+        .collect::<Result<Vec<_>>>();
     // A failure leaves nothing staged behind.
-    for g in staged.values() {
-        let _ = std::fs::remove_file(&g.staged);
-    }
+    staged.values().for_each(Ingested::discard);
     committed
 }
 
@@ -92,13 +72,13 @@ fn shared(job: &GranuleJob) -> Result<GranuleJob> {
 /// What a partition of the ingest runs (`sql::ingest`): the granule of `job` (JSON of a
 /// [`GranuleJob`]) read with `request` (JSON of [`GediOptions`]) into the dataset's `shots/` under a
 /// temporary name; its beam reports as JSON.
-pub fn write_from_json(dataset: &Dataset, request: &str, job: &str) -> Result<(std::path::PathBuf, String)> {
+pub fn write_from_json(dataset: &Dataset, request: &str, job: &str) -> Result<(Vec<std::path::PathBuf>, String)> {
     let bad =
         |what: &str, e: serde_json::Error| Error::Usage(format!("GEDI ingest: a {what} gedisim cannot read: {e}"));
     let opts: GediOptions = serde_json::from_str(request).map_err(|e| bad("request", e))?;
     let job: GranuleJob = serde_json::from_str(job).map_err(|e| bad("granule job", e))?;
     let (staged, beams) = write_granule_shots(&dataset.root().join(tables::SHOTS), &job, &opts, &|_| Ok(()))?;
-    serde_json::to_string(&beams).map(|r| (staged.clone(), r)).map_err(|e| {
+    serde_json::to_string(&beams).map(|r| (vec![staged.clone()], r)).map_err(|e| {
         let _ = std::fs::remove_file(&staged);
         Error::table(&staged, e)
     })
@@ -108,28 +88,30 @@ pub fn write_from_json(dataset: &Dataset, request: &str, job: &str) -> Result<(s
 /// as in a local ingest), then commit it with this process's paths in its beam reports.
 fn check_and_commit(
     job: &GranuleJob,
-    g: GranuleIngested,
+    g: Ingested,
     owners: &ShotOwners,
     commit: &Commit,
 ) -> Result<(GranuleOutcome, Vec<BeamReport>)> {
-    let owner: Arc<str> = Arc::from(job.key.as_str());
-    let claimed = crate::dataset::read::for_each_batch(&g.staged, Some(&[col::SHOT_NUMBER, col::BEAM]), None, |c| {
-        owners.claim(&job.pair, &owner, c.batch())
-    });
-    if let Err(e) = claimed {
-        let _ = std::fs::remove_file(&g.staged);
-        return Err(e);
-    }
-    let beams: std::result::Result<Vec<BeamReport>, _> = serde_json::from_str(&g.report);
-    let mut beams = beams.map_err(|e| {
-        let _ = std::fs::remove_file(&g.staged);
-        Error::field(&g.staged, "report", e)
-    })?;
+    let checked = (|| {
+        let [staged] = g.staged.as_slice() else {
+            return Err(Error::Usage(format!(
+                "GEDI ingest on the cluster: granule {} came back without its shots",
+                job.key
+            )));
+        };
+        let owner: Arc<str> = Arc::from(job.key.as_str());
+        crate::dataset::read::for_each_batch(staged, Some(&[col::SHOT_NUMBER, col::BEAM]), None, |c| {
+            owners.claim(&job.pair, &owner, c.batch())
+        })?;
+        let beams: Vec<BeamReport> = serde_json::from_str(&g.report).map_err(|e| Error::field(staged, "report", e))?;
+        Ok((staged, beams))
+    })();
+    let (staged, mut beams) = checked.inspect_err(|_| g.discard())?;
     for b in &mut beams {
         b.l1b_file = job.pair.l1b.clone();
         b.l2a_file = job.pair.l2a.clone();
     }
-    let outcome = commit(job, &g.staged, &beams)?;
+    let outcome = commit(job, staged, &beams)?;
     Ok((outcome, beams))
 }
 

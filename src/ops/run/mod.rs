@@ -347,8 +347,8 @@ fn ingest_als(ds: &Dataset, opts: &RunOptions, progress: &dyn Progress, report: 
     let half = opts.als_window.unwrap_or_else(|| als::run_window_half(opts.collocate.max_shift));
     let windows = als::shot_windows(ds, half)?;
     report.als_inputs = opts.als.clone();
-    report.tiles =
-        als::ingest(ds, &opts.als, &AlsOptions { keep_all_classes: false, epsg: opts.epsg, windows }, progress)?;
+    let als_opts = AlsOptions { keep_all_classes: false, epsg: opts.epsg, windows, engine: opts.engine.clone() };
+    report.tiles = als::ingest(ds, &opts.als, &als_opts, progress)?;
     Ok(())
 }
 

@@ -14,8 +14,6 @@
 //! chunk and the largest cell, never by the file.
 
 use std::collections::HashMap;
-use std::fs::File;
-use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -39,6 +37,13 @@ use crate::io::source::{self, Fetched};
 use crate::kernels::geo::cells::{Cells, Windows};
 use crate::kernels::sim::{self, AlsPoints, Profile, SimConfig};
 use crate::ops::progress::{Progress, Step};
+/// Where tiles are read (`AlsOptions::engine`).
+pub use crate::sql::Engine;
+
+mod on_cluster;
+mod spill;
+pub use on_cluster::stage_from_json;
+use spill::{Run, SpillFile, SpillReader};
 
 /// Options of `ingest als`.
 #[derive(Debug, Clone, Default)]
@@ -50,6 +55,8 @@ pub struct AlsOptions {
     /// Where COPC tiles are read: only the nodes meeting these windows are decoded and only the
     /// points inside their cells kept. `None`: every tile is read whole.
     pub windows: Option<Windows>,
+    /// Where tiles are read: here, or a partition each on a cluster (`run --cluster`).
+    pub engine: Engine,
 }
 
 /// Half-width (m) of the window a shot needs for `run`: the collocation's largest shift plus the
@@ -104,7 +111,7 @@ pub fn inputs_epsg(inputs: &[PathBuf]) -> Result<Option<u32>> {
 }
 
 /// What happened to one input file.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub enum TileOutcome {
     /// Points written (`window`: a COPC tile read in windows; `points` and `dropped` count the
     /// points of the cells read this time).
@@ -117,7 +124,7 @@ pub enum TileOutcome {
 }
 
 /// What a read of a COPC tile in windows did.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct WindowRead {
     /// Cells read this time, and read so far (this time included).
     pub cells_new: usize,
@@ -161,22 +168,36 @@ pub fn ingest_tiles(
 ) -> Result<Vec<TileOutcome>> {
     let dataset = &dataset.as_writer()?;
     let existing = dataset::dataset_epsg(dataset)?;
-    let mut headers: Vec<(u32, u64, bool)> = Vec::with_capacity(files.len()); // (EPSG, points, COPC) per file
+    let mut headers: Vec<TileHeader> = Vec::with_capacity(files.len());
+    let mut epsgs: Vec<u32> = Vec::with_capacity(files.len());
     for f in files {
         let header = read_header(f)?;
         let epsg = resolve_epsg(&header, opts, existing)?;
-        if let Some(&(first, ..)) = headers.first().filter(|&&(first, ..)| first != epsg) {
+        if let Some(&first) = epsgs.first().filter(|&&first| first != epsg) {
             return Err(Error::field(
                 f,
                 "CRS",
                 format!("EPSG:{epsg} differs from EPSG:{first} of {} in the same call", files[0].display()),
             ));
         }
-        headers.push((epsg, header.number_of_points, header.copc));
+        headers.push(header);
+        epsgs.push(epsg);
     }
-    progress.set_total(headers.iter().map(|h| h.1).sum());
+    progress.set_total(headers.iter().map(|h| h.number_of_points).sum());
     let als_dir = dataset.table_dir(tables::ALS)?;
     let tiles_dir = dataset.table_dir(tables::TILES)?;
+    // The cells of each COPC tile its windows meet (`None`: read whole).
+    let wanted: Vec<Option<Cells>> = headers
+        .iter()
+        .map(|h| {
+            let b = h.bounds;
+            opts.windows.as_ref().filter(|_| h.copc).map(|w| w.cells_in([b[0], b[1], b[3], b[4]]))
+        })
+        .collect();
+    if let Engine::Cluster(_) = &opts.engine {
+        let tiles: Vec<on_cluster::TileJob> = on_cluster::jobs(files, &headers, &epsgs, &wanted)?;
+        return on_cluster::ingest_tiles(dataset, &tiles, opts, progress);
+    }
     // Content hashes first: a file whose content appears earlier in the call is skipped like one
     // ingested before (two copies must not write the same table files at once).
     let hashes = files.par_iter().map(|f| content_key(f)).collect::<Result<Vec<_>>>()?;
@@ -184,23 +205,65 @@ pub fn ingest_tiles(
     let first_copy: Vec<bool> = hashes.iter().map(|h| seen.insert(h.clone())).collect();
     // A single file gets both cores for LAZ decoding; several files run one per core.
     let parallel_decode = seen.len() == 1;
-    files
-        .par_iter()
-        .zip(&hashes)
-        .zip(&first_copy)
-        .zip(&headers)
-        .map(|(((f, hash), &first), &(epsg, points, copc))| {
-            if !first {
-                progress.advance(points);
+    (0..files.len())
+        .into_par_iter()
+        .map(|i| {
+            let f = &files[i];
+            if !first_copy[i] {
+                progress.advance(headers[i].number_of_points);
                 return Ok(TileOutcome::AlreadyIngested { tile: tile_name(f) });
             }
-            let target = Target { path: f, hash, als_dir: &als_dir, tiles_dir: &tiles_dir, epsg };
-            match &opts.windows {
-                Some(windows) if copc => ingest_windows(&target, opts, windows, progress),
-                _ => ingest_tile(&target, opts, parallel_decode, progress),
-            }
+            let (hash, epsg) = (&hashes[i], epsgs[i]);
+            let target = Target { path: f, given: f, hash, als_dir: &als_dir, tiles_dir: &tiles_dir, epsg };
+            stage_tile(&target, opts, wanted[i].as_ref(), parallel_decode, progress)?.commit()
         })
         .collect()
+}
+
+/// Read one tile into its files, written under temporary names: the cells `wanted` of a COPC tile,
+/// or the whole tile.
+fn stage_tile(
+    t: &Target,
+    opts: &AlsOptions,
+    wanted: Option<&Cells>,
+    parallel_decode: bool,
+    progress: &dyn Progress,
+) -> Result<StagedTile> {
+    match wanted {
+        Some(cells) => ingest_windows(t, opts, cells, progress),
+        None => ingest_tile(t, opts, parallel_decode, progress),
+    }
+}
+
+/// A tile's files written under temporary names, with their places (its `als/` file, then its
+/// `tiles/` row: the points become visible with the row), and what the read did.
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
+pub struct StagedTile {
+    /// (staged, destination), in the order they are put in place; none for a tile ingested before.
+    pub files: Vec<(PathBuf, PathBuf)>,
+    pub outcome: TileOutcome,
+}
+
+impl StagedTile {
+    fn already(tile: String) -> Self {
+        StagedTile { files: Vec::new(), outcome: TileOutcome::AlreadyIngested { tile } }
+    }
+
+    /// Put its files in place, in order.
+    pub fn commit(self) -> Result<TileOutcome> {
+        for (i, (staged, dest)) in self.files.iter().enumerate() {
+            if let Err(e) = dataset::place_staged(staged, dest) {
+                self.files[i + 1..].iter().for_each(|(s, _)| drop(std::fs::remove_file(s)));
+                return Err(e);
+            }
+        }
+        Ok(self.outcome)
+    }
+
+    /// Remove its staged files.
+    pub fn discard(&self) {
+        self.files.iter().for_each(|(s, _)| drop(std::fs::remove_file(s)));
+    }
 }
 
 fn tile_name(path: &Path) -> String {
@@ -305,21 +368,13 @@ impl TileStats {
     }
 }
 
-/// One run of points of a single cell in the spill file.
-#[derive(Clone, Copy)]
-struct Run {
-    cell: u64,
-    offset: u64,
-    len: u32,
-}
-
-/// Bytes of one spilled point: x, y, z, gps (f64), scan angle (f32), intensity, psid (u16),
-/// return number, number of returns, class (u8). A run stores each column contiguously.
-const SPILL_RECORD: usize = 8 * 4 + 4 + 2 * 2 + 3;
-
 /// One input file and where its rows go.
 struct Target<'a> {
+    /// Where the file is read.
     path: &'a Path,
+    /// The file as it was given: the tile's name and the `path` of its `tiles/` row (a cluster's
+    /// executor reads it at its absolute path).
+    given: &'a Path,
     hash: &'a str,
     als_dir: &'a Path,
     tiles_dir: &'a Path,
@@ -355,16 +410,27 @@ impl Target<'_> {
         m
     }
 
-    /// Write the tile's `tiles/` row (after its `als/` file: the points become visible with it).
-    fn write_row(
+    /// The tile staged: its `als/` file written at `als` and its `tiles/` row (put in place after
+    /// the `als/` file: the points become visible with it).
+    fn staged(
         &self,
+        als: PathBuf,
         header: &TileHeader,
         stats: &TileStats,
         window: Option<&ReadWindow>,
         metadata: &HashMap<String, String>,
-    ) -> Result<()> {
-        let batch = tiles_batch(header, &tile_name(self.path), self.hash, self.epsg, stats, window)?;
-        dataset::write_parquet(&self.tiles_file(), tiles_schema(), &[batch], metadata).map(|_| ())
+        outcome: TileOutcome,
+    ) -> Result<StagedTile> {
+        let row = tiles_batch(header, self.given, self.hash, self.epsg, stats, window)
+            .and_then(|batch| dataset::stage_parquet(&self.tiles_file(), tiles_schema(), &[batch], metadata))
+            .and_then(|w| w.finish_staged());
+        match row {
+            Ok(row) => Ok(StagedTile { files: vec![(als, self.als_file()), (row, self.tiles_file())], outcome }),
+            Err(e) => {
+                let _ = std::fs::remove_file(&als);
+                Err(e)
+            }
+        }
     }
 }
 
@@ -396,13 +462,13 @@ fn write_cell(writer: &mut AtomicParquet, points: AlsPoints, tile: &str, cell: u
     Ok(())
 }
 
-/// Ingest the points of a COPC tile inside `windows`, decoding only the octree nodes that meet
-/// them. A tile read before in other windows is topped up: only the cells not read yet are
+/// Ingest the points of a COPC tile inside the cells `wanted`, decoding only the octree nodes that
+/// meet them. A tile read before in other windows is topped up: only the cells not read yet are
 /// decoded, and its `als/` file is rewritten with the points read before and the new ones, then
 /// its `tiles/` row. The cells recorded in the `als/` file are the authority: a run cut between
-/// the two writes leaves a `tiles/` row behind, which the next ingest rewrites.
-fn ingest_windows(t: &Target, opts: &AlsOptions, windows: &Windows, progress: &dyn Progress) -> Result<TileOutcome> {
-    let tile = tile_name(t.path);
+/// the two renames leaves a `tiles/` row behind, which the next ingest rewrites.
+fn ingest_windows(t: &Target, opts: &AlsOptions, wanted: &Cells, progress: &dyn Progress) -> Result<StagedTile> {
+    let tile = tile_name(t.given);
     let copc = CopcTile::open(t.path)?;
     let header = copc.header().clone();
     let b = header.bounds;
@@ -413,13 +479,13 @@ fn ingest_windows(t: &Target, opts: &AlsOptions, windows: &Windows, progress: &d
             Some(w) => Some(w),
             None => {
                 progress.advance(header.number_of_points);
-                return Ok(TileOutcome::AlreadyIngested { tile }); // read whole before
+                return Ok(StagedTile::already(tile)); // read whole before
             }
         }
     } else {
         None
     };
-    let missing = windows.cells_in(extent).without(before.as_ref().map_or(&Cells::default(), |w| &w.cells));
+    let missing = wanted.without(before.as_ref().map_or(&Cells::default(), |w| &w.cells));
     let (earlier_dropped, row_cells) = match &before {
         Some(_) => tiles_row_window(&tiles_file)?,
         None => (0, None),
@@ -427,7 +493,7 @@ fn ingest_windows(t: &Target, opts: &AlsOptions, windows: &Windows, progress: &d
     if let Some(w) = &before {
         if missing.is_empty() && row_cells == Some(w.cells.len() as u64) {
             progress.advance(header.number_of_points);
-            return Ok(TileOutcome::AlreadyIngested { tile });
+            return Ok(StagedTile::already(tile));
         }
     }
     let (new, read) = if missing.is_empty() {
@@ -466,16 +532,16 @@ fn ingest_windows(t: &Target, opts: &AlsOptions, windows: &Windows, progress: &d
     for run in order.chunk_by(|&a, &b| cells[a as usize] == cells[b as usize]) {
         write_cell(&mut writer, points.permuted(run), &tile, cells[run[0] as usize])?;
     }
-    writer.finish()?;
-    t.write_row(&header, &stats, Some(&window), &metadata)?;
+    let als = writer.finish_staged()?;
     let window_read = WindowRead { cells_new: missing.len(), cells_read: window.cells.len(), copc: read };
-    Ok(TileOutcome::Ingested {
+    let outcome = TileOutcome::Ingested {
         tile,
         points: points_new,
         dropped: dropped_new,
         odd_returns: stats.odd_returns,
         window: Some(window_read),
-    })
+    };
+    t.staged(als, &header, &stats, Some(&window), &metadata, outcome)
 }
 
 /// The `n_dropped` and `read_cells` of a tile's `tiles/` row.
@@ -492,12 +558,12 @@ fn tiles_row_window(path: &Path) -> Result<(u64, Option<u64>)> {
 
 /// Ingest a whole tile, streamed: decoded chunk by chunk, its points filed by cell and spilled to
 /// disk in sorted runs, then written cell by cell.
-fn ingest_tile(t: &Target, opts: &AlsOptions, parallel_decode: bool, progress: &dyn Progress) -> Result<TileOutcome> {
+fn ingest_tile(t: &Target, opts: &AlsOptions, parallel_decode: bool, progress: &dyn Progress) -> Result<StagedTile> {
     let (path, key, als_dir) = (t.path, t.key(), t.als_dir);
-    let tile = tile_name(path);
+    let tile = tile_name(t.given);
     // A tile read in windows before is read again, whole.
     if t.tiles_file().exists() && table::read_window(&t.als_file())?.is_none() {
-        return Ok(TileOutcome::AlreadyIngested { tile });
+        return Ok(StagedTile::already(tile));
     }
     let mut reader = TileReader::open_with(path, parallel_decode)?;
     let header = reader.header().clone();
@@ -538,18 +604,18 @@ fn ingest_tile(t: &Target, opts: &AlsOptions, parallel_decode: bool, progress: &
             write_cell(&mut writer, spill_reader.read_runs(&runs[start..end])?, &tile, cell)?;
             start = end;
         }
-        writer.finish()?;
+        let als = writer.finish_staged()?;
         drop(spill_reader);
         let _ = std::fs::remove_file(&spill);
 
-        t.write_row(&header, &stats, None, &metadata)?;
-        Ok(TileOutcome::Ingested {
+        let outcome = TileOutcome::Ingested {
             tile: tile.clone(),
             points: stats.kept,
             dropped: stats.dropped,
             odd_returns: stats.odd_returns,
             window: None,
-        })
+        };
+        t.staged(als, &header, &stats, None, &metadata, outcome)
     })();
     if result.is_err() {
         let _ = std::fs::remove_file(&spill_path);
@@ -575,9 +641,10 @@ fn als_writer_properties(
     builder.build()
 }
 
+/// The `tiles/` row of the tile given as `given`.
 fn tiles_batch(
     h: &TileHeader,
-    tile: &str,
+    given: &Path,
     hash: &str,
     epsg: u32,
     s: &TileStats,
@@ -588,8 +655,8 @@ fn tiles_batch(
     let gps = |i: usize| (s.gps[0] <= s.gps[1]).then_some(s.gps[i]);
     let acq = |i: usize| gps(i).and_then(gps_to_utc_micros);
     let cols: Vec<ArrayRef> = vec![
-        Arc::new(StringArray::from(vec![tile])),
-        Arc::new(StringArray::from(vec![h.path.display().to_string()])),
+        Arc::new(StringArray::from(vec![tile_name(given)])),
+        Arc::new(StringArray::from(vec![given.display().to_string()])),
         Arc::new(StringArray::from(vec![hash])),
         Arc::new(StringArray::from(vec![h.version.clone()])),
         Arc::new(UInt8Array::from(vec![h.point_format])),
@@ -620,7 +687,7 @@ fn tiles_batch(
         Arc::new(UInt64Array::from(vec![window.map(|w| w.cells.len() as u64)])),
         Arc::new(StringArray::from(vec![window.map(|w| w.cells.to_text())])),
     ];
-    RecordBatch::try_new(tiles_schema(), cols).map_err(|e| Error::table(&h.path, e))
+    RecordBatch::try_new(tiles_schema(), cols).map_err(|e| Error::table(given, e))
 }
 
 /// UTC (µs since 1970) of a LAS GPS time stored as adjusted standard GPS time
@@ -633,118 +700,6 @@ pub fn gps_to_utc_micros(t: f64) -> Option<i64> {
         return None;
     }
     Some(((GPS_EPOCH_UNIX_S + t + 1e9 - LEAP_SECONDS) * 1e6).round() as i64)
-}
-
-/// Write side of the spill file.
-struct SpillFile {
-    path: PathBuf,
-    out: BufWriter<File>,
-    offset: u64,
-    buf: Vec<u8>,
-}
-
-impl SpillFile {
-    fn create(path: &Path) -> Result<Self> {
-        let f = File::create(path).map_err(|e| Error::file(path, format!("cannot create spill file: {e}")))?;
-        Ok(SpillFile {
-            path: path.to_path_buf(),
-            out: BufWriter::with_capacity(1 << 20, f),
-            offset: 0,
-            buf: Vec::new(),
-        })
-    }
-
-    /// Append the points `order` (sorted by cell) of `chunk`, one run per cell, column by column.
-    fn write_runs(&mut self, chunk: &AlsPoints, order: &[(u64, u32)], runs: &mut Vec<Run>) -> Result<()> {
-        fn put<T: Copy, const N: usize>(
-            buf: &mut Vec<u8>,
-            col: &[T],
-            idx: &[(u64, u32)],
-            bytes: impl Fn(T) -> [u8; N],
-        ) {
-            for &(_, i) in idx {
-                buf.extend_from_slice(&bytes(col[i as usize]));
-            }
-        }
-        self.buf.clear();
-        self.buf.reserve(order.len() * SPILL_RECORD);
-        let mut start = 0;
-        while start < order.len() {
-            let cell = order[start].0;
-            let end = start + order[start..].partition_point(|&(c, _)| c == cell);
-            let (idx, buf) = (&order[start..end], &mut self.buf);
-            runs.push(Run { cell, offset: self.offset + buf.len() as u64, len: idx.len() as u32 });
-            put(buf, &chunk.x, idx, f64::to_le_bytes);
-            put(buf, &chunk.y, idx, f64::to_le_bytes);
-            put(buf, &chunk.z, idx, f64::to_le_bytes);
-            put(buf, &chunk.gps_time, idx, f64::to_le_bytes);
-            put(buf, &chunk.scan_angle_deg, idx, f32::to_le_bytes);
-            put(buf, &chunk.intensity, idx, u16::to_le_bytes);
-            put(buf, &chunk.point_source_id, idx, u16::to_le_bytes);
-            put(buf, &chunk.return_number, idx, |v: u8| [v]);
-            put(buf, &chunk.number_of_returns, idx, |v: u8| [v]);
-            put(buf, &chunk.classification, idx, |v: u8| [v]);
-            start = end;
-        }
-        self.out.write_all(&self.buf).map_err(|e| Error::file(&self.path, format!("cannot write spill file: {e}")))?;
-        self.offset += self.buf.len() as u64;
-        Ok(())
-    }
-
-    fn finish(mut self) -> Result<PathBuf> {
-        self.out.flush().map_err(|e| Error::file(&self.path, format!("cannot write spill file: {e}")))?;
-        Ok(self.path)
-    }
-}
-
-/// Read side of the spill file.
-struct SpillReader {
-    path: PathBuf,
-    file: File,
-    buf: Vec<u8>,
-}
-
-impl SpillReader {
-    fn open(path: &Path) -> Result<Self> {
-        let file = File::open(path).map_err(|e| Error::file(path, format!("cannot open spill file: {e}")))?;
-        Ok(SpillReader { path: path.to_path_buf(), file, buf: Vec::new() })
-    }
-
-    fn read_runs(&mut self, runs: &[Run]) -> Result<AlsPoints> {
-        fn take<T, const N: usize>(
-            col: &mut Vec<T>,
-            bytes: &[u8],
-            at: &mut usize,
-            n: usize,
-            from: impl Fn([u8; N]) -> T,
-        ) {
-            let part = &bytes[*at..*at + n * N];
-            col.extend(part.chunks_exact(N).map(|c| from(c.try_into().expect("N bytes"))));
-            *at += n * N;
-        }
-        let total: usize = runs.iter().map(|r| r.len as usize).sum();
-        let mut p = AlsPoints::with_capacity(total);
-        for r in runs {
-            let n = r.len as usize;
-            self.buf.resize(n * SPILL_RECORD, 0);
-            self.file
-                .seek(SeekFrom::Start(r.offset))
-                .and_then(|_| self.file.read_exact(&mut self.buf))
-                .map_err(|e| Error::file(&self.path, format!("cannot read spill file: {e}")))?;
-            let (b, at) = (&self.buf, &mut 0);
-            take(&mut p.x, b, at, n, f64::from_le_bytes);
-            take(&mut p.y, b, at, n, f64::from_le_bytes);
-            take(&mut p.z, b, at, n, f64::from_le_bytes);
-            take(&mut p.gps_time, b, at, n, f64::from_le_bytes);
-            take(&mut p.scan_angle_deg, b, at, n, f32::from_le_bytes);
-            take(&mut p.intensity, b, at, n, u16::from_le_bytes);
-            take(&mut p.point_source_id, b, at, n, u16::from_le_bytes);
-            take(&mut p.return_number, b, at, n, |[v]: [u8; 1]| v);
-            take(&mut p.number_of_returns, b, at, n, |[v]: [u8; 1]| v);
-            take(&mut p.classification, b, at, n, |[v]: [u8; 1]| v);
-        }
-        Ok(p)
-    }
 }
 
 #[cfg(test)]
