@@ -273,3 +273,39 @@ fn a_granule_locked_by_another_holder_is_still_read() {
     assert_eq!((rows.num_rows(), outside), (2 * 50, 0));
     drop(held);
 }
+
+/// A large granule is read in parts, some of its beams each, in child processes at once
+/// (`BeamPart`, so that HDF5's inflating runs on every core): the batches and beam reports of one
+/// whole read, in the same order, for any number of parts (more parts than beams included), with
+/// and without an area.
+#[test]
+fn a_granule_read_in_parts_gives_the_batches_of_one_read() {
+    use gedisim::ops::ingest_gedi::{child, pair_granules, read_granule_in_process, BeamPart};
+    let reader = child::Reader {
+        exe: PathBuf::from(env!("CARGO_BIN_EXE_gedisim")),
+        stall_limit: std::time::Duration::from_secs(120),
+    };
+    let l1b = common::data("gedi/GEDI01_B_2019108080338_O01964_T05337_02_003_01_sub.h5");
+    let l2a = common::data("gedi/GEDI02_A_2019108080338_O01964_T05337_02_001_01_sub.h5");
+    let pair = pair_granules(&[l1b], &[l2a]).unwrap().0.remove(0);
+    for area in [ShotArea::All, ShotArea::lon_lat_box("-180,-90,180,0").unwrap()] {
+        let opts = GediOptions { area, ..Default::default() };
+        let mut whole = Vec::new();
+        let reports = read_granule_in_process(&pair, &opts, BeamPart::WHOLE, &mut |b| {
+            whole.push(b);
+            Ok(())
+        })
+        .unwrap();
+        assert!(reports.len() >= 4 && !whole.is_empty(), "{} beams", reports.len());
+        for parts in [2, 3, reports.len() + 2] {
+            let mut got = Vec::new();
+            let got_reports = child::read_in_parts(&reader, &pair, &opts, parts, &mut |b| {
+                got.push(b);
+                Ok(())
+            })
+            .unwrap();
+            assert_eq!(got_reports, reports, "{parts} parts");
+            assert_eq!(got, whole, "{parts} parts");
+        }
+    }
+}

@@ -23,7 +23,7 @@ use arrow::ipc::reader::StreamReader;
 use arrow::ipc::writer::StreamWriter;
 use serde::{Deserialize, Serialize};
 
-use super::{read_granule_in_process, BeamReport, GediOptions, GranulePair};
+use super::{read_granule_in_process, BeamPart, BeamReport, GediOptions, GranulePair};
 use crate::error::{Error, Result};
 
 /// The hidden subcommand the child runs.
@@ -66,6 +66,9 @@ pub fn reader() -> Option<&'static Reader> {
 struct Request {
     pair: GranulePair,
     opts: GediOptions,
+    /// The beams to read (all, when absent).
+    #[serde(default)]
+    part: BeamPart,
 }
 
 /// The child: read `request`'s granule in this process, writing frames to `out`. A read error
@@ -76,7 +79,7 @@ pub fn serve(request: &str, out: impl Write) -> Result<()> {
     let result = serde_json::from_str::<Request>(request)
         .map_err(|e| Error::Usage(format!("{COMMAND}: a malformed request: {e}")))
         .and_then(|r| {
-            read_granule_in_process(&r.pair, &r.opts, &mut |batch| {
+            read_granule_in_process(&r.pair, &r.opts, r.part, &mut |batch| {
                 let mut bytes = Vec::new();
                 let mut w = StreamWriter::try_new(&mut bytes, &batch.schema())
                     .and_then(|mut w| w.write(&batch).and_then(|_| w.finish()));
@@ -96,15 +99,54 @@ fn frame(out: &mut impl Write, tag: u8, payload: &[u8]) -> std::io::Result<()> {
     out.write_all(payload)
 }
 
-/// The parent: read `pair` in a child process, handing its batches to `sink`.
-pub fn read(
+/// The parent: read `pair` in `parts` child processes at once, each some of its beams
+/// ([`BeamPart`]), handing the batches to `sink` in beam order (the first part's as they come, the
+/// others' once it is done: they are held until then) and the reports in the same order.
+pub fn read_in_parts(
     reader: &Reader,
     pair: &GranulePair,
     opts: &GediOptions,
+    parts: usize,
+    sink: &mut dyn FnMut(RecordBatch) -> Result<()>,
+) -> Result<Vec<BeamReport>> {
+    if parts <= 1 {
+        return read(reader, pair, opts, BeamPart::WHOLE, sink);
+    }
+    std::thread::scope(|scope| {
+        let others: Vec<_> = (1..parts)
+            .map(|index| {
+                scope.spawn(move || {
+                    let mut held = Vec::new();
+                    let part = BeamPart { index, of: parts };
+                    let reports = read(reader, pair, opts, part, &mut |b| {
+                        held.push(b);
+                        Ok(())
+                    });
+                    reports.map(|r| (held, r))
+                })
+            })
+            .collect();
+        let first = read(reader, pair, opts, BeamPart { index: 0, of: parts }, sink);
+        let mut reports = first?;
+        for other in others {
+            let (held, more) = other.join().unwrap_or_else(|p| std::panic::resume_unwind(p))?;
+            held.into_iter().try_for_each(&mut *sink)?;
+            reports.extend(more);
+        }
+        Ok(reports)
+    })
+}
+
+/// The parent: read the beams `part` of `pair` in a child process, handing its batches to `sink`.
+fn read(
+    reader: &Reader,
+    pair: &GranulePair,
+    opts: &GediOptions,
+    part: BeamPart,
     sink: &mut dyn FnMut(RecordBatch) -> Result<()>,
 ) -> Result<Vec<BeamReport>> {
     let first = pair.l1b.as_deref().or(pair.l2a.as_deref()).unwrap_or(Path::new(""));
-    let request = serde_json::to_string(&Request { pair: pair.clone(), opts: opts.clone() })
+    let request = serde_json::to_string(&Request { pair: pair.clone(), opts: opts.clone(), part })
         .map_err(|e| Error::file(first, format!("a path gedisim cannot pass to its granule reader: {e}")))?;
     // The request goes through stdin: an area of thousands of tiles exceeds one argument's length.
     let mut child = Command::new(&reader.exe)
@@ -141,7 +183,7 @@ pub fn read(
     match received {
         Err(e) => Err(e),
         Ok(Some(result)) => result,
-        Ok(None) => Err(failed(reader, pair, opts, status, stalled, &stderr)),
+        Ok(None) => Err(failed(reader, pair, opts, part, status, stalled, &stderr)),
     }
 }
 
@@ -243,6 +285,7 @@ fn failed(
     reader: &Reader,
     pair: &GranulePair,
     opts: &GediOptions,
+    part: BeamPart,
     status: std::process::ExitStatus,
     stalled: bool,
     stderr: &str,
@@ -266,7 +309,7 @@ fn failed(
     };
     match (&pair.l1b, &pair.l2a) {
         (Some(l1b), Some(l2a)) => {
-            let fails = |p: GranulePair| read(reader, &p, opts, &mut |_| Ok(())).is_err();
+            let fails = |p: GranulePair| read(reader, &p, opts, part, &mut |_| Ok(())).is_err();
             if fails(alone(Some(l1b), None)) {
                 Error::file(l1b, how)
             } else if fails(alone(None, Some(l2a))) {
@@ -315,13 +358,14 @@ mod tests {
         let pair = bundled_pair();
         let opts = GediOptions::default();
         let mut here = Vec::new();
-        let reports = read_granule_in_process(&pair, &opts, &mut |b| {
+        let reports = read_granule_in_process(&pair, &opts, BeamPart::WHOLE, &mut |b| {
             here.push(b);
             Ok(())
         })
         .unwrap();
         let mut bytes = Vec::new();
-        serve(&serde_json::to_string(&Request { pair: pair.clone(), opts }).unwrap(), &mut bytes).unwrap();
+        let request = Request { pair: pair.clone(), opts, part: BeamPart::WHOLE };
+        serve(&serde_json::to_string(&request).unwrap(), &mut bytes).unwrap();
         let mut there = Vec::new();
         let result = receive(bytes.as_slice(), &mut |b| {
             there.push(b);
@@ -340,9 +384,9 @@ mod tests {
         let pair =
             GranulePair { granule: "g".into(), l1b: Some(PathBuf::from("/nonexistent/GEDI01_B_x.h5")), l2a: None };
         let opts = GediOptions::default();
-        let expected = read_granule_in_process(&pair, &opts, &mut |_| Ok(())).unwrap_err().to_string();
+        let expected = read_granule_in_process(&pair, &opts, BeamPart::WHOLE, &mut |_| Ok(())).unwrap_err().to_string();
         let mut bytes = Vec::new();
-        serve(&serde_json::to_string(&Request { pair, opts }).unwrap(), &mut bytes).unwrap();
+        serve(&serde_json::to_string(&Request { pair, opts, part: BeamPart::WHOLE }).unwrap(), &mut bytes).unwrap();
         let got = receive(bytes.as_slice(), &mut |_| Ok(())).unwrap().unwrap().unwrap_err();
         assert_eq!(got.to_string(), expected);
         assert!(matches!(got, Error::File { .. } | Error::Field { .. }), "{got:?}");

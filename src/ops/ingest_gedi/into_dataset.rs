@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use super::join::ShotOwners;
 use super::pairs::{expand_granule_inputs, pair_granules};
 use super::{granule_key, read_granule};
-use super::{BeamReport, GediOptions, GranulePair, IngestReport, ShotChoice};
+use super::{BeamPart, BeamReport, GediOptions, GranulePair, IngestReport, ShotChoice};
 use crate::dataset::shots::{self, granules_col, granules_schema, shots_schema, VERTICAL_DATUM};
 use crate::error::{Error, Result};
 use crate::kernels::geo::area::ShotArea;
@@ -183,7 +183,7 @@ pub fn ingest_into_dataset(
             .map(|job| {
                 let owner: Arc<str> = Arc::from(job.key.as_str());
                 let (staged, beams) =
-                    write_granule_shots(&shots_dir, job, opts, &|b| owners.claim(&job.pair, &owner, b))?;
+                    write_granule_shots(&shots_dir, job, opts, jobs.len(), &|b| owners.claim(&job.pair, &owner, b))?;
                 let outcome = commit(job, &staged, &beams)?;
                 progress.advance(1);
                 Ok((outcome, beams))
@@ -217,19 +217,21 @@ pub struct GranuleJob {
     pub l2a_hash: Option<String>,
 }
 
-/// The shots of `job` read and written beside `shots/<key>.parquet` under a temporary name
-/// (complete, synced, not yet in place: [`commit_granule`] puts it there), each batch given to
-/// `check` before it is written. What a local ingest does per granule, and a cluster's executor.
+/// The shots of `job` read (while `at_once` granules are read together: [`BeamPart::parts_for`])
+/// and written beside `shots/<key>.parquet` under a temporary name (complete, synced, not yet in
+/// place: [`commit_granule`] puts it there), each batch given to `check` before it is written.
+/// What a local ingest does per granule, and a cluster's executor.
 pub fn write_granule_shots(
     shots_dir: &Path,
     job: &GranuleJob,
     opts: &GediOptions,
+    at_once: usize,
     check: &(dyn Fn(&RecordBatch) -> Result<()> + Sync),
 ) -> Result<(PathBuf, Vec<BeamReport>)> {
     let props = crate::dataset::writer_properties(&shots_metadata(opts), 1 << 16);
     let dest = shots_dir.join(format!("{}.parquet", job.key));
     let mut writer = crate::dataset::AtomicParquet::create(&dest, shots_schema(opts.epsg), props)?;
-    let beams = read_granule(&job.pair, opts, &mut |b| {
+    let beams = read_granule(&job.pair, opts, BeamPart::parts_for(&job.pair, at_once), &mut |b| {
         check(&b)?;
         writer.write(&b)
     })?;

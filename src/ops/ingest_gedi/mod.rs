@@ -18,6 +18,7 @@ use std::path::{Path, PathBuf};
 
 use arrow::array::RecordBatch;
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
 use crate::dataset::shots::shots_schema;
 use crate::error::{Error, Result};
@@ -217,7 +218,7 @@ pub fn read_gedi(l1b: &[PathBuf], l2a: &[PathBuf], opts: &GediOptions) -> Result
         .par_iter()
         .map(|pair| {
             let mut batches = Vec::new();
-            let beams = read_granule(pair, opts, &mut |b| {
+            let beams = read_granule(pair, opts, BeamPart::parts_for(pair, pairs.len()), &mut |b| {
                 batches.push(b);
                 Ok(())
             })?;
@@ -243,28 +244,72 @@ pub fn ingest_gedi(
     let (pairs, notes) = pair_granules(l1b, l2a)?;
     let mut report = IngestReport { beams: Vec::new(), notes, area: opts.area.describe() };
     for pair in &pairs {
-        report.beams.extend(read_granule(pair, opts, &mut sink)?);
+        report.beams.extend(read_granule(pair, opts, BeamPart::parts_for(pair, 1), &mut sink)?);
     }
     Ok(report)
 }
 
 /// Read one granule, beam by beam, handing each batch to `sink`; returns one report per beam.
-/// In a child process when the command line asked for it (`ops::ingest_gedi::child`).
+/// In child processes when the command line asked for it (`ops::ingest_gedi::child`): `parts` of
+/// its beams at once, each in its own child, the batches handed on in beam order.
 pub fn read_granule(
     pair: &GranulePair,
     opts: &GediOptions,
+    parts: usize,
     sink: &mut dyn FnMut(RecordBatch) -> Result<()>,
 ) -> Result<Vec<BeamReport>> {
     match child::reader() {
-        Some(reader) => child::read(reader, pair, opts, sink),
-        None => read_granule_in_process(pair, opts, sink),
+        Some(reader) => child::read_in_parts(reader, pair, opts, parts, sink),
+        None => read_granule_in_process(pair, opts, BeamPart::WHOLE, sink),
     }
 }
 
-/// [`read_granule`] in this process.
+/// Some of a granule's beams: those of its sorted beam names in part `index` of `of` contiguous
+/// parts. HDF5 reads (and inflates) one dataset at a time in a process; a large granule read alone
+/// is read faster in parts, each in its own process.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct BeamPart {
+    pub index: usize,
+    pub of: usize,
+}
+
+impl Default for BeamPart {
+    fn default() -> Self {
+        BeamPart::WHOLE
+    }
+}
+
+impl BeamPart {
+    /// Every beam.
+    pub const WHOLE: BeamPart = BeamPart { index: 0, of: 1 };
+
+    /// Its beams of `beams` (sorted).
+    fn of_beams(self, beams: Vec<String>) -> Vec<String> {
+        let (n, of) = (beams.len(), self.of.max(1));
+        let range = self.index * n / of..(self.index + 1) * n / of;
+        beams.into_iter().take(range.end).skip(range.start).collect()
+    }
+
+    /// The parts to read `pair` in while `at_once` granules are read together: one for a granule
+    /// below [`SPLIT_MIN_BYTES`] (a child process costs more than its beams), else the cores each
+    /// granule has, at most one part a beam.
+    pub fn parts_for(pair: &GranulePair, at_once: usize) -> usize {
+        let size = |p: &Option<PathBuf>| p.as_deref().and_then(|p| std::fs::metadata(p).ok()).map_or(0, |m| m.len());
+        if size(&pair.l1b) + size(&pair.l2a) < SPLIT_MIN_BYTES {
+            return 1;
+        }
+        (rayon::current_num_threads() / at_once.max(1)).clamp(1, 8)
+    }
+}
+
+/// A granule pair of at least this many bytes is read in parts ([`BeamPart::parts_for`]).
+pub const SPLIT_MIN_BYTES: u64 = 256 << 20;
+
+/// [`read_granule`] in this process: the beams of `part`.
 pub fn read_granule_in_process(
     pair: &GranulePair,
     opts: &GediOptions,
+    part: BeamPart,
     sink: &mut dyn FnMut(RecordBatch) -> Result<()>,
 ) -> Result<Vec<BeamReport>> {
     let projector = Projector::new(opts.epsg)?;
@@ -278,6 +323,7 @@ pub fn read_granule_in_process(
     }
     beams.sort();
     beams.dedup();
+    let beams = part.of_beams(beams);
 
     // The area's rectangles indexed once for the granule's beams.
     let area = opts.area.index();

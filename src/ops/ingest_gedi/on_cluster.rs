@@ -77,7 +77,7 @@ pub fn write_from_json(dataset: &Dataset, request: &str, job: &str) -> Result<(V
         |what: &str, e: serde_json::Error| Error::Usage(format!("GEDI ingest: a {what} gedisim cannot read: {e}"));
     let opts: GediOptions = serde_json::from_str(request).map_err(|e| bad("request", e))?;
     let job: GranuleJob = serde_json::from_str(job).map_err(|e| bad("granule job", e))?;
-    let (staged, beams) = write_granule_shots(&dataset.root().join(tables::SHOTS), &job, &opts, &|_| Ok(()))?;
+    let (staged, beams) = write_granule_shots(&dataset.root().join(tables::SHOTS), &job, &opts, 1, &|_| Ok(()))?;
     serde_json::to_string(&beams).map(|r| (vec![staged.clone()], r)).map_err(|e| {
         let _ = std::fs::remove_file(&staged);
         Error::table(&staged, e)
