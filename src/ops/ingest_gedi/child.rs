@@ -100,8 +100,9 @@ fn frame(out: &mut impl Write, tag: u8, payload: &[u8]) -> std::io::Result<()> {
 }
 
 /// The parent: read `pair` in `parts` child processes at once, each some of its beams
-/// ([`BeamPart`]), handing the batches to `sink` in beam order (the first part's as they come, the
-/// others' once it is done: they are held until then) and the reports in the same order.
+/// ([`BeamPart`]), handing the batches to `sink` in beam order and the reports in the same order:
+/// the first part's batches as they come, the others' once it is done (held until then in an
+/// anonymous temporary file, so that memory stays that of one read).
 pub fn read_in_parts(
     reader: &Reader,
     pair: &GranulePair,
@@ -114,27 +115,68 @@ pub fn read_in_parts(
     }
     std::thread::scope(|scope| {
         let others: Vec<_> = (1..parts)
-            .map(|index| {
-                scope.spawn(move || {
-                    let mut held = Vec::new();
-                    let part = BeamPart { index, of: parts };
-                    let reports = read(reader, pair, opts, part, &mut |b| {
-                        held.push(b);
-                        Ok(())
-                    });
-                    reports.map(|r| (held, r))
-                })
-            })
+            .map(|index| scope.spawn(move || read_held(reader, pair, opts, BeamPart { index, of: parts })))
             .collect();
         let first = read(reader, pair, opts, BeamPart { index: 0, of: parts }, sink);
         let mut reports = first?;
         for other in others {
             let (held, more) = other.join().unwrap_or_else(|p| std::panic::resume_unwind(p))?;
-            held.into_iter().try_for_each(&mut *sink)?;
+            held.replay(sink)?;
             reports.extend(more);
         }
         Ok(reports)
     })
+}
+
+/// [`read`] of one part, its batches held in a [`Held`].
+fn read_held(
+    reader: &Reader,
+    pair: &GranulePair,
+    opts: &GediOptions,
+    part: BeamPart,
+) -> Result<(Held, Vec<BeamReport>)> {
+    let mut held = Held::new()?;
+    let reports = read(reader, pair, opts, part, &mut |b| held.hold(&b))?;
+    Ok((held, reports))
+}
+
+/// Batches held in an anonymous temporary file (Arrow IPC), handed on later in the same order.
+struct Held {
+    writer: Option<StreamWriter<BufWriter<std::fs::File>>>,
+    file: Option<std::fs::File>,
+}
+
+impl Held {
+    fn new() -> Result<Held> {
+        let file =
+            tempfile::tempfile().map_err(|e| Error::Usage(format!("a temporary file for a granule's part: {e}")))?;
+        Ok(Held { writer: None, file: Some(file) })
+    }
+
+    fn failed(e: impl std::fmt::Display) -> Error {
+        Error::Usage(format!("holding a granule's part in a temporary file: {e}"))
+    }
+
+    fn hold(&mut self, batch: &RecordBatch) -> Result<()> {
+        if self.writer.is_none() {
+            let file = self.file.take().expect("the file until the first batch");
+            self.writer = Some(StreamWriter::try_new(BufWriter::new(file), &batch.schema()).map_err(Held::failed)?);
+        }
+        self.writer.as_mut().expect("set above").write(batch).map_err(Held::failed)
+    }
+
+    /// Hand every batch held to `sink`, in order.
+    fn replay(self, sink: &mut dyn FnMut(RecordBatch) -> Result<()>) -> Result<()> {
+        use std::io::{Seek, SeekFrom};
+        let Some(mut writer) = self.writer else { return Ok(()) };
+        writer.finish().map_err(Held::failed)?;
+        let mut file = writer.into_inner().map_err(Held::failed)?.into_inner().map_err(Held::failed)?;
+        file.seek(SeekFrom::Start(0)).map_err(Held::failed)?;
+        for batch in StreamReader::try_new(BufReader::new(file), None).map_err(Held::failed)? {
+            sink(batch.map_err(Held::failed)?)?;
+        }
+        Ok(())
+    }
 }
 
 /// The parent: read the beams `part` of `pair` in a child process, handing its batches to `sink`.
