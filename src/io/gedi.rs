@@ -103,7 +103,8 @@ impl<'a> Granule<'a> {
             return Ok(None);
         }
         let group = self.file.group(name).map_err(|e| Error::field(self.path, name, e))?;
-        let mut g = BeamGroup { path: self.path, beam: name.to_string(), group, n: 0, runs: None };
+        let mut g =
+            BeamGroup { path: self.path, beam: name.to_string(), group, n: 0, runs: None, placed: Default::default() };
         g.n = g.shot_numbers_len()?;
         Ok(Some(g))
     }
@@ -145,6 +146,18 @@ pub fn runs_of(indices: &[usize]) -> Runs {
     runs
 }
 
+/// The per-shot datasets that place a beam's shots (`ops::ingest_gedi::select`), read whole then
+/// again for the shots kept.
+const PLACING: [&str; 7] = [
+    "shot_number",
+    "lat_lowestmode",
+    "lon_lowestmode",
+    "geolocation/latitude_bin0",
+    "geolocation/longitude_bin0",
+    "geolocation/latitude_lastbin",
+    "geolocation/longitude_lastbin",
+];
+
 /// One beam group of one file, with its shot count.
 pub struct BeamGroup<'a> {
     pub path: &'a Path,
@@ -154,6 +167,10 @@ pub struct BeamGroup<'a> {
     pub n: usize,
     /// The shots every per-shot read takes (`None`: all), read by hyperslab selections.
     runs: Option<Runs>,
+    /// The datasets of [`PLACING`] once opened, kept open with the beam: an ingest by area reads
+    /// them whole to place every shot, then again for the shots kept, which HDF5's chunk cache
+    /// then serves without inflating them again.
+    placed: std::cell::RefCell<std::collections::HashMap<String, Dataset>>,
 }
 
 impl BeamGroup<'_> {
@@ -175,6 +192,17 @@ impl BeamGroup<'_> {
 
     /// The dataset at `rel` (e.g. `geolocation/elevation_bin0`), or `None` if any component is absent.
     pub fn dataset(&self, rel: &str) -> Result<Option<Dataset>> {
+        if let Some(ds) = self.placed.borrow().get(rel) {
+            return Ok(Some(ds.clone()));
+        }
+        let ds = self.open_dataset(rel)?;
+        if let Some(ds) = ds.as_ref().filter(|_| PLACING.contains(&rel)) {
+            self.placed.borrow_mut().insert(rel.to_string(), ds.clone());
+        }
+        Ok(ds)
+    }
+
+    fn open_dataset(&self, rel: &str) -> Result<Option<Dataset>> {
         let (dirs, name) = rel.rsplit_once('/').unwrap_or(("", rel));
         let mut g = self.group.clone();
         for part in dirs.split('/').filter(|p| !p.is_empty()) {

@@ -37,6 +37,7 @@ use crate::io::source::{self, Fetched};
 use crate::kernels::geo::cells::{Cells, Windows};
 use crate::kernels::sim::{self, AlsPoints, Profile, SimConfig};
 use crate::ops::progress::{Progress, Step};
+
 /// Where tiles are read (`AlsOptions::engine`).
 pub use crate::sql::Engine;
 
@@ -195,8 +196,8 @@ pub fn ingest_tiles(
         })
         .collect();
     if let Engine::Cluster(_) = &opts.engine {
-        let tiles: Vec<on_cluster::TileJob> = on_cluster::jobs(files, &headers, &epsgs, &wanted)?;
-        return on_cluster::ingest_tiles(dataset, &tiles, opts, progress);
+        let jobs = on_cluster::jobs(files, &headers, &epsgs, &wanted)?;
+        return on_cluster::ingest_tiles(dataset, &jobs, opts, progress);
     }
     // Content hashes first: a file whose content appears earlier in the call is skipped like one
     // ingested before (two copies must not write the same table files at once).
@@ -238,10 +239,10 @@ fn stage_tile(
 /// A tile's files written under temporary names, with their places (its `als/` file, then its
 /// `tiles/` row: the points become visible with the row), and what the read did.
 #[derive(Debug, serde::Serialize, serde::Deserialize)]
-pub struct StagedTile {
+struct StagedTile {
     /// (staged, destination), in the order they are put in place; none for a tile ingested before.
-    pub files: Vec<(PathBuf, PathBuf)>,
-    pub outcome: TileOutcome,
+    files: Vec<(PathBuf, PathBuf)>,
+    outcome: TileOutcome,
 }
 
 impl StagedTile {
@@ -250,7 +251,7 @@ impl StagedTile {
     }
 
     /// Put its files in place, in order.
-    pub fn commit(self) -> Result<TileOutcome> {
+    fn commit(self) -> Result<TileOutcome> {
         for (i, (staged, dest)) in self.files.iter().enumerate() {
             if let Err(e) = dataset::place_staged(staged, dest) {
                 self.files[i + 1..].iter().for_each(|(s, _)| drop(std::fs::remove_file(s)));
@@ -261,7 +262,7 @@ impl StagedTile {
     }
 
     /// Remove its staged files.
-    pub fn discard(&self) {
+    fn discard(&self) {
         self.files.iter().for_each(|(s, _)| drop(std::fs::remove_file(s)));
     }
 }
