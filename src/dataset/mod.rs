@@ -392,8 +392,8 @@ pub fn write_parquet(
     stage_parquet(dest, schema, batches, metadata)?.finish()
 }
 
-/// Write `batches` for `dest` under a temporary name: complete, not yet in place
-/// ([`AtomicParquet::finish_staged`]).
+/// The writer of `dest` with `batches` written under its temporary name, to be finished in place
+/// ([`AtomicParquet::finish`]) or left staged ([`AtomicParquet::finish_staged`]).
 pub fn stage_parquet(
     dest: &Path,
     schema: SchemaRef,
